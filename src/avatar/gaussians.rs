@@ -1,0 +1,182 @@
+//! A set of triangle-bound Gaussians in structure-of-arrays form, in the
+//! parameterisation GaussianAvatars stores (local position, unnormalised
+//! quaternion, log-scale, opacity logit, spherical-harmonics colour).
+
+use glam::{Quat, Vec3};
+
+/// The zeroth-order SH constant: rgb = 0.5 + C0 · f_dc.
+pub const SH_C0: f32 = 0.282_094_8;
+
+/// Number of SH coefficients per channel for a degree (0..=3).
+pub const fn sh_coefficients(degree: u8) -> usize {
+    (degree as usize + 1) * (degree as usize + 1)
+}
+
+/// The SH degree for a per-channel coefficient count, if it is a square 1, 4, 9 or 16.
+pub fn sh_degree_for(coefficients: usize) -> Option<u8> {
+    (0u8..=3).find(|&d| sh_coefficients(d) == coefficients)
+}
+
+/// Converts a display colour channel to the DC coefficient.
+pub fn rgb_to_dc(rgb: f32) -> f32 {
+    (rgb - 0.5) / SH_C0
+}
+
+/// Converts a DC coefficient to a display colour channel (unclamped).
+pub fn dc_to_rgb(dc: f32) -> f32 {
+    0.5 + SH_C0 * dc
+}
+
+/// Triangle-bound Gaussians. All arrays have one entry per Gaussian except `sh`,
+/// which has `3 · sh_coefficients(sh_degree)` floats per Gaussian laid out
+/// coefficient-major: `[coef][channel]` (coefficient 0 is the DC term).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GaussianSet {
+    /// Parent triangle index.
+    pub binding: Vec<u32>,
+    /// Position in the parent triangle's frame (units of the triangle size).
+    pub position: Vec<Vec3>,
+    /// Rotation relative to the triangle frame; not necessarily normalised.
+    pub rotation: Vec<Quat>,
+    /// Natural log of the per-axis scale in units of the triangle size.
+    pub log_scale: Vec<Vec3>,
+    /// Opacity before the sigmoid.
+    pub opacity_logit: Vec<f32>,
+    /// SH degree 0..=3.
+    pub sh_degree: u8,
+    /// SH coefficients, see the type documentation.
+    pub sh: Vec<f32>,
+}
+
+impl GaussianSet {
+    /// An empty set with the given SH degree.
+    pub fn with_degree(sh_degree: u8) -> Self {
+        Self {
+            sh_degree,
+            ..Self::default()
+        }
+    }
+
+    /// Number of Gaussians.
+    pub fn len(&self) -> usize {
+        self.binding.len()
+    }
+
+    /// True when there is no Gaussian.
+    pub fn is_empty(&self) -> bool {
+        self.binding.is_empty()
+    }
+
+    /// Floats of SH per Gaussian.
+    pub fn sh_stride(&self) -> usize {
+        3 * sh_coefficients(self.sh_degree)
+    }
+
+    /// SH coefficients of Gaussian `i`.
+    pub fn sh_of(&self, i: usize) -> &[f32] {
+        let s = self.sh_stride();
+        &self.sh[i * s..(i + 1) * s]
+    }
+
+    /// Mutable SH coefficients of Gaussian `i`.
+    pub fn sh_of_mut(&mut self, i: usize) -> &mut [f32] {
+        let s = self.sh_stride();
+        &mut self.sh[i * s..(i + 1) * s]
+    }
+
+    /// Appends one Gaussian; `sh` must hold `sh_stride()` floats.
+    pub fn push(
+        &mut self,
+        binding: u32,
+        position: Vec3,
+        rotation: Quat,
+        log_scale: Vec3,
+        opacity_logit: f32,
+        sh: &[f32],
+    ) {
+        assert_eq!(sh.len(), self.sh_stride(), "SH length");
+        self.binding.push(binding);
+        self.position.push(position);
+        self.rotation.push(rotation);
+        self.log_scale.push(log_scale);
+        self.opacity_logit.push(opacity_logit);
+        self.sh.extend_from_slice(sh);
+    }
+
+    /// Checks internal consistency: equal lengths, bindings below `triangles`,
+    /// finite values. Returns a one-line description of the first problem.
+    pub fn validate(&self, triangles: usize) -> Result<(), String> {
+        let n = self.len();
+        if self.position.len() != n
+            || self.rotation.len() != n
+            || self.log_scale.len() != n
+            || self.opacity_logit.len() != n
+            || self.sh.len() != n * self.sh_stride()
+        {
+            return Err("Gaussian attribute arrays differ in length".into());
+        }
+        if let Some((i, b)) = self
+            .binding
+            .iter()
+            .enumerate()
+            .find(|(_, b)| **b as usize >= triangles)
+        {
+            return Err(format!(
+                "Gaussian {i} is bound to triangle {b}, but the mesh has {triangles} triangles"
+            ));
+        }
+        let finite = |i: usize| {
+            self.position[i].is_finite()
+                && self.rotation[i].is_finite()
+                && self.log_scale[i].is_finite()
+                && self.opacity_logit[i].is_finite()
+                && self.sh_of(i).iter().all(|x| x.is_finite())
+        };
+        if let Some(i) = (0..n).find(|&i| !finite(i)) {
+            return Err(format!("Gaussian {i} has a NaN or infinite value"));
+        }
+        Ok(())
+    }
+}
+
+/// Logistic sigmoid.
+pub fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// Inverse of the sigmoid, for probabilities strictly inside (0, 1).
+pub fn logit(p: f32) -> f32 {
+    let p = p.clamp(1e-6, 1.0 - 1e-6);
+    (p / (1.0 - p)).ln()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sh_degree_round_trip() {
+        for d in 0..=3u8 {
+            assert_eq!(sh_degree_for(sh_coefficients(d)), Some(d));
+        }
+        assert_eq!(sh_degree_for(5), None);
+    }
+
+    #[test]
+    fn validate_catches_bad_binding_and_nan() {
+        let mut g = GaussianSet::with_degree(0);
+        g.push(3, Vec3::ZERO, Quat::IDENTITY, Vec3::ZERO, 0.0, &[0.0; 3]);
+        assert!(g.validate(4).is_ok());
+        assert!(g.validate(3).unwrap_err().contains("triangle 3"));
+        g.opacity_logit[0] = f32::NAN;
+        assert!(g.validate(4).unwrap_err().contains("NaN"));
+    }
+
+    #[test]
+    fn colour_and_opacity_conversions_invert() {
+        for x in [0.0, 0.25, 0.9] {
+            assert!((dc_to_rgb(rgb_to_dc(x)) - x).abs() < 1e-6);
+            assert!((sigmoid(logit(x.max(0.01))) - x.max(0.01)).abs() < 1e-5);
+        }
+    }
+}

@@ -1,0 +1,67 @@
+//! The database options shared by every command that reads a database.
+
+use std::time::{Duration, Instant};
+
+use clap::Args;
+
+use crate::avatar::database::Database;
+use crate::error::{Error, Result};
+use crate::model::builtin::build_head;
+use crate::model::synthetic::{builtin_database, SyntheticOptions, MAX_SOURCES};
+
+/// Most Gaussians per built-in avatar accepted (bounds memory: ~240 bytes each).
+const MAX_GAUSSIANS_PER_AVATAR: usize = 2_000_000;
+
+/// Which database to open and, for the built-in one, how to generate it.
+#[derive(Args, Debug, Clone)]
+pub struct DbArgs {
+    /// Database: `builtin` (synthetic avatars) or a folder of GaussianAvatars avatars.
+    #[arg(long, default_value = "builtin", value_name = "builtin|DIR")]
+    pub db: String,
+    /// Seed of the built-in database (shapes, textures, Gaussian placement).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Gaussians per built-in avatar.
+    #[arg(long, default_value_t = 50_000, value_name = "N")]
+    pub gaussians_per_avatar: usize,
+    /// Number of built-in source avatars (1-14).
+    #[arg(long, default_value_t = MAX_SOURCES, value_name = "N")]
+    pub sources: usize,
+}
+
+impl Default for DbArgs {
+    fn default() -> Self {
+        Self {
+            db: "builtin".into(),
+            seed: 1,
+            gaussians_per_avatar: 50_000,
+            sources: MAX_SOURCES,
+        }
+    }
+}
+
+impl DbArgs {
+    /// Opens the database and reports how long that took.
+    pub fn load(&self) -> Result<(Database, Duration)> {
+        if self.db != "builtin" {
+            return Err(Error::input(format!(
+                "cannot open database '{}': only the built-in database ('--db builtin') is available in this version",
+                self.db
+            )));
+        }
+        if !(1..=MAX_GAUSSIANS_PER_AVATAR).contains(&self.gaussians_per_avatar) {
+            return Err(Error::input(format!(
+                "--gaussians-per-avatar must be between 1 and {MAX_GAUSSIANS_PER_AVATAR}, not {}",
+                self.gaussians_per_avatar
+            )));
+        }
+        let start = Instant::now();
+        let options = SyntheticOptions {
+            seed: self.seed,
+            sources: self.sources,
+            gaussians_per_avatar: self.gaussians_per_avatar,
+        };
+        let db = builtin_database(build_head(), options).map_err(Error::Input)?;
+        Ok((db, start.elapsed()))
+    }
+}

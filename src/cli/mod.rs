@@ -1,0 +1,75 @@
+//! The `visage` command line: argument parsing, dispatch and the exit-code
+//! contract (0 ok, 1 a check failed, 2 bad input, always one line on stderr).
+
+mod db;
+mod info;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+pub use db::DbArgs;
+
+use crate::error::Result;
+
+/// Compose photo-realistic, animatable Gaussian head avatars in the terminal.
+#[derive(Parser, Debug)]
+#[command(name = "visage", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Describe the database: model, regions, sources and motions.
+    Info(info::InfoArgs),
+}
+
+/// Parses the process arguments, runs the command and maps errors to exit codes.
+pub fn run() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(e),
+    };
+    match dispatch(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("visage: {e}");
+            ExitCode::from(e.exit_code())
+        }
+    }
+}
+
+fn dispatch(cli: Cli) -> Result<()> {
+    match cli.command {
+        Some(Command::Info(args)) => info::run(&args),
+        None => info::run(&info::InfoArgs::default()),
+    }
+}
+
+/// Help and version go to stdout with exit 0; real usage errors become one line
+/// on stderr with exit 2.
+fn usage_error(e: clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        let _ = e.print();
+        return ExitCode::SUCCESS;
+    }
+    let rendered = e.render().to_string();
+    let first = rendered
+        .lines()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or("invalid arguments")
+        .trim_start_matches("error: ");
+    eprintln!(
+        "visage: {} (see visage --help)",
+        crate::io::printable(first)
+    );
+    ExitCode::from(2)
+}

@@ -1,0 +1,5 @@
+//! The `visage` binary: see `visage --help`.
+
+fn main() -> std::process::ExitCode {
+    visage::cli::run()
+}

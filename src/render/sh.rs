@@ -1,0 +1,119 @@
+//! Real spherical-harmonics colour evaluation, degrees 0-3, in the 3D Gaussian
+//! Splatting convention: rgb = max(0, 0.5 + Σ basis(d)·coef) where d is the unit
+//! direction from the camera to the Gaussian.
+
+/// Degree 0 constant.
+pub const C0: f64 = 0.282_094_791_773_878_14;
+/// Degree 1 constant.
+pub const C1: f64 = 0.488_602_511_902_919_9;
+/// Degree 2 constants.
+pub const C2: [f64; 5] = [
+    1.092_548_430_592_079_2,
+    -1.092_548_430_592_079_2,
+    0.315_391_565_252_520_05,
+    -1.092_548_430_592_079_2,
+    0.546_274_215_296_039_6,
+];
+/// Degree 3 constants.
+pub const C3: [f64; 7] = [
+    -0.590_043_589_926_643_5,
+    2.890_611_442_640_554,
+    -0.457_045_799_464_465_8,
+    0.373_176_332_590_115_4,
+    -0.457_045_799_464_465_8,
+    1.445_305_721_320_277,
+    -0.590_043_589_926_643_5,
+];
+
+/// The SH basis functions for direction `d` (unit), up to `degree`.
+pub fn basis(degree: u8, d: [f64; 3]) -> [f64; 16] {
+    let [x, y, z] = d;
+    let mut b = [0.0; 16];
+    b[0] = C0;
+    if degree >= 1 {
+        b[1] = -C1 * y;
+        b[2] = C1 * z;
+        b[3] = -C1 * x;
+    }
+    if degree >= 2 {
+        let (xx, yy, zz) = (x * x, y * y, z * z);
+        b[4] = C2[0] * x * y;
+        b[5] = C2[1] * y * z;
+        b[6] = C2[2] * (2.0 * zz - xx - yy);
+        b[7] = C2[3] * x * z;
+        b[8] = C2[4] * (xx - yy);
+        if degree >= 3 {
+            b[9] = C3[0] * y * (3.0 * xx - yy);
+            b[10] = C3[1] * x * y * z;
+            b[11] = C3[2] * y * (4.0 * zz - xx - yy);
+            b[12] = C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+            b[13] = C3[4] * x * (4.0 * zz - xx - yy);
+            b[14] = C3[5] * z * (xx - yy);
+            b[15] = C3[6] * x * (xx - 3.0 * yy);
+        }
+    }
+    b
+}
+
+/// Colour of a Gaussian seen along `d`, from its coefficient-major SH (`[coef][rgb]`).
+/// `use_degree` may be lower than the stored degree to truncate the expansion.
+pub fn eval_rgb(sh: &[f32], use_degree: u8, d: [f64; 3]) -> [f64; 3] {
+    let b = basis(use_degree, d);
+    let coefficients = (sh.len() / 3).min((use_degree as usize + 1).pow(2));
+    let mut rgb = [0.5; 3];
+    for (k, bk) in b.iter().enumerate().take(coefficients) {
+        for (ch, out) in rgb.iter_mut().enumerate() {
+            *out += bk * sh[k * 3 + ch] as f64;
+        }
+    }
+    rgb.map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dc_only_is_view_independent() {
+        let sh = [1.0, -3.0, 0.0];
+        let a = eval_rgb(&sh, 0, [0.0, 0.0, 1.0]);
+        let b = eval_rgb(&sh, 0, [1.0, 0.0, 0.0]);
+        assert_eq!(a, b);
+        assert!((a[0] - (0.5 + C0)).abs() < 1e-12);
+        assert_eq!(a[1], 0.0, "clamped at zero");
+    }
+
+    #[test]
+    fn degree_one_follows_direction() {
+        let mut sh = [0.0f32; 12];
+        sh[6] = 1.0; // coefficient 2 (z), red channel
+        let toward = eval_rgb(&sh, 1, [0.0, 0.0, 1.0]);
+        let away = eval_rgb(&sh, 1, [0.0, 0.0, -1.0]);
+        assert!((toward[0] - 0.5 - C1).abs() < 1e-7);
+        assert!((away[0] - 0.5 + C1).abs() < 1e-7);
+    }
+
+    #[test]
+    fn basis_is_orthonormal_on_the_sphere() {
+        // Monte-Carlo-free check: a Fibonacci sphere quadrature of b_i·b_j ≈ δ_ij/(4π)·4π.
+        let n = 20000;
+        let mut gram = [[0.0f64; 16]; 16];
+        for k in 0..n {
+            let z = 1.0 - 2.0 * (k as f64 + 0.5) / n as f64;
+            let r = (1.0 - z * z).sqrt();
+            let phi = k as f64 * std::f64::consts::PI * (3.0 - 5f64.sqrt());
+            let b = basis(3, [r * phi.cos(), r * phi.sin(), z]);
+            for i in 0..16 {
+                for j in 0..16 {
+                    gram[i][j] += b[i] * b[j] * 4.0 * std::f64::consts::PI / n as f64;
+                }
+            }
+        }
+        for (i, row) in gram.iter().enumerate() {
+            for (j, g) in row.iter().enumerate() {
+                let want = if i == j { 1.0 } else { 0.0 };
+                assert!((g - want).abs() < 2e-3, "({i},{j}) = {g}");
+            }
+        }
+    }
+}
