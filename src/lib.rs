@@ -8,6 +8,7 @@
 
 pub mod avatar;
 pub mod cli;
+pub mod compose;
 pub mod error;
 pub mod io;
 pub mod model;

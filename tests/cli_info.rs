@@ -53,7 +53,7 @@ fn export_obj_writes_one_coloured_mesh_per_source() {
     let dir = std::env::temp_dir().join(format!("visage-obj-{}", std::process::id()));
     let out = visage(&[
         "info",
-        "--sources",
+        "--source-count",
         "2",
         "--gaussians-per-avatar",
         "11000",
@@ -79,7 +79,7 @@ fn export_obj_writes_one_coloured_mesh_per_source() {
 fn bad_input_is_one_line_and_exit_code_2() {
     for args in [
         &["info", "--bogus"][..],
-        &["info", "--sources", "99"][..],
+        &["info", "--source-count", "99"][..],
         &["info", "--gaussians-per-avatar", "0"][..],
         &["info", "--db", "/no/such/folder"][..],
         &["info", "--seed", "minus-one"][..],

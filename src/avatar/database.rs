@@ -34,6 +34,9 @@ impl SourceAvatar {
 pub struct Database {
     /// Where the database came from ("builtin" or a folder).
     pub label: String,
+    /// Identifies the exact contents (generation options or file digests); part
+    /// of every composite's state hash.
+    pub fingerprint: String,
     /// The shared morphable model (topology, bases, skeleton).
     pub model: HeadModel,
     /// Source avatars, in display order.

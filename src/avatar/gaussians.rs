@@ -103,6 +103,46 @@ impl GaussianSet {
         self.sh.extend_from_slice(sh);
     }
 
+    /// Empties the set (keeping its allocations) and sets its SH degree.
+    pub fn clear(&mut self, sh_degree: u8) {
+        self.binding.clear();
+        self.position.clear();
+        self.rotation.clear();
+        self.log_scale.clear();
+        self.opacity_logit.clear();
+        self.sh.clear();
+        self.sh_degree = sh_degree;
+    }
+
+    /// Reserves room for `additional` more Gaussians.
+    pub fn reserve(&mut self, additional: usize) {
+        self.binding.reserve(additional);
+        self.position.reserve(additional);
+        self.rotation.reserve(additional);
+        self.log_scale.reserve(additional);
+        self.opacity_logit.reserve(additional);
+        self.sh.reserve(additional * self.sh_stride());
+    }
+
+    /// Appends Gaussian `i` of `other` with a new opacity logit. SH beyond this
+    /// set's degree are dropped; missing ones are zero.
+    pub fn push_from(&mut self, other: &GaussianSet, i: usize, opacity_logit: f32) {
+        self.binding.push(other.binding[i]);
+        self.position.push(other.position[i]);
+        self.rotation.push(other.rotation[i]);
+        self.log_scale.push(other.log_scale[i]);
+        self.opacity_logit.push(opacity_logit);
+        let stride = self.sh_stride();
+        let sh = other.sh_of(i);
+        if sh.len() == stride {
+            self.sh.extend_from_slice(sh);
+        } else {
+            let take = sh.len().min(stride);
+            self.sh.extend_from_slice(&sh[..take]);
+            self.sh.extend(std::iter::repeat_n(0.0, stride - take));
+        }
+    }
+
     /// Checks internal consistency: equal lengths, bindings below `triangles`,
     /// finite values. Returns a one-line description of the first problem.
     pub fn validate(&self, triangles: usize) -> Result<(), String> {

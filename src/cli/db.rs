@@ -25,8 +25,8 @@ pub struct DbArgs {
     #[arg(long, default_value_t = 50_000, value_name = "N")]
     pub gaussians_per_avatar: usize,
     /// Number of built-in source avatars (1-14).
-    #[arg(long, default_value_t = MAX_SOURCES, value_name = "N")]
-    pub sources: usize,
+    #[arg(long = "source-count", default_value_t = MAX_SOURCES, value_name = "N")]
+    pub source_count: usize,
 }
 
 impl Default for DbArgs {
@@ -35,7 +35,7 @@ impl Default for DbArgs {
             db: "builtin".into(),
             seed: 1,
             gaussians_per_avatar: 50_000,
-            sources: MAX_SOURCES,
+            source_count: MAX_SOURCES,
         }
     }
 }
@@ -58,7 +58,7 @@ impl DbArgs {
         let start = Instant::now();
         let options = SyntheticOptions {
             seed: self.seed,
-            sources: self.sources,
+            sources: self.source_count,
             gaussians_per_avatar: self.gaussians_per_avatar,
         };
         let db = builtin_database(build_head(), options).map_err(Error::Input)?;

@@ -1,8 +1,11 @@
 //! The `visage` command line: argument parsing, dispatch and the exit-code
 //! contract (0 ok, 1 a check failed, 2 bad input, always one line on stderr).
 
+mod bench;
+mod compose;
 mod db;
 mod info;
+mod render;
 
 use std::process::ExitCode;
 
@@ -24,6 +27,14 @@ pub struct Cli {
 enum Command {
     /// Describe the database: model, regions, sources and motions.
     Info(info::InfoArgs),
+    /// Build a composite from a recipe and describe it.
+    Compose(compose::ComposeArgs),
+    /// Write a composite to a file.
+    Export(compose::ExportArgs),
+    /// Render a still to PNG.
+    Render(render::RenderArgs),
+    /// Measure speed beside error.
+    Bench(bench::BenchArgs),
 }
 
 /// Parses the process arguments, runs the command and maps errors to exit codes.
@@ -44,6 +55,10 @@ pub fn run() -> ExitCode {
 fn dispatch(cli: Cli) -> Result<()> {
     match cli.command {
         Some(Command::Info(args)) => info::run(&args),
+        Some(Command::Compose(args)) => compose::run_compose(&args),
+        Some(Command::Export(args)) => compose::run_export(&args),
+        Some(Command::Render(args)) => render::run(&args),
+        Some(Command::Bench(args)) => bench::run(&args),
         None => info::run(&info::InfoArgs::default()),
     }
 }

@@ -1,6 +1,7 @@
 //! File formats and terminal-safe text.
 
 pub mod obj;
+pub mod ply;
 
 /// Strips control characters (and the escape sequences they start) so untrusted
 /// names can be printed to a terminal. Newlines become spaces.

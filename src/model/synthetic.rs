@@ -273,6 +273,10 @@ pub fn builtin_database(model: HeadModel, options: SyntheticOptions) -> Result<D
     let motions = builtin_motions(model.expression_basis.names());
     Ok(Database {
         label: "builtin".into(),
+        fingerprint: format!(
+            "builtin v1 seed={} sources={} gaussians_per_avatar={}",
+            options.seed, options.sources, options.gaussians_per_avatar
+        ),
         model,
         sources,
         motions,

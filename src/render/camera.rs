@@ -79,7 +79,7 @@ impl Camera {
 /// An orbit around a target: yaw about +y (0 = in front of the face), pitch up,
 /// radius, and vertical field of view in degrees.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct Orbit {
     /// Yaw in degrees; positive moves the camera towards the subject's left (+x).
     pub yaw_deg: f32,

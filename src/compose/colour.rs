@@ -1,0 +1,270 @@
+//! Colour correction of regions whose Gaussians come from another source than the
+//! colour reference (the base avatar), thesis 4.2.2 and DESIGN §3.4.
+//!
+//! Gaussian colour is rgb = 0.5 + C0·f_dc + (view-dependent terms). An affine map
+//! A·rgb + b applies to SH as f_dc' = (A·(C0·f_dc + 0.5) + b − 0.5)/C0 and
+//! f_rest' = A·f_rest.
+//!
+//! - **thesis**: per region, gain c̄_ref / c̄_f per channel on weighted mean
+//!   colours (w = α·Πs / min s). Means below `DARK_MEAN` are treated as
+//!   `DARK_MEAN` and gains are clamped to `GAIN_RANGE`, so near-black regions
+//!   (pupils, mouth cavity) never explode or produce NaN.
+//! - **skin**: mean and spread transfer (Reinhard) in CIELAB, estimated on the
+//!   skin-coloured Gaussians of each source's face and applied to skin-coloured
+//!   Gaussians only, weighted by how skin-like they are. Hair, brows, lips, eyes
+//!   and clothing keep their colours (the thesis's neck turned green trying to
+//!   match a shirt; this cannot).
+
+use glam::Vec3;
+
+use crate::avatar::gaussians::{dc_to_rgb, sigmoid, GaussianSet, SH_C0};
+use crate::model::geometry::smoothstep;
+use crate::model::regions::Region;
+
+/// Means darker than this are clamped up before dividing.
+pub const DARK_MEAN: f32 = 0.02;
+/// Allowed per-channel gains.
+pub const GAIN_RANGE: (f32, f32) = (0.25, 4.0);
+/// Allowed spread ratios in the skin transfer.
+pub const SPREAD_RANGE: (f32, f32) = (0.5, 2.0);
+
+/// Weighted mean DC colour of some Gaussians of a set (thesis weights).
+pub fn weighted_mean_colour(set: &GaussianSet, indices: &[u32]) -> Option<Vec3> {
+    let mut sum = Vec3::ZERO;
+    let mut total = 0.0f32;
+    let stride = set.sh_stride();
+    for &i in indices {
+        let i = i as usize;
+        let s = set.log_scale[i].exp();
+        let size = s.x * s.y * s.z / s.min_element().max(1e-30);
+        let w = sigmoid(set.opacity_logit[i]) * size;
+        if !w.is_finite() || w <= 0.0 {
+            continue;
+        }
+        let dc = &set.sh[i * stride..i * stride + 3];
+        sum += w * Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
+        total += w;
+    }
+    (total > 0.0 && sum.is_finite()).then(|| sum / total)
+}
+
+/// The thesis gain c̄_ref / c̄_f, guarded and clamped.
+pub fn thesis_gain(reference: Vec3, source: Vec3) -> Vec3 {
+    let r = reference.max(Vec3::splat(DARK_MEAN));
+    let s = source.max(Vec3::splat(DARK_MEAN));
+    (r / s).clamp(Vec3::splat(GAIN_RANGE.0), Vec3::splat(GAIN_RANGE.1))
+}
+
+/// Applies `rgb ↦ gain ⊙ rgb` to one Gaussian's SH (coefficient-major `[coef][rgb]`).
+pub fn apply_gain(sh: &mut [f32], gain: Vec3) {
+    for ch in 0..3 {
+        let g = gain[ch];
+        sh[ch] = (g * (SH_C0 * sh[ch] + 0.5) - 0.5) / SH_C0;
+        for k in (3 + ch..sh.len()).step_by(3) {
+            sh[k] *= g;
+        }
+    }
+}
+
+/// sRGB (display, 0..1) to CIELAB (D65).
+pub fn srgb_to_lab(rgb: Vec3) -> Vec3 {
+    let lin = rgb.clamp(Vec3::ZERO, Vec3::ONE).to_array().map(|c| {
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    });
+    let x = 0.412_456_4 * lin[0] + 0.357_576_1 * lin[1] + 0.180_437_5 * lin[2];
+    let y = 0.212_672_9 * lin[0] + 0.715_152_2 * lin[1] + 0.072_175 * lin[2];
+    let z = 0.019_333_9 * lin[0] + 0.119_192 * lin[1] + 0.950_304_1 * lin[2];
+    let f = |t: f32| {
+        if t > 0.008_856 {
+            t.cbrt()
+        } else {
+            7.787 * t + 16.0 / 116.0
+        }
+    };
+    let (fx, fy, fz) = (f(x / 0.950_47), f(y), f(z / 1.088_83));
+    Vec3::new(116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz))
+}
+
+/// CIELAB (D65) to sRGB (display, 0..1, clamped).
+pub fn lab_to_srgb(lab: Vec3) -> Vec3 {
+    let fy = (lab.x + 16.0) / 116.0;
+    let fx = fy + lab.y / 500.0;
+    let fz = fy - lab.z / 200.0;
+    let inv = |t: f32| {
+        if t > 0.206_893 {
+            t * t * t
+        } else {
+            (t - 16.0 / 116.0) / 7.787
+        }
+    };
+    let (x, y, z) = (inv(fx) * 0.950_47, inv(fy), inv(fz) * 1.088_83);
+    let r = 3.240_454_2 * x - 1.537_138_5 * y - 0.498_531_4 * z;
+    let g = -0.969_266 * x + 1.876_010_8 * y + 0.041_556 * z;
+    let b = 0.055_643_4 * x - 0.204_025_9 * y + 1.057_225_2 * z;
+    Vec3::new(r, g, b)
+        .to_array()
+        .map(|c| {
+            let c = c.max(0.0);
+            if c <= 0.003_130_8 {
+                12.92 * c
+            } else {
+                1.055 * c.powf(1.0 / 2.4) - 0.055
+            }
+        })
+        .into()
+}
+
+/// Skin colour statistics of one source in CIELAB.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SkinStats {
+    /// Weighted mean.
+    pub mean: Vec3,
+    /// Weighted standard deviation per channel.
+    pub spread: Vec3,
+}
+
+/// How skin-like a colour is, given the source's skin statistics (1 = typical skin).
+pub fn skin_likeness(lab: Vec3, stats: &SkinStats) -> f32 {
+    smoothstep(26.0, 12.0, (lab - stats.mean).length())
+}
+
+/// Regions whose Gaussians define a source's skin tone.
+pub const SKIN_REFERENCE_REGIONS: [Region; 2] = [Region::Skin, Region::Nose];
+
+/// Estimates skin statistics from the Gaussians `indices` of a set: a first mean
+/// over all of them, then mean and spread over the skin-like ones.
+pub fn skin_stats(set: &GaussianSet, indices: &[u32]) -> Option<SkinStats> {
+    let stride = set.sh_stride();
+    let labs: Vec<(Vec3, f32)> = indices
+        .iter()
+        .map(|&i| {
+            let i = i as usize;
+            let dc = &set.sh[i * stride..i * stride + 3];
+            let rgb = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
+            (srgb_to_lab(rgb), sigmoid(set.opacity_logit[i]))
+        })
+        .filter(|(lab, w)| lab.is_finite() && w.is_finite())
+        .collect();
+    let weighted = |weight: &dyn Fn(Vec3, f32) -> f32| -> Option<SkinStats> {
+        let (mut sum, mut sq, mut total) = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
+        for &(lab, a) in &labs {
+            let w = weight(lab, a);
+            sum += w * lab;
+            sq += w * lab * lab;
+            total += w;
+        }
+        (total > 1e-6).then(|| {
+            let mean = sum / total;
+            let var = (sq / total - mean * mean).max(Vec3::ZERO);
+            SkinStats {
+                mean,
+                spread: var.sqrt().max(Vec3::splat(0.5)),
+            }
+        })
+    };
+    let rough = weighted(&|_, a| a)?;
+    weighted(&|lab, a| a * skin_likeness(lab, &rough)).or(Some(rough))
+}
+
+/// The per-channel gain that moves a Gaussian's DC colour from `from` skin
+/// statistics towards `to`, in proportion to how skin-like it is (1 when it is
+/// not skin). Expressed as a gain so view-dependent terms follow (`apply_gain`).
+pub fn skin_transfer_gain(dc: [f32; 3], from: &SkinStats, to: &SkinStats) -> Vec3 {
+    let rgb = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
+    let lab = srgb_to_lab(rgb);
+    let k = skin_likeness(lab, from);
+    if k <= 0.0 || !lab.is_finite() {
+        return Vec3::ONE;
+    }
+    let ratio =
+        (to.spread / from.spread).clamp(Vec3::splat(SPREAD_RANGE.0), Vec3::splat(SPREAD_RANGE.1));
+    let moved = to.mean + (lab - from.mean) * ratio;
+    let target = lab_to_srgb(lab.lerp(moved, k));
+    let current = rgb.clamp(Vec3::ZERO, Vec3::ONE).max(Vec3::splat(DARK_MEAN));
+    (target.max(Vec3::splat(DARK_MEAN)) / current)
+        .clamp(Vec3::splat(GAIN_RANGE.0), Vec3::splat(GAIN_RANGE.1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::avatar::gaussians::rgb_to_dc;
+
+    #[test]
+    fn gain_maps_dc_colour_exactly_and_scales_rest() {
+        let mut sh = vec![
+            rgb_to_dc(0.4),
+            rgb_to_dc(0.2),
+            rgb_to_dc(0.8),
+            0.1,
+            0.2,
+            0.3,
+        ];
+        apply_gain(&mut sh, Vec3::new(2.0, 0.5, 1.0));
+        assert!((dc_to_rgb(sh[0]) - 0.8).abs() < 1e-5);
+        assert!((dc_to_rgb(sh[1]) - 0.1).abs() < 1e-5);
+        assert!((dc_to_rgb(sh[2]) - 0.8).abs() < 1e-5);
+        assert!(
+            (sh[3] - 0.2).abs() < 1e-6 && (sh[4] - 0.1).abs() < 1e-6 && (sh[5] - 0.3).abs() < 1e-6
+        );
+    }
+
+    #[test]
+    fn near_black_means_give_bounded_finite_gains() {
+        for (r, s) in [
+            (Vec3::splat(0.5), Vec3::ZERO),
+            (Vec3::ZERO, Vec3::splat(0.5)),
+            (Vec3::ZERO, Vec3::ZERO),
+            (Vec3::splat(1e-9), Vec3::splat(1e-12)),
+        ] {
+            let g = thesis_gain(r, s);
+            assert!(g.is_finite());
+            assert!(
+                g.min_element() >= GAIN_RANGE.0 && g.max_element() <= GAIN_RANGE.1,
+                "{g}"
+            );
+        }
+        assert_eq!(thesis_gain(Vec3::ZERO, Vec3::ZERO), Vec3::ONE);
+    }
+
+    #[test]
+    fn lab_round_trip() {
+        for rgb in [
+            Vec3::new(0.9, 0.7, 0.6),
+            Vec3::new(0.1, 0.05, 0.02),
+            Vec3::ZERO,
+            Vec3::ONE,
+        ] {
+            let back = lab_to_srgb(srgb_to_lab(rgb));
+            assert!(back.abs_diff_eq(rgb, 2e-3), "{rgb} -> {back}");
+        }
+        let white = srgb_to_lab(Vec3::ONE);
+        assert!((white.x - 100.0).abs() < 0.1 && white.y.abs() < 0.5 && white.z.abs() < 0.5);
+    }
+
+    #[test]
+    fn skin_transfer_moves_skin_and_leaves_hair() {
+        let from = SkinStats {
+            mean: srgb_to_lab(Vec3::new(0.9, 0.75, 0.65)),
+            spread: Vec3::splat(3.0),
+        };
+        let to = SkinStats {
+            mean: srgb_to_lab(Vec3::new(0.45, 0.3, 0.2)),
+            spread: Vec3::splat(3.0),
+        };
+        let mut skin = vec![rgb_to_dc(0.9), rgb_to_dc(0.75), rgb_to_dc(0.65)];
+        let gain = skin_transfer_gain([skin[0], skin[1], skin[2]], &from, &to);
+        apply_gain(&mut skin, gain);
+        assert!(
+            (dc_to_rgb(skin[0]) - 0.45).abs() < 0.02,
+            "{}",
+            dc_to_rgb(skin[0])
+        );
+        let hair = [rgb_to_dc(0.05), rgb_to_dc(0.04), rgb_to_dc(0.03)];
+        assert_eq!(skin_transfer_gain(hair, &from, &to), Vec3::ONE);
+    }
+}

@@ -1,0 +1,477 @@
+//! The composition engine: everything precomputed per database, composites built
+//! from recipes (and rebuilt only where a recipe changed), and posed frames.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+use super::blend::{Blender, SparseRhs};
+use super::colour::{
+    apply_gain, skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats,
+    SKIN_REFERENCE_REGIONS,
+};
+use super::recipe::{AnimationMode, ColourCorrection, ResolvedRecipe, Smoothing};
+use super::selection::SelectionTables;
+use super::smoothing::{own_share, split_opacity, BorderTables};
+use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
+use crate::avatar::database::Database;
+use crate::avatar::gaussians::{logit, sigmoid, GaussianSet};
+use crate::error::Result;
+use crate::model::head::Pose;
+use crate::model::regions::Region;
+use crate::render::scene::SplatScene;
+
+/// Precomputed tables of one database.
+pub struct Engine {
+    db: Database,
+    tables: SelectionTables,
+    borders: BorderTables,
+    blender: Blender,
+    neutrals: Vec<Vec<Vec3>>,
+    /// `[source][region]` → Mᵀd contribution of that region's edges with weight 1.
+    region_rhs: Vec<Vec<SparseRhs>>,
+    /// `[source][region]` → thesis-weighted mean colour.
+    mean_colour: Vec<Vec<Option<Vec3>>>,
+    /// Skin statistics per source.
+    skin: Vec<Option<SkinStats>>,
+    /// Per-Gaussian skin-transfer gains by (source, colour reference), computed on
+    /// first use: the CIELAB transfer costs ~100 ns a Gaussian, applying a gain ~5.
+    skin_gains: Mutex<HashMap<(usize, usize), SharedGains>>,
+}
+
+/// Per-Gaussian colour gains shared between composites.
+type SharedGains = Arc<Vec<Vec3>>;
+
+/// What one range of a composite's Gaussians is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Block {
+    /// Region whose triangles the Gaussians are bound to.
+    pub region: Region,
+    /// Source they come from.
+    pub source: usize,
+    /// For border extras: the neighbouring region whose source they belong to.
+    pub extra_from: Option<Region>,
+    /// Range in the composite's Gaussian set.
+    pub start: usize,
+    /// End of the range (exclusive).
+    pub end: usize,
+}
+
+/// A composite avatar: blended neutral mesh and the selected, post-processed
+/// Gaussians bound to its triangles.
+#[derive(Clone, Debug)]
+pub struct Composite {
+    /// The recipe it was built from.
+    pub recipe: ResolvedRecipe,
+    /// Blended neutral mesh (identity and static offsets; no expression, no pose).
+    pub neutral: Vec<Vec3>,
+    /// Relative residual of the neutral blend solve.
+    pub residual: f64,
+    /// Selected Gaussians (own regions first, then border extras), colours corrected.
+    pub gaussians: GaussianSet,
+    /// What each range of `gaussians` is.
+    pub blocks: Vec<Block>,
+    /// Mean per-channel colour gain applied per region (1 where uncorrected).
+    pub colour_gains: [Vec3; Region::COUNT],
+}
+
+/// What an update had to redo.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Changes {
+    /// The neutral mesh was re-blended.
+    pub shape: bool,
+    /// The Gaussian selection was rebuilt.
+    pub gaussians: bool,
+}
+
+/// A posed composite: vertices and triangle frames of one frame.
+#[derive(Clone, Debug, Default)]
+pub struct PosedMesh {
+    /// Posed vertices.
+    pub vertices: Vec<Vec3>,
+    /// Triangle frames of the posed mesh.
+    pub frames: Vec<TriangleFrame>,
+    /// Blend residual of this frame (exact mode; the neutral's in fast mode).
+    pub residual: f64,
+}
+
+impl Engine {
+    /// Precomputes the tables of a database and factors its blend system.
+    pub fn new(db: Database) -> Result<Self> {
+        let blender = Blender::new(&db.model)?;
+        let tables = SelectionTables::new(&db);
+        let borders = BorderTables::new(&db.model);
+        let neutrals: Vec<Vec<Vec3>> = db
+            .sources
+            .par_iter()
+            .map(|s| s.neutral(&db.model))
+            .collect();
+        let region_rhs = neutrals
+            .par_iter()
+            .map(|n| {
+                Region::ALL
+                    .iter()
+                    .map(|&r| blender.region_rhs(r, n))
+                    .collect()
+            })
+            .collect();
+        let mean_colour = (0..db.sources.len())
+            .into_par_iter()
+            .map(|f| {
+                Region::ALL
+                    .iter()
+                    .map(|&r| weighted_mean_colour(&db.sources[f].gaussians, tables.region(f, r)))
+                    .collect()
+            })
+            .collect();
+        let skin = (0..db.sources.len())
+            .into_par_iter()
+            .map(|f| {
+                let indices: Vec<u32> = SKIN_REFERENCE_REGIONS
+                    .iter()
+                    .flat_map(|&r| tables.region(f, r).iter().copied())
+                    .collect();
+                skin_stats(&db.sources[f].gaussians, &indices)
+            })
+            .collect();
+        Ok(Self {
+            db,
+            tables,
+            borders,
+            blender,
+            neutrals,
+            region_rhs,
+            mean_colour,
+            skin,
+            skin_gains: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// The database.
+    pub fn database(&self) -> &Database {
+        &self.db
+    }
+
+    /// The blend system.
+    pub fn blender(&self) -> &Blender {
+        &self.blender
+    }
+
+    /// Neutral mesh of a source.
+    pub fn source_neutral(&self, source: usize) -> &[Vec3] {
+        &self.neutrals[source]
+    }
+
+    /// Builds a composite from scratch.
+    pub fn compose(&self, recipe: &ResolvedRecipe) -> Composite {
+        let (neutral, residual) = self.blend_neutral(recipe);
+        let mut composite = Composite {
+            recipe: recipe.clone(),
+            neutral,
+            residual,
+            gaussians: GaussianSet::default(),
+            blocks: Vec::new(),
+            colour_gains: [Vec3::ONE; Region::COUNT],
+        };
+        self.select_into(recipe, &mut composite);
+        composite
+    }
+
+    /// Brings a composite up to date with a new recipe, redoing only what changed:
+    /// shape weights re-blend the neutral; sources, base or post-processing rebuild
+    /// the selection; motion, frame and camera cost nothing here.
+    pub fn update(&self, composite: &mut Composite, recipe: &ResolvedRecipe) -> Changes {
+        let old = &composite.recipe;
+        let changes = Changes {
+            shape: old.shape != recipe.shape || old.base != recipe.base,
+            gaussians: old.gaussians != recipe.gaussians
+                || old.base != recipe.base
+                || old.post != recipe.post,
+        };
+        if changes.shape {
+            let (neutral, residual) = self.blend_neutral(recipe);
+            composite.neutral = neutral;
+            composite.residual = residual;
+        }
+        if changes.gaussians {
+            self.select_into(recipe, composite);
+        }
+        composite.recipe = recipe.clone();
+        changes
+    }
+
+    /// Blends the sources' neutral meshes with the recipe's shape weights.
+    pub fn blend_neutral(&self, recipe: &ResolvedRecipe) -> (Vec<Vec3>, f64) {
+        let mut rhs = vec![DVec3::ZERO; self.blender.vertex_count()];
+        for r in Region::ALL {
+            for (f, &w) in recipe.shape[r.group().index()].iter().enumerate() {
+                if w > 0.0 {
+                    for &(v, d) in &self.region_rhs[f][r.index()] {
+                        rhs[v as usize] += w * d;
+                    }
+                }
+            }
+        }
+        let pin = self.neutrals[recipe.base][self.blender.pinned_vertex() as usize].as_dvec3();
+        let solution = self.blender.solve(&rhs, pin);
+        (
+            solution.vertices.iter().map(|v| v.as_vec3()).collect(),
+            solution.residual,
+        )
+    }
+
+    /// Expression and pose of the recipe's frame (rest when it has no motion).
+    pub fn frame_parameters(&self, recipe: &ResolvedRecipe, frame: usize) -> (Vec<f32>, Pose) {
+        match recipe.motion {
+            Some(m) => {
+                let (e, p) = self.db.motions[m].frame(frame);
+                (e.to_vec(), *p)
+            }
+            None => (Vec::new(), Pose::REST),
+        }
+    }
+
+    /// Poses the composite at `frame` of its motion, in the recipe's animation mode.
+    pub fn pose(&self, composite: &Composite, frame: usize, out: &mut PosedMesh) {
+        let (expression, pose) = self.frame_parameters(&composite.recipe, frame);
+        self.pose_with(composite, &expression, &pose, composite.recipe.mode, out);
+    }
+
+    /// Poses the composite with explicit parameters and mode.
+    pub fn pose_with(
+        &self,
+        composite: &Composite,
+        expression: &[f32],
+        pose: &Pose,
+        mode: AnimationMode,
+        out: &mut PosedMesh,
+    ) {
+        let model = &self.db.model;
+        match mode {
+            AnimationMode::Fast => {
+                model.pose(&composite.neutral, expression, pose, &mut out.vertices);
+                out.residual = composite.residual;
+            }
+            AnimationMode::Exact => {
+                let recipe = &composite.recipe;
+                let sources = recipe.shape_sources();
+                let posed: Vec<(usize, Vec<Vec3>)> = sources
+                    .iter()
+                    .map(|&f| {
+                        let mut v = Vec::new();
+                        model.pose(&self.neutrals[f], expression, pose, &mut v);
+                        (f, v)
+                    })
+                    .collect();
+                let mut meshes: Vec<Option<&[Vec3]>> = vec![None; self.db.sources.len()];
+                for (f, v) in &posed {
+                    meshes[*f] = Some(v);
+                }
+                let weights: Vec<&[f64]> = Region::ALL
+                    .iter()
+                    .map(|r| recipe.shape[r.group().index()].as_slice())
+                    .collect();
+                let rhs = self.blender.rhs_from_meshes(&weights, &meshes);
+                let base = meshes[recipe.base].expect("base is always posed");
+                let pin = base[self.blender.pinned_vertex() as usize].as_dvec3();
+                let solution = self.blender.solve(&rhs, pin);
+                out.vertices.clear();
+                out.vertices
+                    .extend(solution.vertices.iter().map(|v| v.as_vec3()));
+                out.residual = solution.residual;
+            }
+        }
+        triangle_frames_into(&out.vertices, &model.triangles, &mut out.frames);
+    }
+
+    /// World-space Gaussians of a posed composite (CPU binding; the GPU renderer
+    /// does the same on the device).
+    pub fn scene(&self, composite: &Composite, posed: &PosedMesh) -> SplatScene {
+        let mut scene = SplatScene::with_degree(composite.gaussians.sh_degree);
+        let all: Vec<u32> = (0..composite.gaussians.len() as u32).collect();
+        scene.append_bound(&composite.gaussians, &posed.frames, &all);
+        scene
+    }
+
+    fn source_of(recipe: &ResolvedRecipe, region: Region) -> usize {
+        recipe.gaussians[region.group().index()]
+    }
+
+    /// Skin-transfer gains of every Gaussian of `source` towards `reference`.
+    fn skin_gains(&self, source: usize, reference: usize) -> Option<SharedGains> {
+        let (from, to) = (self.skin[source]?, self.skin[reference]?);
+        let mut cache = self.skin_gains.lock().unwrap_or_else(|e| e.into_inner());
+        let gains = cache.entry((source, reference)).or_insert_with(|| {
+            let set = &self.db.sources[source].gaussians;
+            let gains = (0..set.len())
+                .into_par_iter()
+                .map(|i| {
+                    let sh = set.sh_of(i);
+                    skin_transfer_gain([sh[0], sh[1], sh[2]], &from, &to)
+                })
+                .collect();
+            Arc::new(gains)
+        });
+        Some(gains.clone())
+    }
+
+    /// The colour correction of Gaussians of source `f` bound in `region`.
+    fn correction(&self, recipe: &ResolvedRecipe, region: Region, f: usize) -> Correction {
+        if f == recipe.base {
+            return Correction::None;
+        }
+        match recipe.post.colour {
+            ColourCorrection::Off => Correction::None,
+            ColourCorrection::Thesis => {
+                let reference = self.mean_colour[recipe.base][region.index()];
+                let source = self.mean_colour[f][region.index()];
+                match (reference, source) {
+                    (Some(r), Some(s)) => Correction::Gain(thesis_gain(r, s)),
+                    _ => Correction::None,
+                }
+            }
+            ColourCorrection::Skin => match self.skin_gains(f, recipe.base) {
+                Some(g) => Correction::PerGaussian(g),
+                None => Correction::None,
+            },
+        }
+    }
+
+    /// Rebuilds the composite's Gaussian set from the lookup tables, reusing its
+    /// buffers (an assignment change allocates nothing once they are large enough).
+    fn select_into(&self, recipe: &ResolvedRecipe, composite: &mut Composite) {
+        let degree = self
+            .db
+            .sources
+            .iter()
+            .map(|s| s.gaussians.sh_degree)
+            .max()
+            .unwrap_or(0);
+        let smoothing = recipe.post.smoothing;
+        // Cross-fade: own Gaussians near a border keep only part of their opacity.
+        let mut own_exponent = vec![1.0f32; self.db.model.triangle_count()];
+        let differs =
+            |r: Region, p: Region| Self::source_of(recipe, r) != Self::source_of(recipe, p);
+        if smoothing == Smoothing::Crossfade {
+            for (&(r, p), band) in self.borders.pairs() {
+                if differs(r, p) {
+                    for &(t, ring) in band {
+                        let e = &mut own_exponent[t as usize];
+                        *e = e.min(own_share(ring));
+                    }
+                }
+            }
+        }
+        let own_count: usize = Region::ALL
+            .iter()
+            .map(|&r| self.tables.region(Self::source_of(recipe, r), r).len())
+            .sum();
+        let set = &mut composite.gaussians;
+        set.clear(degree);
+        set.reserve(own_count + own_count / 8);
+        let blocks = &mut composite.blocks;
+        blocks.clear();
+        let gains = &mut composite.colour_gains;
+        *gains = [Vec3::ONE; Region::COUNT];
+        for region in Region::ALL {
+            let f = Self::source_of(recipe, region);
+            let correction = self.correction(recipe, region, f);
+            let start = set.len();
+            let mut gain_sum = Vec3::ZERO;
+            let source = &self.db.sources[f].gaussians;
+            for &i in self.tables.region(f, region) {
+                let exponent = own_exponent[source.binding[i as usize] as usize];
+                gain_sum +=
+                    self.push_corrected(set, f, i, &correction, OpacityEdit::Split(exponent));
+            }
+            let n = set.len() - start;
+            if n > 0 {
+                gains[region.index()] = gain_sum / n as f32;
+            }
+            blocks.push(Block {
+                region,
+                source: f,
+                extra_from: None,
+                start,
+                end: set.len(),
+            });
+        }
+        if smoothing != Smoothing::Off {
+            for (&(r, p), band) in self.borders.pairs() {
+                if !differs(r, p) {
+                    continue;
+                }
+                let f = Self::source_of(recipe, r);
+                let correction = self.correction(recipe, p, f);
+                let start = set.len();
+                for &(t, ring) in band {
+                    let edit = match smoothing {
+                        Smoothing::Thesis if ring == 1 => OpacityEdit::Scale(0.5),
+                        Smoothing::Crossfade => OpacityEdit::Split(1.0 - own_share(ring)),
+                        _ => continue,
+                    };
+                    for &i in self.tables.triangle(f, t) {
+                        self.push_corrected(set, f, i, &correction, edit);
+                    }
+                }
+                if set.len() > start {
+                    blocks.push(Block {
+                        region: p,
+                        source: f,
+                        extra_from: Some(r),
+                        start,
+                        end: set.len(),
+                    });
+                }
+            }
+        }
+    }
+
+    /// Copies Gaussian `i` of source `f` into `set` with a colour correction and an
+    /// opacity edit; returns the colour gain used.
+    fn push_corrected(
+        &self,
+        set: &mut GaussianSet,
+        f: usize,
+        i: u32,
+        correction: &Correction,
+        opacity: OpacityEdit,
+    ) -> Vec3 {
+        let src = &self.db.sources[f].gaussians;
+        let i = i as usize;
+        let opacity_logit = match opacity {
+            OpacityEdit::Split(e) if e >= 1.0 => src.opacity_logit[i],
+            OpacityEdit::Split(e) => logit(split_opacity(sigmoid(src.opacity_logit[i]), e)),
+            OpacityEdit::Scale(s) => logit(sigmoid(src.opacity_logit[i]) * s),
+        };
+        let gain = match correction {
+            Correction::None => Vec3::ONE,
+            Correction::Gain(g) => *g,
+            Correction::PerGaussian(g) => g[i],
+        };
+        set.push_from(src, i, opacity_logit);
+        if gain != Vec3::ONE {
+            let last = set.len() - 1;
+            apply_gain(set.sh_of_mut(last), gain);
+        }
+        gain
+    }
+}
+
+/// A colour correction for a block of Gaussians.
+enum Correction {
+    None,
+    Gain(Vec3),
+    PerGaussian(SharedGains),
+}
+
+/// How a copied Gaussian's opacity changes.
+#[derive(Clone, Copy, Debug)]
+enum OpacityEdit {
+    /// α' = 1 − (1 − α)^e (1 leaves it unchanged).
+    Split(f32),
+    /// α' = s·α.
+    Scale(f32),
+}

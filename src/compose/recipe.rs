@@ -1,0 +1,329 @@
+//! Recipes: the whole composite in one small value, stored as TOML.
+//!
+//! ```toml
+//! base = "ada"                      # base avatar: default for every group
+//!
+//! [groups.nose]                     # any of mouth, eyes, ears, neck, hair, nose, face
+//! gaussians = "bram"                # whose Gaussians the group shows
+//! shape = { bram = 0.7, ada = 0.3 } # convex shape weights (normalised if they don't sum to 1)
+//!
+//! [post]
+//! smoothing = "thesis"              # off | thesis | crossfade
+//! colour = "thesis"                 # off | thesis | skin
+//!
+//! [animation]
+//! motion = "talk"                   # a database motion, or "rest"
+//! frame = 0
+//! mode = "fast"                     # fast | exact
+//!
+//! [camera]
+//! yaw_deg = 0.0
+//! pitch_deg = 0.0
+//! radius = 2.5
+//! fov_deg = 7.5
+//! target = [0.0, -0.025, 0.0]
+//! ```
+//! Groups that are not listed take both Gaussians and shape from the base.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::avatar::database::Database;
+use crate::error::{Error, Result};
+use crate::model::regions::Group;
+use crate::render::camera::Orbit;
+
+/// Recipe file format version written by this build.
+pub const RECIPE_VERSION: u32 = 1;
+
+/// Border smoothing between regions whose Gaussians come from different sources.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Smoothing {
+    /// No extra Gaussians.
+    #[default]
+    Off,
+    /// Thesis 4.2.2: copy the neighbour's Gaussians on the bordering triangles at half opacity.
+    Thesis,
+    /// A cross-fade over a band of triangles that keeps coverage exact (see `smoothing`).
+    Crossfade,
+}
+
+/// Colour correction of regions whose Gaussians come from another source than the base.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ColourCorrection {
+    /// Colours as captured.
+    #[default]
+    Off,
+    /// Thesis 4.2.2: per-region gain c̄_base / c̄_f on weighted mean colours.
+    Thesis,
+    /// Mean and spread transfer in CIELAB on skin-coloured Gaussians only.
+    Skin,
+}
+
+/// How the composite is animated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AnimationMode {
+    /// Blend the neutral meshes once, animate the composite as one head.
+    #[default]
+    Fast,
+    /// The thesis: pose every source and blend the posed meshes every frame.
+    Exact,
+}
+
+/// The Gaussian source and shape weights of one group.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GroupEdit {
+    /// Source whose Gaussians the group shows.
+    pub gaussians: String,
+    /// Shape weights by source name (non-negative, not all zero).
+    pub shape: BTreeMap<String, f64>,
+}
+
+/// Post-processing toggles.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PostProcess {
+    /// Border smoothing.
+    pub smoothing: Smoothing,
+    /// Colour correction.
+    pub colour: ColourCorrection,
+}
+
+/// The driving motion and frame.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Animation {
+    /// Motion name, or "rest".
+    pub motion: String,
+    /// Frame index (wraps around the motion's length).
+    pub frame: usize,
+    /// Fast (blend once) or exact (blend every frame).
+    pub mode: AnimationMode,
+}
+
+impl Default for Animation {
+    fn default() -> Self {
+        Self {
+            motion: "rest".into(),
+            frame: 0,
+            mode: AnimationMode::Fast,
+        }
+    }
+}
+
+/// A composite avatar described by name.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Recipe {
+    /// File format version.
+    #[serde(default = "default_version")]
+    pub version: u32,
+    /// The base avatar.
+    pub base: String,
+    /// Edited groups.
+    #[serde(default)]
+    pub groups: BTreeMap<String, GroupEdit>,
+    /// Post-processing.
+    #[serde(default)]
+    pub post: PostProcess,
+    /// Animation.
+    #[serde(default)]
+    pub animation: Animation,
+    /// Camera.
+    #[serde(default)]
+    pub camera: Orbit,
+}
+
+fn default_version() -> u32 {
+    RECIPE_VERSION
+}
+
+impl Recipe {
+    /// The recipe that shows `base` unedited.
+    pub fn unedited(base: &str) -> Self {
+        Self {
+            version: RECIPE_VERSION,
+            base: base.to_string(),
+            groups: BTreeMap::new(),
+            post: PostProcess::default(),
+            animation: Animation::default(),
+            camera: Orbit::default(),
+        }
+    }
+
+    /// Parses a recipe from TOML text; errors name the problem in one line.
+    pub fn from_toml(text: &str) -> Result<Self> {
+        let recipe: Recipe = toml::from_str(text)
+            .map_err(|e| Error::input(format!("invalid recipe: {}", e.message().trim())))?;
+        if recipe.version != RECIPE_VERSION {
+            return Err(Error::input(format!(
+                "recipe version {} is not supported (this build reads version {RECIPE_VERSION})",
+                recipe.version
+            )));
+        }
+        Ok(recipe)
+    }
+
+    /// Reads a recipe file.
+    pub fn load(path: &std::path::Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::input(format!("cannot read recipe {}: {e}", path.display())))?;
+        Self::from_toml(&text).map_err(|e| Error::input(format!("{}: {e}", path.display())))
+    }
+
+    /// The canonical TOML text (stable ordering), used for files and state hashes.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("recipes always serialise")
+    }
+}
+
+/// A recipe checked against a database, with names turned into indices and shape
+/// weights normalised to sum to 1.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ResolvedRecipe {
+    /// Index of the base source.
+    pub base: usize,
+    /// Gaussian source per group, in [`Group::ALL`] order.
+    pub gaussians: [usize; Group::COUNT],
+    /// Shape weights per group over all sources (each row sums to 1).
+    pub shape: [Vec<f64>; Group::COUNT],
+    /// Post-processing.
+    pub post: PostProcess,
+    /// Motion index, or `None` for the rest pose.
+    pub motion: Option<usize>,
+    /// Frame index.
+    pub frame: usize,
+    /// Animation mode.
+    pub mode: AnimationMode,
+    /// Camera.
+    pub camera: Orbit,
+}
+
+impl ResolvedRecipe {
+    /// Sources with a non-zero shape weight in some group (always includes the base).
+    pub fn shape_sources(&self) -> Vec<usize> {
+        let n = self.shape[0].len();
+        let mut used: Vec<usize> = (0..n)
+            .filter(|&f| self.shape.iter().any(|row| row[f] > 0.0))
+            .collect();
+        if !used.contains(&self.base) {
+            used.push(self.base);
+            used.sort();
+        }
+        used
+    }
+}
+
+/// Smallest positive weight kept after normalisation; smaller ones are dropped
+/// (they cannot change a vertex by more than ~1e-12 m but would cost a source).
+const NEGLIGIBLE_WEIGHT: f64 = 1e-15;
+
+impl Recipe {
+    /// Checks the recipe against a database and resolves names to indices.
+    pub fn resolve(&self, db: &Database) -> Result<ResolvedRecipe> {
+        let source = |name: &str, what: &str| {
+            db.source_index(name).ok_or_else(|| {
+                Error::input(format!(
+                    "unknown source '{}' in {what} (known: {})",
+                    crate::io::printable(name),
+                    db.sources
+                        .iter()
+                        .map(|s| s.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ))
+            })
+        };
+        let base = source(&self.base, "base")?;
+        let n = db.sources.len();
+        let mut gaussians = [base; Group::COUNT];
+        let mut shape: [Vec<f64>; Group::COUNT] = std::array::from_fn(|_| {
+            let mut row = vec![0.0; n];
+            row[base] = 1.0;
+            row
+        });
+        for (name, edit) in &self.groups {
+            let group = Group::from_name(name).ok_or_else(|| {
+                Error::input(format!(
+                    "unknown group '{}' (groups: {})",
+                    crate::io::printable(name),
+                    Group::ALL.map(Group::name).join(", ")
+                ))
+            })?;
+            let g = group.index();
+            gaussians[g] = source(&edit.gaussians, &format!("groups.{name}.gaussians"))?;
+            if edit.shape.is_empty() {
+                continue;
+            }
+            let mut row = vec![0.0; n];
+            for (src, &w) in &edit.shape {
+                let f = source(src, &format!("groups.{name}.shape"))?;
+                if !w.is_finite() || w < 0.0 {
+                    return Err(Error::input(format!(
+                        "shape weight {w} for '{}' in group {name} must be a finite number ≥ 0",
+                        crate::io::printable(src)
+                    )));
+                }
+                row[f] += w;
+            }
+            let sum: f64 = row.iter().sum();
+            if sum <= 0.0 {
+                return Err(Error::input(format!(
+                    "the shape weights of group {name} are all zero; give at least one source a positive weight"
+                )));
+            }
+            for w in &mut row {
+                *w /= sum;
+                if *w < NEGLIGIBLE_WEIGHT {
+                    *w = 0.0;
+                }
+            }
+            let sum: f64 = row.iter().sum();
+            row.iter_mut().for_each(|w| *w /= sum);
+            shape[g] = row;
+        }
+        let motion = match self.animation.motion.as_str() {
+            "rest" => None,
+            name => Some(db.motion_index(name).ok_or_else(|| {
+                Error::input(format!(
+                    "unknown motion '{}' (motions: rest, {})",
+                    crate::io::printable(name),
+                    db.motions
+                        .iter()
+                        .map(|m| m.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ))
+            })?),
+        };
+        let c = &self.camera;
+        let camera_ok = c.radius.is_finite()
+            && c.radius > 0.0
+            && c.fov_deg.is_finite()
+            && c.fov_deg > 0.0
+            && c.fov_deg < 170.0
+            && c.yaw_deg.is_finite()
+            && c.pitch_deg.is_finite()
+            && c.target.iter().all(|x| x.is_finite());
+        if !camera_ok {
+            return Err(Error::input(
+                "camera needs a finite radius > 0, a field of view in (0, 170) degrees and finite angles and target",
+            ));
+        }
+        Ok(ResolvedRecipe {
+            base,
+            gaussians,
+            shape,
+            post: self.post,
+            motion,
+            frame: self.animation.frame,
+            mode: self.animation.mode,
+            camera: self.camera,
+        })
+    }
+}

@@ -1,0 +1,175 @@
+//! `visage compose`, `visage export` and `visage bench engine` as a user runs them.
+
+use std::process::Command;
+
+fn visage(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_visage"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+const SMALL: [&str; 2] = ["--gaussians-per-avatar", "11000"];
+
+fn compose_json(recipe: &str) -> serde_json::Value {
+    let mut args = vec!["compose", "--recipe", recipe, "--json"];
+    args.extend(SMALL);
+    let out = visage(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn compose_reports_the_composite_and_a_stable_state_hash() {
+    let a = compose_json("recipes/three-sources.toml");
+    let b = compose_json("recipes/three-sources.toml");
+    assert_eq!(a["state_hash"], b["state_hash"], "identical across runs");
+    assert_eq!(a["regions"], b["regions"]);
+    assert_eq!(a["regions"].as_array().unwrap().len(), 18);
+    let nose = a["regions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["region"] == "nose")
+        .unwrap();
+    assert_eq!(nose["source"], "bram");
+    assert!(
+        a["extra_gaussians"].as_u64().unwrap() > 0,
+        "crossfade adds Gaussians"
+    );
+    assert!(a["solve_residual"].as_f64().unwrap() <= 1e-10);
+    assert_eq!(a["frame"]["finite"], true);
+    let eyes = a["regions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["region"] == "left_eye_region")
+        .unwrap();
+    assert_ne!(
+        eyes["colour_gain"][0], 1.0,
+        "skin correction applied to jomo's eye region"
+    );
+}
+
+#[test]
+fn export_ply_writes_every_gaussian_of_the_frame() {
+    let out_path = std::env::temp_dir().join(format!("visage-export-{}.ply", std::process::id()));
+    let mut args = vec![
+        "export",
+        "--recipe",
+        "recipes/three-sources.toml",
+        "--format",
+        "ply",
+        "--frame",
+        "12",
+        "-o",
+        out_path.to_str().unwrap(),
+    ];
+    args.extend(SMALL);
+    let out = visage(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let scene = visage::io::ply::read_splat_ply(&out_path).unwrap();
+    std::fs::remove_file(&out_path).ok();
+    let report = compose_json("recipes/three-sources.toml");
+    assert_eq!(scene.len() as u64, report["gaussians"].as_u64().unwrap());
+    assert_eq!(scene.sh_degree, 3);
+    assert!(scene
+        .position
+        .iter()
+        .all(|p| p.is_finite() && p.length() < 1.0));
+}
+
+#[test]
+fn bad_recipes_fail_with_one_line_and_exit_2() {
+    let dir = std::env::temp_dir().join(format!("visage-bad-recipes-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cases = [
+        ("unknown-source.toml", "base = \"zed\"\n", "unknown source"),
+        (
+            "bad-weight.toml",
+            "base = \"ada\"\n[groups.nose]\ngaussians = \"ada\"\nshape = { ada = -1.0 }\n",
+            "≥ 0",
+        ),
+        (
+            "zero.toml",
+            "base = \"ada\"\n[groups.nose]\ngaussians = \"ada\"\nshape = { ada = 0.0 }\n",
+            "all zero",
+        ),
+        (
+            "typo.toml",
+            "base = \"ada\"\n[post]\nsmothing = \"thesis\"\n",
+            "smothing",
+        ),
+    ];
+    for (file, text, needle) in cases {
+        let path = dir.join(file);
+        std::fs::write(&path, text).unwrap();
+        let out = visage(&[
+            "compose",
+            "--recipe",
+            path.to_str().unwrap(),
+            "--gaussians-per-avatar",
+            "11000",
+        ]);
+        assert_eq!(out.status.code(), Some(2), "{file}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.trim_end().lines().count(), 1, "{file}: {err}");
+        assert!(err.contains(needle), "{file}: {err}");
+    }
+    let out = visage(&["compose", "--recipe", "/no/such/recipe.toml"]);
+    assert_eq!(out.status.code(), Some(2));
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn bench_engine_json_rows_carry_speed_and_error() {
+    let mut args = vec![
+        "bench",
+        "engine",
+        "--sources",
+        "2,3",
+        "--iterations",
+        "4",
+        "--warmup",
+        "1",
+        "--json",
+    ];
+    args.extend(SMALL);
+    let out = visage(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    for action in ["animate", "shape", "assign", "solve", "factor"] {
+        assert!(rows.iter().any(|r| r["action"] == action), "{action}");
+    }
+    for r in rows {
+        assert!(
+            r["ms_median"].as_f64().unwrap() >= 0.0
+                && r["ms_p90"].as_f64().unwrap() >= r["ms_median"].as_f64().unwrap()
+        );
+        assert!(r["sources"].as_u64().is_some());
+    }
+    let fast = rows
+        .iter()
+        .find(|r| r["action"] == "animate" && r["mode"] == "fast")
+        .unwrap();
+    let err = fast["max_vertex_error_m"].as_f64().unwrap();
+    assert!(err > 0.0 && err < 0.005, "fast vs exact {err}");
+    let exact = rows
+        .iter()
+        .find(|r| r["action"] == "animate" && r["mode"] == "exact")
+        .unwrap();
+    assert!(exact["max_residual"].as_f64().unwrap() <= 1e-10);
+}

@@ -1,0 +1,568 @@
+//! The composition engine: recipes, selection, blending, post-processing and
+//! animation, including the numerical hard cases.
+
+use std::collections::BTreeMap;
+use std::sync::OnceLock;
+
+use glam::Vec3;
+use visage::avatar::database::Database;
+use visage::avatar::gaussians::{dc_to_rgb, rgb_to_dc, sigmoid};
+use visage::compose::blend::Blender;
+use visage::compose::colour::{weighted_mean_colour, GAIN_RANGE};
+use visage::compose::engine::{Engine, PosedMesh};
+use visage::compose::recipe::{
+    AnimationMode, ColourCorrection, GroupEdit, Recipe, ResolvedRecipe, Smoothing,
+};
+use visage::compose::state_hash;
+use visage::model::builtin::build_head;
+use visage::model::head::{Joint, Pose};
+use visage::model::regions::{Group, Region};
+use visage::model::synthetic::{builtin_database, SyntheticOptions};
+
+fn small_db() -> Database {
+    builtin_database(
+        build_head(),
+        SyntheticOptions {
+            seed: 5,
+            sources: 4,
+            gaussians_per_avatar: 12_000,
+        },
+    )
+    .unwrap()
+}
+
+fn engine() -> &'static Engine {
+    static ENGINE: OnceLock<Engine> = OnceLock::new();
+    ENGINE.get_or_init(|| Engine::new(small_db()).unwrap())
+}
+
+fn names(e: &Engine) -> Vec<String> {
+    e.database()
+        .sources
+        .iter()
+        .map(|s| s.name.clone())
+        .collect()
+}
+
+fn edit(gaussians: &str, shape: &[(&str, f64)]) -> GroupEdit {
+    GroupEdit {
+        gaussians: gaussians.to_string(),
+        shape: shape
+            .iter()
+            .map(|(k, v)| (k.to_string(), *v))
+            .collect::<BTreeMap<_, _>>(),
+    }
+}
+
+fn resolve(e: &Engine, recipe: &Recipe) -> ResolvedRecipe {
+    recipe.resolve(e.database()).unwrap()
+}
+
+fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (*x - *y).length())
+        .fold(0.0, f32::max)
+}
+
+fn all_groups(recipe: &mut Recipe, gaussians: &str, shape: &[(&str, f64)]) {
+    for g in Group::ALL {
+        recipe
+            .groups
+            .insert(g.name().into(), edit(gaussians, shape));
+    }
+}
+
+#[test]
+fn recipe_validation_names_the_problem() {
+    let e = engine();
+    let db = e.database();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.base = "nobody".into();
+    assert!(r
+        .resolve(db)
+        .unwrap_err()
+        .to_string()
+        .contains("unknown source 'nobody'"));
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups.insert("forehead".into(), edit(&n[1], &[]));
+    assert!(r
+        .resolve(db)
+        .unwrap_err()
+        .to_string()
+        .contains("unknown group 'forehead'"));
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups
+        .insert("nose".into(), edit(&n[1], &[(&n[1], -0.5)]));
+    assert!(r.resolve(db).unwrap_err().to_string().contains("≥ 0"));
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups
+        .insert("nose".into(), edit(&n[1], &[(&n[1], 0.0), (&n[0], 0.0)]));
+    assert!(r.resolve(db).unwrap_err().to_string().contains("all zero"));
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups
+        .insert("nose".into(), edit(&n[1], &[(&n[1], f64::NAN)]));
+    assert!(r.resolve(db).is_err());
+    let mut r = Recipe::unedited(&n[0]);
+    r.animation.motion = "dance".into();
+    assert!(r
+        .resolve(db)
+        .unwrap_err()
+        .to_string()
+        .contains("unknown motion"));
+    // Non-zero weights are normalised.
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups
+        .insert("nose".into(), edit(&n[1], &[(&n[1], 3.0), (&n[2], 1.0)]));
+    let resolved = r.resolve(db).unwrap();
+    assert_eq!(resolved.shape[Group::Nose.index()][1], 0.75);
+    assert_eq!(resolved.shape[Group::Nose.index()][2], 0.25);
+}
+
+#[test]
+fn recipe_files_parse_strictly() {
+    let good = "base = \"ada\"\n[groups.nose]\ngaussians = \"bram\"\nshape = { bram = 1.0 }\n[post]\nsmoothing = \"thesis\"\n";
+    let r = Recipe::from_toml(good).unwrap();
+    assert_eq!(r.post.smoothing, Smoothing::Thesis);
+    assert_eq!(
+        Recipe::from_toml(&r.to_toml()).unwrap(),
+        r,
+        "canonical text round-trips"
+    );
+    for bad in [
+        "base = \"ada\"\nsmoothing = \"thesis\"\n", // misplaced key
+        "base = \"ada\"\n[post]\nsmoothing = \"blur\"\n", // unknown option
+        "[groups.nose]\ngaussians = \"bram\"\nshape = {}\n", // no base
+        "base = \"ada\"\nversion = 9\n",            // future version
+        "base = ",                                  // not TOML
+    ] {
+        let err = Recipe::from_toml(bad).unwrap_err().to_string();
+        assert!(!err.contains('\n'), "one line: {err}");
+    }
+}
+
+#[test]
+fn blending_one_source_reproduces_its_mesh() {
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[2]);
+    all_groups(&mut r, &n[2], &[(&n[2], 1.0)]);
+    let c = e.compose(&resolve(e, &r));
+    assert!(c.residual <= 1e-10, "residual {}", c.residual);
+    assert!(max_distance(&c.neutral, e.source_neutral(2)) < 1e-6);
+}
+
+#[test]
+fn an_even_blend_is_the_average_mesh_translated_to_the_base_pin() {
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    all_groups(&mut r, &n[0], &[(&n[1], 0.5), (&n[3], 0.5)]);
+    let c = e.compose(&resolve(e, &r));
+    let (a, b, base) = (
+        e.source_neutral(1),
+        e.source_neutral(3),
+        e.source_neutral(0),
+    );
+    let p = e.blender().pinned_vertex() as usize;
+    let shift = base[p] - 0.5 * (a[p] + b[p]);
+    let expected: Vec<Vec3> = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| 0.5 * (*x + *y) + shift)
+        .collect();
+    assert!(max_distance(&c.neutral, &expected) < 1e-6);
+    assert!(c.residual <= 1e-10);
+}
+
+#[test]
+fn weights_zero_one_and_tiny() {
+    let e = engine();
+    let n = names(e);
+    let compose = |shape: &[(&str, f64)]| {
+        let mut r = Recipe::unedited(&n[0]);
+        r.groups.insert("nose".into(), edit(&n[0], shape));
+        e.compose(&resolve(e, &r)).neutral
+    };
+    let only_a = compose(&[(&n[1], 1.0)]);
+    let with_zero = compose(&[(&n[1], 1.0), (&n[2], 0.0)]);
+    let with_tiny = compose(&[(&n[1], 1.0), (&n[2], 1e-12)]);
+    assert_eq!(only_a, with_zero, "a zero weight changes nothing");
+    assert!(
+        max_distance(&only_a, &with_tiny) < 1e-6,
+        "1e-12 changes (almost) nothing"
+    );
+    let only_b = compose(&[(&n[1], 0.0), (&n[2], 1.0)]);
+    assert!(
+        max_distance(&only_a, &only_b) > 1e-4,
+        "the weights are used"
+    );
+}
+
+#[test]
+fn nose_blend_stays_local() {
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups.insert("nose".into(), edit(&n[0], &[(&n[3], 1.0)]));
+    let c = e.compose(&resolve(e, &r));
+    let base = e.source_neutral(0);
+    let model = &e.database().model;
+    // Vertices of the hair region (far from the nose) barely move.
+    let mut far = 0.0f32;
+    for (t, reg) in model.triangles.iter().zip(&model.triangle_regions) {
+        if *reg == Region::Hair {
+            for &v in t {
+                far = far.max((c.neutral[v as usize] - base[v as usize]).length());
+            }
+        }
+    }
+    assert!(far < 5e-4, "hair moved {far} m for a nose edit");
+}
+
+#[test]
+fn fast_and_exact_animation_agree_at_rest_and_stay_close_when_posed() {
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    all_groups(&mut r, &n[0], &[(&n[1], 0.3), (&n[2], 0.7)]);
+    let c = e.compose(&resolve(e, &r));
+    let (mut fast, mut exact) = (PosedMesh::default(), PosedMesh::default());
+    e.pose_with(&c, &[], &Pose::REST, AnimationMode::Fast, &mut fast);
+    e.pose_with(&c, &[], &Pose::REST, AnimationMode::Exact, &mut exact);
+    assert!(max_distance(&fast.vertices, &exact.vertices) < 1e-5);
+    let mut pose = Pose::REST;
+    pose.joints[Joint::Jaw as usize] = Vec3::new(0.2, 0.0, 0.0);
+    pose.joints[Joint::Neck as usize] = Vec3::new(0.1, 0.4, 0.0);
+    let expression = vec![0.5; e.database().model.expression_basis.len()];
+    e.pose_with(&c, &expression, &pose, AnimationMode::Fast, &mut fast);
+    e.pose_with(&c, &expression, &pose, AnimationMode::Exact, &mut exact);
+    let d = max_distance(&fast.vertices, &exact.vertices);
+    assert!(d > 0.0 && d < 0.005, "fast vs exact differ by {d} m");
+    assert!(exact.residual <= 1e-10);
+}
+
+#[test]
+fn selection_follows_the_assignment_and_updates_only_what_changed() {
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups.insert("eyes".into(), edit(&n[2], &[]));
+    let resolved = resolve(e, &r);
+    let mut c = e.compose(&resolved);
+    let model = &e.database().model;
+    for b in &c.blocks {
+        assert_eq!(b.source, resolved.gaussians[b.region.group().index()]);
+        for i in b.start..b.end {
+            assert_eq!(
+                model.triangle_regions[c.gaussians.binding[i] as usize],
+                b.region
+            );
+        }
+    }
+    let expected: usize = Region::ALL
+        .iter()
+        .map(|&reg| {
+            let f = resolved.gaussians[reg.group().index()];
+            let src = &e.database().sources[f].gaussians;
+            src.binding
+                .iter()
+                .filter(|&&t| model.triangle_regions[t as usize] == reg)
+                .count()
+        })
+        .sum();
+    assert_eq!(
+        c.gaussians.len(),
+        expected,
+        "no smoothing: exactly the assigned Gaussians"
+    );
+    // A shape edit re-blends but keeps the selection; an assignment edit the reverse.
+    let mut shape_edit = resolved.clone();
+    shape_edit.shape[Group::Nose.index()] = vec![0.5, 0.5, 0.0, 0.0];
+    let changes = e.update(&mut c, &shape_edit);
+    assert!(changes.shape && !changes.gaussians);
+    let mut assign_edit = shape_edit.clone();
+    assign_edit.gaussians[Group::Nose.index()] = 3;
+    let changes = e.update(&mut c, &assign_edit);
+    assert!(!changes.shape && changes.gaussians);
+    let fresh = e.compose(&assign_edit);
+    assert_eq!(
+        c.gaussians, fresh.gaussians,
+        "incremental update equals a fresh build"
+    );
+    assert_eq!(c.neutral, fresh.neutral);
+}
+
+#[test]
+fn thesis_smoothing_adds_half_opaque_neighbours_only_where_sources_differ() {
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.post.smoothing = Smoothing::Thesis;
+    let same = e.compose(&resolve(e, &r));
+    assert!(
+        same.blocks.iter().all(|b| b.extra_from.is_none()),
+        "one source: no extras"
+    );
+    r.groups.insert("nose".into(), edit(&n[1], &[]));
+    let c = e.compose(&resolve(e, &r));
+    let extras: Vec<_> = c.blocks.iter().filter(|b| b.extra_from.is_some()).collect();
+    assert!(!extras.is_empty());
+    for b in extras {
+        let from = b.extra_from.unwrap();
+        assert!(from.group() == Group::Nose || b.region.group() == Group::Nose);
+        let src = &e.database().sources[b.source].gaussians;
+        // Every extra is a copy of a source Gaussian at half its opacity.
+        for i in b.start..b.end.min(b.start + 50) {
+            let alpha = sigmoid(c.gaussians.opacity_logit[i]);
+            let original = (0..src.len())
+                .find(|&j| {
+                    src.position[j] == c.gaussians.position[i]
+                        && src.binding[j] == c.gaussians.binding[i]
+                })
+                .expect("extra comes from its source");
+            assert!((alpha - 0.5 * sigmoid(src.opacity_logit[original])).abs() < 1e-4);
+        }
+    }
+}
+
+#[test]
+fn crossfade_keeps_coverage_exact() {
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.post.smoothing = Smoothing::Crossfade;
+    r.groups.insert("nose".into(), edit(&n[1], &[]));
+    let c = e.compose(&resolve(e, &r));
+    // On every border triangle, own and foreign opacity exponents sum to one: the
+    // transmittance of the most opaque own/foreign pair multiplies back to the original.
+    let extras = c.blocks.iter().filter(|b| b.extra_from.is_some()).count();
+    assert!(extras > 0);
+    let mut checked = 0;
+    for b in c.blocks.iter().filter(|b| b.extra_from.is_some()) {
+        for i in b.start..b.end {
+            let t = c.gaussians.binding[i];
+            let src = &e.database().sources[b.source].gaussians;
+            let j = (0..src.len())
+                .find(|&j| src.binding[j] == t && src.position[j] == c.gaussians.position[i])
+                .unwrap();
+            let (full, split) = (
+                sigmoid(src.opacity_logit[j]),
+                sigmoid(c.gaussians.opacity_logit[i]),
+            );
+            let exponent = (1.0 - split).ln() / (1.0 - full).ln();
+            assert!(
+                exponent > 0.0 && exponent <= 0.5 + 1e-4,
+                "foreign share {exponent}"
+            );
+            checked += 1;
+            if checked > 200 {
+                break;
+            }
+        }
+    }
+}
+
+#[test]
+fn thesis_colour_correction_matches_region_means_to_the_base() {
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.post.colour = ColourCorrection::Thesis;
+    r.groups.insert("face".into(), edit(&n[3], &[]));
+    let c = e.compose(&resolve(e, &r));
+    let block = c
+        .blocks
+        .iter()
+        .find(|b| b.region == Region::Skin && b.extra_from.is_none())
+        .unwrap();
+    let indices: Vec<u32> = (block.start as u32..block.end as u32).collect();
+    let corrected = weighted_mean_colour(&c.gaussians, &indices).unwrap();
+    let base = &e.database().sources[0].gaussians;
+    let base_idx: Vec<u32> = (0..base.len() as u32)
+        .filter(|&i| {
+            e.database().model.triangle_regions[base.binding[i as usize] as usize] == Region::Skin
+        })
+        .collect();
+    let target = weighted_mean_colour(base, &base_idx).unwrap();
+    assert!(
+        corrected.abs_diff_eq(target, 2e-3),
+        "{corrected} vs {target}"
+    );
+}
+
+#[test]
+fn near_black_regions_get_bounded_gains_and_no_nan() {
+    let mut db = small_db();
+    // Source 1 paints its whole face pitch black; the base keeps its colours.
+    let model = db.model.clone();
+    let set = &mut db.sources[1].gaussians;
+    let stride = set.sh_stride();
+    for i in 0..set.len() {
+        if model.triangle_regions[set.binding[i] as usize] == Region::Skin {
+            for k in 0..stride {
+                set.sh[i * stride + k] = if k < 3 { rgb_to_dc(0.0) } else { 0.0 };
+            }
+        }
+    }
+    let e = Engine::new(db).unwrap();
+    let n = names(&e);
+    for colour in [ColourCorrection::Thesis, ColourCorrection::Skin] {
+        let mut r = Recipe::unedited(&n[0]);
+        r.post.colour = colour;
+        r.groups.insert("face".into(), edit(&n[1], &[]));
+        let c = e.compose(&resolve(&e, &r));
+        let g = c.colour_gains[Region::Skin.index()];
+        assert!(
+            g.is_finite() && g.max_element() <= GAIN_RANGE.1 && g.min_element() >= GAIN_RANGE.0,
+            "{g}"
+        );
+        assert!(c.gaussians.sh.iter().all(|x| x.is_finite()));
+        c.gaussians
+            .validate(e.database().model.triangle_count())
+            .unwrap();
+        // Black stays dark: a bounded gain cannot make it skin-coloured.
+        let block = c
+            .blocks
+            .iter()
+            .find(|b| b.region == Region::Skin && b.extra_from.is_none())
+            .unwrap();
+        let stride = c.gaussians.sh_stride();
+        let rgb = dc_to_rgb(c.gaussians.sh[block.start * stride]);
+        assert!(rgb < 0.1, "{rgb}");
+    }
+}
+
+#[test]
+fn degenerate_and_sliver_triangles_in_a_source_leave_no_nan() {
+    let mut db = small_db();
+    let model = db.model.clone();
+    let src = &mut db.sources[2];
+    // Collapse some nose triangles to a point and squash others into slivers.
+    let mut collapsed = 0;
+    for (k, (t, r)) in model
+        .triangles
+        .iter()
+        .zip(&model.triangle_regions)
+        .enumerate()
+    {
+        if *r == Region::Nose {
+            let [a, b, c] = t.map(|i| model.template[i as usize]);
+            if k % 2 == 0 {
+                let centre = (a + b + c) / 3.0;
+                for (&v, p) in t.iter().zip([a, b, c]) {
+                    src.static_offset[v as usize] = centre - p;
+                }
+                collapsed += 1;
+            } else {
+                src.static_offset[t[2] as usize] = 0.5 * (a + b) - c + Vec3::splat(1e-9);
+            }
+        }
+    }
+    assert!(collapsed > 10);
+    let e = Engine::new(db).unwrap();
+    let n = names(&e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.post.smoothing = Smoothing::Thesis;
+    r.post.colour = ColourCorrection::Thesis;
+    r.groups.insert("nose".into(), edit(&n[2], &[(&n[2], 1.0)]));
+    r.groups
+        .insert("face".into(), edit(&n[2], &[(&n[2], 0.5), (&n[0], 0.5)]));
+    r.animation.motion = "talk".into();
+    let resolved = resolve(&e, &r);
+    let c = e.compose(&resolved);
+    assert!(c.residual <= 1e-10);
+    for mode in [AnimationMode::Fast, AnimationMode::Exact] {
+        let mut posed = PosedMesh::default();
+        let (ex, pose) = e.frame_parameters(&resolved, 40);
+        e.pose_with(&c, &ex, &pose, mode, &mut posed);
+        let scene = e.scene(&c, &posed);
+        assert!(scene.position.iter().all(|p| p.is_finite()), "{mode:?}");
+        assert!(scene.rotation.iter().all(|q| q.is_finite()));
+        assert!(scene.scale.iter().all(|s| s.is_finite()));
+        assert!(scene.opacity.iter().all(|o| o.is_finite()));
+    }
+}
+
+#[test]
+fn a_disjoint_part_without_anchor_is_a_clear_error() {
+    let mut model = build_head();
+    let n = model.vertex_count() as u32;
+    for p in [
+        Vec3::new(0.3, 0.0, 0.0),
+        Vec3::new(0.31, 0.0, 0.0),
+        Vec3::new(0.3, 0.01, 0.0),
+    ] {
+        model.template.push(p);
+        model.skin_weights.push([0.0, 1.0, 0.0, 0.0, 0.0]);
+    }
+    model.triangles.push([n, n + 1, n + 2]);
+    model.triangle_regions.push(Region::Skin);
+    let err = Blender::new(&model).err().expect("must fail").to_string();
+    assert!(
+        err.contains("not connected") && err.contains("skin"),
+        "{err}"
+    );
+    assert!(!err.contains('\n'));
+}
+
+#[test]
+fn far_from_the_origin_blending_keeps_its_relative_accuracy() {
+    let near = small_db();
+    let mut far = near.clone();
+    let offset = Vec3::splat(1e3);
+    for v in &mut far.model.template {
+        *v += offset;
+    }
+    let (en, ef) = (Engine::new(near).unwrap(), Engine::new(far).unwrap());
+    let n = names(&en);
+    let mut r = Recipe::unedited(&n[0]);
+    all_groups(&mut r, &n[0], &[(&n[1], 0.4), (&n[2], 0.6)]);
+    let (cn, cf) = (en.compose(&resolve(&en, &r)), ef.compose(&resolve(&ef, &r)));
+    assert!(cf.residual <= 1e-10, "residual {}", cf.residual);
+    let shifted: Vec<Vec3> = cf.neutral.iter().map(|v| *v - offset).collect();
+    // f32 storage at 1 km resolves ~6e-5 m; the solve must not lose more than that.
+    let err = max_distance(&shifted, &cn.neutral);
+    assert!(err < 2.5e-4, "error {err} m at 1e3 m from the origin");
+}
+
+#[test]
+fn the_full_composite_has_no_nan_and_is_reproducible() {
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.post.smoothing = Smoothing::Crossfade;
+    r.post.colour = ColourCorrection::Skin;
+    r.groups
+        .insert("eyes".into(), edit(&n[1], &[(&n[1], 0.5), (&n[0], 0.5)]));
+    r.groups
+        .insert("mouth".into(), edit(&n[2], &[(&n[2], 1.0)]));
+    r.groups.insert("hair".into(), edit(&n[3], &[(&n[3], 1.0)]));
+    r.animation.motion = "smile".into();
+    let resolved = resolve(e, &r);
+    let a = e.compose(&resolved);
+    let b = e.compose(&resolved);
+    assert_eq!(a.gaussians, b.gaussians);
+    assert_eq!(a.neutral, b.neutral);
+    a.gaussians
+        .validate(e.database().model.triangle_count())
+        .unwrap();
+    let mut posed = PosedMesh::default();
+    for frame in [0, 37, 90] {
+        e.pose(&a, frame, &mut posed);
+        let scene = e.scene(&a, &posed);
+        assert!(scene.position.iter().all(|p| p.is_finite()));
+        assert!(scene.sh.iter().all(|x| x.is_finite()));
+    }
+    assert_eq!(
+        state_hash(e.database(), &resolved),
+        state_hash(e.database(), &resolved)
+    );
+    let mut other = resolved.clone();
+    other.frame += 1;
+    assert_ne!(
+        state_hash(e.database(), &resolved),
+        state_hash(e.database(), &other)
+    );
+}
