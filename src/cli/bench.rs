@@ -29,6 +29,8 @@ pub struct BenchArgs {
 enum BenchWhat {
     /// Animate / change shape / change assignment, per number of sources.
     Engine(EngineBenchArgs),
+    /// Frame time per resolution and stage, and speed against error per knob.
+    Render(super::bench_render::RenderBenchArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -53,6 +55,7 @@ struct EngineBenchArgs {
 pub fn run(args: &BenchArgs) -> Result<()> {
     match &args.what {
         BenchWhat::Engine(a) => engine_bench(a),
+        BenchWhat::Render(a) => super::bench_render::run(a),
     }
 }
 

@@ -69,17 +69,32 @@ pub struct Built {
     pub timings: [f64; 4],
 }
 
-/// Loads the database and recipe, builds the composite and poses `frame`.
+/// Loads the database and a recipe file, builds the composite and poses `frame`.
 pub fn build(
     db_args: &DbArgs,
     recipe_path: &std::path::Path,
     frame: Option<usize>,
 ) -> Result<Built> {
     let recipe = Recipe::load(recipe_path)?;
+    build_with(db_args, &recipe, frame, Some(recipe_path))
+}
+
+/// Loads the database, builds the composite of `recipe` and poses `frame`.
+pub fn build_recipe(db_args: &DbArgs, recipe: &Recipe, frame: Option<usize>) -> Result<Built> {
+    build_with(db_args, recipe, frame, None)
+}
+
+fn build_with(
+    db_args: &DbArgs,
+    recipe: &Recipe,
+    frame: Option<usize>,
+    file: Option<&std::path::Path>,
+) -> Result<Built> {
     let (db, db_time) = db_args.load()?;
-    let resolved = recipe
-        .resolve(&db)
-        .map_err(|e| Error::input(format!("{}: {e}", recipe_path.display())))?;
+    let resolved = recipe.resolve(&db).map_err(|e| match file {
+        Some(path) => Error::input(format!("{}: {e}", path.display())),
+        None => e,
+    })?;
     let t = Instant::now();
     let engine = Engine::new(db)?;
     let setup = t.elapsed();

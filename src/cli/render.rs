@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use clap::Args;
 
-use super::compose::build;
+use super::compose::{build, build_recipe, Built};
 use super::DbArgs;
 use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
@@ -13,6 +13,7 @@ use crate::io::ply::read_splat_ply;
 use crate::render::camera::Orbit;
 use crate::render::reference::{render_reference, RenderSettings};
 use crate::render::scene::SplatScene;
+use crate::render::{Backend, SplatRenderer};
 
 /// Arguments of `visage render`.
 #[derive(Args, Debug, Clone)]
@@ -40,6 +41,10 @@ pub struct RenderArgs {
     /// Render with the CPU reference renderer (f64, exact depth order).
     #[arg(long)]
     reference: bool,
+    /// Renderer: auto (a hardware GPU if present, else the CPU renderer), gpu
+    /// (wgpu on any adapter, lavapipe included) or cpu.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    renderer: Backend,
     /// Output PNG.
     #[arg(short = 'o', long = "output", value_name = "OUT.png")]
     output: PathBuf,
@@ -60,35 +65,32 @@ pub fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
     Ok((parse(w)?, parse(h)?))
 }
 
+/// What a still shows: a world-space PLY scene, or a posed composite.
+enum Subject {
+    Ply(SplatScene),
+    Composite(Box<Built>),
+}
+
 /// Runs `visage render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
-    let (scene, mut orbit) = if let Some(ply) = &args.ply {
+    let (subject, mut orbit) = if let Some(ply) = &args.ply {
         let scene = read_splat_ply(ply)?;
         let (lo, hi) = scene
             .bounds()
             .ok_or_else(|| Error::input(format!("{} holds no Gaussians", ply.display())))?;
-        (
-            scene,
-            Orbit {
-                fov_deg: 40.0,
-                ..Orbit::STUDY
-            }
-            .framing(lo, hi),
-        )
+        let orbit = Orbit {
+            fov_deg: 40.0,
+            ..Orbit::STUDY
+        }
+        .framing(lo, hi);
+        (Subject::Ply(scene), orbit)
     } else {
-        let path = match &args.recipe {
-            Some(p) => p.clone(),
-            None => {
-                let tmp = std::env::temp_dir()
-                    .join(format!("visage-default-{}.toml", std::process::id()));
-                std::fs::write(&tmp, Recipe::unedited("ada").to_toml())
-                    .map_err(|e| Error::input(e.to_string()))?;
-                tmp
-            }
+        let built = match &args.recipe {
+            Some(path) => build(&args.db, path, args.frame)?,
+            None => build_recipe(&args.db, &Recipe::unedited("ada"), args.frame)?,
         };
-        let built = build(&args.db, &path, args.frame)?;
-        let scene = built.engine.scene(&built.composite, &built.posed);
-        (scene, built.composite.recipe.camera)
+        let orbit = built.composite.recipe.camera;
+        (Subject::Composite(Box::new(built)), orbit)
     };
     if let Some(yaw) = args.yaw {
         orbit.yaw_deg = yaw;
@@ -97,23 +99,44 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         orbit.pitch_deg = pitch;
     }
     let camera = orbit.camera(args.size.0, args.size.1);
+    let settings = RenderSettings::default();
     let t = Instant::now();
-    let image = render_still(&scene, &camera, args.reference)?;
+    let (image, count, device) = match (&subject, args.reference) {
+        (Subject::Ply(scene), true) => (
+            render_reference(scene, &camera, &settings),
+            scene.len(),
+            "CPU reference".to_string(),
+        ),
+        (Subject::Composite(b), true) => {
+            let scene = b.engine.scene(&b.composite, &b.posed);
+            (
+                render_reference(&scene, &camera, &settings),
+                scene.len(),
+                "CPU reference".to_string(),
+            )
+        }
+        (Subject::Ply(scene), false) => {
+            let mut r = SplatRenderer::open(args.renderer)?;
+            r.set_world_scene(scene)?;
+            (
+                r.render_world(&camera, &settings)?,
+                scene.len(),
+                r.description(),
+            )
+        }
+        (Subject::Composite(b), false) => {
+            let mut r = SplatRenderer::open(args.renderer)?;
+            r.set_gaussians(&b.composite.gaussians)?;
+            let image = r.render(&b.posed.frames, &camera, &settings)?;
+            (image, b.composite.gaussians.len(), r.description())
+        }
+    };
     eprintln!(
-        "visage: rendered {} Gaussians at {}x{} in {:.1} ms",
-        scene.len(),
+        "visage: rendered {count} Gaussians at {}x{} in {:.1} ms on {device}",
         args.size.0,
         args.size.1,
         t.elapsed().as_secs_f64() * 1e3
     );
     image.save_png(&args.output)?;
     Ok(())
-}
-
-fn render_still(
-    scene: &SplatScene,
-    camera: &crate::render::camera::Camera,
-    _reference: bool,
-) -> Result<crate::render::image::RgbImage> {
-    Ok(render_reference(scene, camera, &RenderSettings::default()))
 }

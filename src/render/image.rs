@@ -63,6 +63,40 @@ impl RgbImage {
         })
     }
 
+    /// Bilinear resize (pixel centres aligned), for previews rendered at a lower
+    /// resolution.
+    pub fn resized(&self, width: u32, height: u32) -> RgbImage {
+        let mut out = RgbImage::new(width, height, [0; 3]);
+        if self.width == 0 || self.height == 0 {
+            return out;
+        }
+        let sx = self.width as f32 / width as f32;
+        let sy = self.height as f32 / height as f32;
+        for y in 0..height {
+            let fy = ((y as f32 + 0.5) * sy - 0.5).clamp(0.0, (self.height - 1) as f32);
+            let (y0, ty) = (fy.floor() as u32, fy.fract());
+            let y1 = (y0 + 1).min(self.height - 1);
+            for x in 0..width {
+                let fx = ((x as f32 + 0.5) * sx - 0.5).clamp(0.0, (self.width - 1) as f32);
+                let (x0, tx) = (fx.floor() as u32, fx.fract());
+                let x1 = (x0 + 1).min(self.width - 1);
+                let (a, b, c, d) = (
+                    self.pixel(x0, y0),
+                    self.pixel(x1, y0),
+                    self.pixel(x0, y1),
+                    self.pixel(x1, y1),
+                );
+                let k = ((y * width + x) * 3) as usize;
+                for ch in 0..3 {
+                    let top = a[ch] as f32 + (b[ch] as f32 - a[ch] as f32) * tx;
+                    let bottom = c[ch] as f32 + (d[ch] as f32 - c[ch] as f32) * tx;
+                    out.pixels[k + ch] = (top + (bottom - top) * ty + 0.5) as u8;
+                }
+            }
+        }
+        out
+    }
+
     /// The RGB triple at (x, y).
     pub fn pixel(&self, x: u32, y: u32) -> [u8; 3] {
         let k = (y as usize * self.width as usize + x as usize) * 3;
@@ -100,6 +134,12 @@ pub fn psnr(a: &RgbImage, b: &RgbImage) -> Option<f64> {
     } else {
         10.0 * (255.0f64 * 255.0 / mse).log10()
     })
+}
+
+/// PSNR for reports: capped at 100 dB (identical images report 100), so it is
+/// always a finite number in JSON.
+pub fn psnr_report(a: &RgbImage, b: &RgbImage) -> Option<f64> {
+    psnr(a, b).map(|p| p.min(100.0))
 }
 
 #[cfg(test)]

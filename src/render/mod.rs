@@ -2,9 +2,117 @@
 //! (the accuracy oracle), and the CPU mesh preview.
 
 pub mod camera;
+pub mod cpu;
+pub mod gpu;
 pub mod image;
 pub mod mesh_preview;
 pub mod projection;
 pub mod reference;
 pub mod scene;
 pub mod sh;
+pub mod tiles;
+
+use crate::avatar::binding::TriangleFrame;
+use crate::avatar::gaussians::GaussianSet;
+use crate::error::Result;
+
+/// Which renderer draws frames.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Backend {
+    /// A hardware GPU through wgpu when there is one, otherwise the CPU renderer.
+    #[default]
+    Auto,
+    /// wgpu on the best adapter, software (lavapipe) included.
+    Gpu,
+    /// The fast CPU renderer.
+    Cpu,
+}
+
+/// A splat renderer: the wgpu one or the CPU one, behind one interface.
+pub enum SplatRenderer {
+    /// wgpu compute.
+    Gpu(Box<gpu::GpuRenderer>),
+    /// Native CPU.
+    Cpu(Box<cpu::CpuRenderer>),
+}
+
+impl SplatRenderer {
+    /// Opens a renderer of the requested kind.
+    pub fn open(backend: Backend) -> Result<Self> {
+        Ok(match backend {
+            Backend::Gpu => SplatRenderer::Gpu(Box::new(gpu::GpuRenderer::new()?)),
+            Backend::Cpu => SplatRenderer::Cpu(Box::default()),
+            Backend::Auto => match gpu::GpuRenderer::new_hardware() {
+                Ok(Some(g)) => SplatRenderer::Gpu(Box::new(g)),
+                _ => SplatRenderer::Cpu(Box::default()),
+            },
+        })
+    }
+
+    /// Uploads the Gaussians to render (when the selection changes).
+    pub fn set_gaussians(&mut self, set: &GaussianSet) -> Result<()> {
+        match self {
+            SplatRenderer::Gpu(g) => g.set_gaussians(set),
+            SplatRenderer::Cpu(c) => {
+                c.set_gaussians(set);
+                Ok(())
+            }
+        }
+    }
+
+    /// Uploads a world-space scene (render it with the identity frame).
+    pub fn set_world_scene(&mut self, scene: &scene::SplatScene) -> Result<()> {
+        self.set_gaussians(&scene.as_bound_to_identity())
+    }
+
+    /// Renders the uploaded Gaussians on `frames`.
+    pub fn render(
+        &mut self,
+        frames: &[TriangleFrame],
+        camera: &camera::Camera,
+        settings: &reference::RenderSettings,
+    ) -> Result<image::RgbImage> {
+        match self {
+            SplatRenderer::Gpu(g) => g.render(frames, camera, settings),
+            SplatRenderer::Cpu(c) => c.render(frames, camera, settings),
+        }
+    }
+
+    /// Renders a world-space scene uploaded with [`SplatRenderer::set_world_scene`].
+    pub fn render_world(
+        &mut self,
+        camera: &camera::Camera,
+        settings: &reference::RenderSettings,
+    ) -> Result<image::RgbImage> {
+        self.render(&[scene::IDENTITY_FRAME], camera, settings)
+    }
+
+    /// Stage timings of the last frame.
+    pub fn timings(&self) -> gpu::StageTimings {
+        match self {
+            SplatRenderer::Gpu(g) => g.timings,
+            SplatRenderer::Cpu(c) => c.timings,
+        }
+    }
+
+    /// What renders: adapter name or "CPU".
+    pub fn description(&self) -> String {
+        match self {
+            SplatRenderer::Gpu(g) => format!("wgpu on {}", g.adapter_description()),
+            SplatRenderer::Cpu(_) => {
+                format!("CPU renderer ({} threads)", rayon::current_num_threads())
+            }
+        }
+    }
+}

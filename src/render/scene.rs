@@ -3,7 +3,7 @@
 use glam::{Quat, Vec3};
 
 use crate::avatar::binding::{local_to_world, normalize_quat, TriangleFrame};
-use crate::avatar::gaussians::{sh_coefficients, sigmoid, GaussianSet};
+use crate::avatar::gaussians::{logit, sh_coefficients, sigmoid, GaussianSet};
 
 /// World-space Gaussians in structure-of-arrays form. `sh` holds
 /// `3 · (sh_degree+1)²` floats per Gaussian, coefficient-major (`[coef][channel]`).
@@ -73,6 +73,24 @@ impl SplatScene {
         Some(it.fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p))))
     }
 
+    /// The scene as Gaussians bound to one identity frame ([`IDENTITY_FRAME`]), so a
+    /// world-space scene goes through the same renderer path as a composite.
+    pub fn as_bound_to_identity(&self) -> GaussianSet {
+        let mut set = GaussianSet::with_degree(self.sh_degree);
+        set.reserve(self.len());
+        for i in 0..self.len() {
+            set.push(
+                0,
+                self.position[i],
+                self.rotation[i],
+                self.scale[i].max(Vec3::splat(1e-30)).ln(),
+                logit(self.opacity[i]),
+                self.sh_of(i),
+            );
+        }
+        set
+    }
+
     /// Appends the Gaussians `indices` of a bound set, placed on `frames`.
     pub fn append_bound(&mut self, set: &GaussianSet, frames: &[TriangleFrame], indices: &[u32]) {
         for &i in indices {
@@ -89,3 +107,11 @@ impl SplatScene {
         }
     }
 }
+
+/// The frame that leaves triangle-local values as they are (world = local).
+pub const IDENTITY_FRAME: TriangleFrame = TriangleFrame {
+    center: Vec3::ZERO,
+    rotation: glam::Mat3::IDENTITY,
+    quat: Quat::IDENTITY,
+    scale: 1.0,
+};

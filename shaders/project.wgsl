@@ -1,0 +1,113 @@
+// project: world Gaussians -> screen-space ellipses (EWA, 3DGS numerics), SH colour,
+// depth and the tiles each footprint touches. Culled Gaussians get key.w = 0.
+
+@group(0) @binding(0) var<uniform> camera: Camera;
+@group(0) @binding(1) var<storage, read> world: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> sh: array<f32>;
+// Per Gaussian, 3 x vec4: (centre x, y, depth, radius), (conic a, b, c, opacity), (rgb, 0).
+@group(0) @binding(3) var<storage, read_write> projected: array<vec4<f32>>;
+// Per Gaussian: (depth bits, first tile x | y << 16, last tile x | y << 16, visible).
+@group(0) @binding(4) var<storage, read_write> keys: array<vec4<u32>>;
+
+const SH_C0: f32 = 0.28209479177387814;
+const SH_C1: f32 = 0.4886025119029199;
+
+fn coef(base: u32, k: u32) -> vec3<f32> {
+    let o = base + 3u * k;
+    return vec3<f32>(sh[o], sh[o + 1u], sh[o + 2u]);
+}
+
+fn sh_colour(i: u32, dir: vec3<f32>) -> vec3<f32> {
+    let base = i * camera.counts.z;
+    let degree = camera.counts.y;
+    var c = SH_C0 * coef(base, 0u);
+    if (degree >= 1u) {
+        let x = dir.x; let y = dir.y; let z = dir.z;
+        c += SH_C1 * (-y * coef(base, 1u) + z * coef(base, 2u) - x * coef(base, 3u));
+        if (degree >= 2u) {
+            let xx = x * x; let yy = y * y; let zz = z * z;
+            c += 1.0925484305920792 * x * y * coef(base, 4u)
+               - 1.0925484305920792 * y * z * coef(base, 5u)
+               + 0.31539156525252005 * (2.0 * zz - xx - yy) * coef(base, 6u)
+               - 1.0925484305920792 * x * z * coef(base, 7u)
+               + 0.5462742152960396 * (xx - yy) * coef(base, 8u);
+            if (degree >= 3u) {
+                c += -0.5900435899266435 * y * (3.0 * xx - yy) * coef(base, 9u)
+                   + 2.890611442640554 * x * y * z * coef(base, 10u)
+                   - 0.4570457994644658 * y * (4.0 * zz - xx - yy) * coef(base, 11u)
+                   + 0.3731763325901154 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * coef(base, 12u)
+                   - 0.4570457994644658 * x * (4.0 * zz - xx - yy) * coef(base, 13u)
+                   + 1.445305721320277 * z * (xx - yy) * coef(base, 14u)
+                   - 0.5900435899266435 * x * (xx - 3.0 * yy) * coef(base, 15u);
+            }
+        }
+    }
+    return max(c + vec3<f32>(0.5), vec3<f32>(0.0));
+}
+
+fn cull(i: u32) {
+    keys[i] = vec4<u32>(0u, 0u, 0u, 0u);
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if (i >= camera.counts.x) {
+        return;
+    }
+    let w0 = world[3u * i];
+    let q = world[3u * i + 1u];
+    let s = world[3u * i + 2u].xyz * camera.extra.x;
+    let opacity = min(w0.w, 1.0);
+    if (!finite3(w0.xyz) || !finite3(s) || !(opacity > 0.0)) {
+        cull(i);
+        return;
+    }
+    let p = (camera.view * vec4<f32>(w0.xyz, 1.0)).xyz;
+    let depth = -p.z;
+    if (!(depth >= camera.limits.z && depth <= camera.limits.w)) {
+        cull(i);
+        return;
+    }
+    let r = quat_to_mat(quat_normalize(q));
+    let m = mat3x3<f32>(r[0] * s.x, r[1] * s.y, r[2] * s.z);
+    let w = mat3x3<f32>(camera.view[0].xyz, camera.view[1].xyz, camera.view[2].xyz);
+    let cov = w * (m * transpose(m)) * transpose(w);
+    let fx = camera.intrinsics.x;
+    let fy = camera.intrinsics.y;
+    let tx = clamp(p.x / depth, -camera.limits.x, camera.limits.x);
+    let ty = clamp(p.y / depth, -camera.limits.y, camera.limits.y);
+    let j0 = vec3<f32>(fx / depth, 0.0, fx * tx / depth);
+    let j1 = vec3<f32>(0.0, -fy / depth, -fy * ty / depth);
+    let a = dot(j0, cov * j0) + DILATION;
+    let b = dot(j0, cov * j1);
+    let c = dot(j1, cov * j1) + DILATION;
+    let det = a * c - b * b;
+    if (!(det > 0.0) || !finite(det)) {
+        cull(i);
+        return;
+    }
+    let mid = 0.5 * (a + c);
+    let lambda = mid + sqrt(max(mid * mid - det, 0.1));
+    let radius = ceil(RADIUS_SIGMAS * sqrt(lambda));
+    let centre = vec2<f32>(camera.intrinsics.z + fx * p.x / depth, camera.intrinsics.w - fy * p.y / depth);
+    let width = f32(camera.size.x);
+    let height = f32(camera.size.y);
+    // Pixels whose centres lie within the square footprint (see projection.rs).
+    let x0 = max(ceil(centre.x - radius - 0.5), 0.0);
+    let x1 = min(floor(centre.x + radius - 0.5), width - 1.0);
+    let y0 = max(ceil(centre.y - radius - 0.5), 0.0);
+    let y1 = min(floor(centre.y + radius - 0.5), height - 1.0);
+    if (!finite(radius) || !(x0 <= x1) || !(y0 <= y1)) {
+        cull(i);
+        return;
+    }
+    let dir = normalize(w0.xyz - camera.position.xyz);
+    let rgb = sh_colour(i, dir);
+    projected[3u * i] = vec4<f32>(centre, depth, radius);
+    projected[3u * i + 1u] = vec4<f32>(c / det, -b / det, a / det, opacity);
+    projected[3u * i + 2u] = vec4<f32>(rgb, 0.0);
+    let t0 = vec2<u32>(u32(x0) / TILE, u32(y0) / TILE);
+    let t1 = vec2<u32>(u32(x1) / TILE, u32(y1) / TILE);
+    keys[i] = vec4<u32>(bitcast<u32>(depth), t0.x | (t0.y << 16u), t1.x | (t1.y << 16u), 1u);
+}

@@ -1,0 +1,354 @@
+//! `visage bench render`: frame time per resolution and per stage with PSNR
+//! against the CPU reference, and a speed-against-error table over the renderer's
+//! knobs (resolution scale, SH degree, sort precision, early-stop threshold).
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+use serde_json::{json, Value};
+
+use super::bench::summarize;
+use super::compose::{build, build_recipe, Built};
+use super::render::parse_size;
+use super::DbArgs;
+use crate::compose::engine::PosedMesh;
+use crate::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
+use crate::error::{Error, Result};
+use crate::render::camera::Camera;
+use crate::render::gpu::StageTimings;
+use crate::render::image::{psnr_report, RgbImage};
+use crate::render::reference::{render_reference, RenderSettings};
+use crate::render::{Backend, SplatRenderer};
+
+/// Arguments of `visage bench render`.
+#[derive(Args, Debug, Clone)]
+pub struct RenderBenchArgs {
+    #[command(flatten)]
+    db: DbArgs,
+    /// Recipe to render (default: a four-source composite with cross-fade and skin correction).
+    #[arg(long, value_name = "FILE")]
+    recipe: Option<PathBuf>,
+    /// Image sizes, comma-separated WxH.
+    #[arg(long, value_delimiter = ',', default_values = ["160x120", "320x240", "640x480", "1280x720"], value_parser = parse_size)]
+    sizes: Vec<(u32, u32)>,
+    /// Size at which the knobs are compared.
+    #[arg(long, default_value = "320x240", value_parser = parse_size)]
+    knob_size: (u32, u32),
+    /// Timed frames per case (after the warm-up ones).
+    #[arg(long, default_value_t = 30)]
+    iterations: usize,
+    /// Warm-up frames per case.
+    #[arg(long, default_value_t = 5)]
+    warmup: usize,
+    /// Renderer(s) to measure, comma-separated: gpu (wgpu on any adapter,
+    /// lavapipe included), cpu, auto.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Backend::Gpu, Backend::Cpu])]
+    renderers: Vec<Backend>,
+    /// Skip the knob table.
+    #[arg(long)]
+    no_knobs: bool,
+    /// Print one JSON document instead of tables.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The composite benchmarked when no recipe is given.
+pub fn default_bench_recipe() -> Recipe {
+    let mut r = Recipe::unedited("ada");
+    let edit = |src: &str, with: &[(&str, f64)]| GroupEdit {
+        gaussians: src.into(),
+        shape: with.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+    };
+    r.groups
+        .insert("eyes".into(), edit("jomo", &[("jomo", 0.5), ("ada", 0.5)]));
+    r.groups
+        .insert("nose".into(), edit("bram", &[("bram", 0.7), ("ada", 0.3)]));
+    r.groups
+        .insert("mouth".into(), edit("ines", &[("ines", 0.6), ("ada", 0.4)]));
+    r.post.smoothing = Smoothing::Crossfade;
+    r.post.colour = ColourCorrection::Skin;
+    r.animation.motion = "talk".into();
+    r
+}
+
+struct Case {
+    settings: RenderSettings,
+    scale: f32,
+}
+
+/// Times `frames` animated renders; returns the per-frame totals and stage medians.
+fn time_frames(
+    gpu: &mut SplatRenderer,
+    built: &Built,
+    camera: &Camera,
+    case: &Case,
+    warmup: usize,
+    iterations: usize,
+) -> Result<(Vec<f64>, StageTimings)> {
+    let mut posed = PosedMesh::default();
+    let mut totals = Vec::new();
+    let mut stages: Vec<StageTimings> = Vec::new();
+    let scaled = scaled_camera(camera, case.scale);
+    for it in 0..warmup + iterations {
+        built.engine.pose(&built.composite, it, &mut posed);
+        let t = Instant::now();
+        let image = gpu.render(&posed.frames, &scaled, &case.settings)?;
+        if case.scale != 1.0 {
+            let _ = image.resized(camera.width, camera.height);
+        }
+        let total = t.elapsed().as_secs_f64() * 1e3;
+        if it >= warmup {
+            totals.push(total);
+            stages.push(gpu.timings());
+        }
+    }
+    let median = |f: fn(&StageTimings) -> f64| summarize(stages.iter().map(f).collect()).0;
+    let stage = StageTimings {
+        upload: median(|s| s.upload),
+        project: median(|s| s.project),
+        sort: median(|s| s.sort),
+        rasterize: median(|s| s.rasterize),
+        readback: median(|s| s.readback),
+    };
+    Ok((totals, stage))
+}
+
+fn scaled_camera(camera: &Camera, scale: f32) -> Camera {
+    Camera {
+        width: ((camera.width as f32 * scale).round() as u32).max(1),
+        height: ((camera.height as f32 * scale).round() as u32).max(1),
+        ..*camera
+    }
+}
+
+/// PSNR of the GPU frame (rendered with `case`) against the reference at full size.
+fn accuracy(
+    gpu: &mut SplatRenderer,
+    built: &Built,
+    camera: &Camera,
+    case: &Case,
+    reference: &RgbImage,
+) -> Result<f64> {
+    let image = gpu.render(
+        &built.posed.frames,
+        &scaled_camera(camera, case.scale),
+        &case.settings,
+    )?;
+    let image = if case.scale != 1.0 {
+        image.resized(camera.width, camera.height)
+    } else {
+        image
+    };
+    Ok(psnr_report(&image, reference).unwrap_or(0.0))
+}
+
+/// Runs `visage bench render`.
+pub fn run(args: &RenderBenchArgs) -> Result<()> {
+    if args.iterations == 0 {
+        return Err(Error::input("--iterations must be at least 1"));
+    }
+    let built = match &args.recipe {
+        Some(path) => build(&args.db, path, Some(0))?,
+        None => build_recipe(&args.db, &default_bench_recipe(), Some(0))?,
+    };
+    let scene = built.engine.scene(&built.composite, &built.posed);
+    let orbit = built.composite.recipe.camera;
+    let exact = Case {
+        settings: RenderSettings::default(),
+        scale: 1.0,
+    };
+    let mut references = Vec::new();
+    for &(w, h) in &args.sizes {
+        let camera = orbit.camera(w, h);
+        let t = Instant::now();
+        let image = render_reference(&scene, &camera, &RenderSettings::default());
+        references.push((camera, image, t.elapsed().as_secs_f64() * 1e3));
+    }
+    let mut renderers = Vec::new();
+    for &backend in &args.renderers {
+        let t = Instant::now();
+        let mut gpu = SplatRenderer::open(backend)?;
+        let setup_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        gpu.set_gaussians(&built.composite.gaussians)?;
+        let upload_ms = t.elapsed().as_secs_f64() * 1e3;
+        let mut rows = Vec::new();
+        for (camera, reference, reference_ms) in &references {
+            let psnr_db = accuracy(&mut gpu, &built, camera, &exact, reference)?;
+            let (totals, stages) = time_frames(
+                &mut gpu,
+                &built,
+                camera,
+                &exact,
+                args.warmup,
+                args.iterations,
+            )?;
+            let (median, p90) = summarize(totals);
+            rows.push(json!({
+                "width": camera.width, "height": camera.height, "ms_median": median, "ms_p90": p90, "fps": 1e3 / median,
+                "psnr_db": psnr_db, "stages_ms": stages, "reference_ms": reference_ms,
+            }));
+        }
+        let mut knobs = Vec::new();
+        if !args.no_knobs {
+            let (w, h) = args.knob_size;
+            let camera = orbit.camera(w, h);
+            let reference = render_reference(&scene, &camera, &RenderSettings::default());
+            for (knob, value, case) in knob_cases() {
+                let psnr_db = accuracy(&mut gpu, &built, &camera, &case, &reference)?;
+                let (totals, _) = time_frames(
+                    &mut gpu,
+                    &built,
+                    &camera,
+                    &case,
+                    args.warmup,
+                    args.iterations,
+                )?;
+                let (median, p90) = summarize(totals);
+                knobs.push(json!({
+                    "knob": knob, "value": value, "width": w, "height": h,
+                    "ms_median": median, "ms_p90": p90, "psnr_db": psnr_db,
+                }));
+            }
+        }
+        renderers.push(json!({
+            "renderer": backend,
+            "device": gpu.description(),
+            "setup_ms": setup_ms,
+            "gaussian_upload_ms": upload_ms,
+            "rows": rows,
+            "knobs": knobs,
+        }));
+    }
+    let doc = json!({
+        "bench": "render",
+        "gaussians": built.composite.gaussians.len(),
+        "renderers": renderers,
+    });
+    if args.json {
+        println!("{doc}");
+    } else {
+        print_tables(&doc);
+    }
+    Ok(())
+}
+
+/// The knob settings compared at one size: (knob, value, case).
+fn knob_cases() -> Vec<(&'static str, String, Case)> {
+    let base = RenderSettings::default();
+    let mut cases: Vec<(&str, String, Case)> = vec![(
+        "default",
+        "exact".into(),
+        Case {
+            settings: base,
+            scale: 1.0,
+        },
+    )];
+    for scale in [0.75f32, 0.5, 0.25] {
+        cases.push((
+            "resolution_scale",
+            format!("{scale}"),
+            Case {
+                settings: base,
+                scale,
+            },
+        ));
+    }
+    for degree in [0u8, 1, 2] {
+        cases.push((
+            "sh_degree",
+            format!("{degree}"),
+            Case {
+                settings: RenderSettings {
+                    sh_degree: degree,
+                    ..base
+                },
+                scale: 1.0,
+            },
+        ));
+    }
+    for bits in [16u8, 8] {
+        cases.push((
+            "sort_bits",
+            format!("{bits}"),
+            Case {
+                settings: RenderSettings {
+                    sort_bits: bits,
+                    ..base
+                },
+                scale: 1.0,
+            },
+        ));
+    }
+    for stop in [1e-3f32, 1e-2, 5e-2] {
+        cases.push((
+            "early_stop",
+            format!("{stop}"),
+            Case {
+                settings: RenderSettings {
+                    early_stop: stop,
+                    ..base
+                },
+                scale: 1.0,
+            },
+        ));
+    }
+    cases
+}
+
+fn print_tables(doc: &Value) {
+    println!("render bench: {} Gaussians", doc["gaussians"]);
+    for r in doc["renderers"].as_array().into_iter().flatten() {
+        print_renderer(r);
+    }
+}
+
+fn print_renderer(doc: &Value) {
+    println!(
+        "\n{}: set-up {:.0} ms, Gaussian upload {:.1} ms",
+        doc["device"].as_str().unwrap_or(""),
+        doc["setup_ms"].as_f64().unwrap_or(0.0),
+        doc["gaussian_upload_ms"].as_f64().unwrap_or(0.0)
+    );
+    println!(
+        "{:>10} {:>9} {:>9} {:>7} {:>9}  stages (upload/project/sort/raster/readback ms)",
+        "size", "median ms", "p90 ms", "FPS", "PSNR dB"
+    );
+    for r in doc["rows"].as_array().into_iter().flatten() {
+        let s = &r["stages_ms"];
+        let f = |k: &str| s[k].as_f64().unwrap_or(0.0);
+        println!(
+            "{:>10} {:>9.2} {:>9.2} {:>7.1} {:>9.1}  {:.2}/{:.2}/{:.2}/{:.2}/{:.2}",
+            format!("{}x{}", r["width"], r["height"]),
+            r["ms_median"].as_f64().unwrap_or(0.0),
+            r["ms_p90"].as_f64().unwrap_or(0.0),
+            r["fps"].as_f64().unwrap_or(0.0),
+            r["psnr_db"].as_f64().unwrap_or(0.0),
+            f("upload"),
+            f("project"),
+            f("sort"),
+            f("rasterize"),
+            f("readback"),
+        );
+    }
+    if let Some(knobs) = doc["knobs"].as_array().filter(|k| !k.is_empty()) {
+        println!(
+            "speed against error at {}x{}:",
+            knobs[0]["width"], knobs[0]["height"]
+        );
+        println!(
+            "{:<17} {:>7} {:>9} {:>9}",
+            "knob", "value", "median ms", "PSNR dB"
+        );
+        for k in knobs {
+            println!(
+                "{:<17} {:>7} {:>9.2} {:>9.1}",
+                k["knob"].as_str().unwrap_or(""),
+                k["value"].as_str().unwrap_or(""),
+                k["ms_median"].as_f64().unwrap_or(0.0),
+                k["psnr_db"].as_f64().unwrap_or(0.0)
+            );
+        }
+    }
+}

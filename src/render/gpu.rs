@@ -1,0 +1,639 @@
+//! The offscreen splat renderer on wgpu compute (DESIGN §5), running on any Vulkan,
+//! Metal or DX12 device and on Mesa's lavapipe where there is no GPU.
+//!
+//! Stages per frame: upload the triangle frames (the Gaussians only when the
+//! selection changes) → `bind` (local → world) → `project` (cull, 2D covariance,
+//! SH colour, depth, touched tiles) → read back the sort keys → CPU radix sort by
+//! depth and tile binning (no workgroup ever waits for another, which hangs some
+//! drivers; on lavapipe the CPU is the device anyway) → `rasterize` (per 16×16
+//! tile, front to back, early termination) → read back RGBA8.
+
+use std::time::Instant;
+
+use bytemuck::{Pod, Zeroable};
+use wgpu::util::DeviceExt;
+
+use super::camera::Camera;
+use super::image::RgbImage;
+use super::reference::RenderSettings;
+use super::scene::SplatScene;
+use super::tiles::TileBins;
+use crate::avatar::binding::TriangleFrame;
+use crate::avatar::gaussians::GaussianSet;
+use crate::error::{Error, Result};
+
+/// Tile edge in pixels (must match `TILE` in shaders/common.wgsl).
+pub const TILE: u32 = 16;
+
+const COMMON: &str = include_str!("../../shaders/common.wgsl");
+const BIND: &str = include_str!("../../shaders/bind.wgsl");
+const PROJECT: &str = include_str!("../../shaders/project.wgsl");
+const RASTERIZE: &str = include_str!("../../shaders/rasterize.wgsl");
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct CameraUniform {
+    view: [[f32; 4]; 4],
+    position: [f32; 4],
+    intrinsics: [f32; 4],
+    limits: [f32; 4],
+    size: [u32; 4],
+    counts: [u32; 4],
+    extra: [f32; 4],
+    tuning: [f32; 4],
+}
+
+/// Wall-clock milliseconds of each stage of the last frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageTimings {
+    /// Frame upload.
+    pub upload: f64,
+    /// bind + project kernels and the key read-back.
+    pub project: f64,
+    /// CPU depth sort and tile binning (and their upload).
+    pub sort: f64,
+    /// rasterize kernel.
+    pub rasterize: f64,
+    /// Image read-back and conversion.
+    pub readback: f64,
+}
+
+impl StageTimings {
+    /// Sum of the stages.
+    pub fn total(&self) -> f64 {
+        self.upload + self.project + self.sort + self.rasterize + self.readback
+    }
+}
+
+struct SceneBuffers {
+    count: u32,
+    sh_degree: u8,
+    sh_stride: u32,
+    local: wgpu::Buffer,
+    sh: wgpu::Buffer,
+    world: wgpu::Buffer,
+    projected: wgpu::Buffer,
+    keys: wgpu::Buffer,
+    keys_readback: wgpu::Buffer,
+}
+
+/// A growable GPU buffer.
+struct Growable {
+    buffer: wgpu::Buffer,
+    usage: wgpu::BufferUsages,
+    label: &'static str,
+}
+
+impl Growable {
+    fn new(device: &wgpu::Device, label: &'static str, usage: wgpu::BufferUsages) -> Self {
+        Self {
+            buffer: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: 256,
+                usage,
+                mapped_at_creation: false,
+            }),
+            usage,
+            label,
+        }
+    }
+
+    /// Makes room for `bytes`; returns true when the buffer was replaced.
+    fn ensure(&mut self, device: &wgpu::Device, bytes: u64) -> bool {
+        if self.buffer.size() >= bytes {
+            return false;
+        }
+        let size = bytes.next_power_of_two().max(256);
+        self.buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(self.label),
+            size,
+            usage: self.usage,
+            mapped_at_creation: false,
+        });
+        true
+    }
+}
+
+/// The wgpu splat renderer. Create once; call [`GpuRenderer::set_gaussians`] when
+/// the selection changes and [`GpuRenderer::render`] per frame.
+pub struct GpuRenderer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    adapter: wgpu::AdapterInfo,
+    limits: wgpu::Limits,
+    bind_pipeline: wgpu::ComputePipeline,
+    project_pipeline: wgpu::ComputePipeline,
+    raster_pipeline: wgpu::ComputePipeline,
+    camera: wgpu::Buffer,
+    scene: Option<SceneBuffers>,
+    frames: Growable,
+    tile_ranges: Growable,
+    tile_list: Growable,
+    image: Growable,
+    image_readback: Growable,
+    /// Timings of the last frame.
+    pub timings: StageTimings,
+    /// Scratch for sorting.
+    sort_scratch: TileBins,
+}
+
+fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn uniform_entry() -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding: 0,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+impl GpuRenderer {
+    /// Opens the first suitable adapter (a real GPU when present, lavapipe
+    /// otherwise) and compiles the kernels.
+    pub fn new() -> Result<Self> {
+        pollster::block_on(Self::open(true))?
+            .ok_or_else(|| Error::input("no graphics adapter found"))
+    }
+
+    /// Opens a hardware adapter only: `Ok(None)` when the best adapter is a
+    /// software one (no shaders are compiled then).
+    pub fn new_hardware() -> Result<Option<Self>> {
+        pollster::block_on(Self::open(false))
+    }
+
+    async fn open(allow_software: bool) -> Result<Option<Self>> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+                apply_limit_buckets: false,
+            })
+            .await
+            .map_err(|e| {
+                Error::input(format!(
+                    "no graphics adapter found ({e}); install Mesa's software Vulkan driver with \
+                     'apt-get install mesa-vulkan-drivers libvulkan1', or use --reference for the CPU renderer"
+                ))
+            })?;
+        if !allow_software && adapter.get_info().device_type == wgpu::DeviceType::Cpu {
+            return Ok(None);
+        }
+        let adapter_limits = adapter.limits();
+        let mut limits = wgpu::Limits::downlevel_defaults();
+        limits.max_storage_buffer_binding_size = adapter_limits.max_storage_buffer_binding_size;
+        limits.max_buffer_size = adapter_limits.max_buffer_size;
+        limits.max_storage_buffers_per_shader_stage = 5;
+        limits.max_compute_invocations_per_workgroup = 256;
+        limits.max_compute_workgroup_size_x = 256;
+        limits.max_compute_workgroup_size_y = 16;
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("visage"),
+                required_features: wgpu::Features::empty(),
+                required_limits: limits.clone(),
+                experimental_features: wgpu::ExperimentalFeatures::default(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            })
+            .await
+            .map_err(|e| Error::input(format!("cannot open the graphics device: {e}")))?;
+        let uniform_and = |n: u32, read_only: &[bool]| {
+            let mut entries = vec![uniform_entry()];
+            entries.extend((1..=n).map(|b| storage_entry(b, read_only[(b - 1) as usize])));
+            entries
+        };
+        let make = |name: &str, source: &str, entries: &[wgpu::BindGroupLayoutEntry]| {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(name),
+                source: wgpu::ShaderSource::Wgsl(format!("{COMMON}\n{source}").into()),
+            });
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(name),
+                entries,
+            });
+            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(name),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(name),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let bind_pipeline = make("bind", BIND, &uniform_and(3, &[true, true, false]));
+        let project_pipeline = make(
+            "project",
+            PROJECT,
+            &uniform_and(4, &[true, true, false, false]),
+        );
+        let raster_pipeline = make(
+            "rasterize",
+            RASTERIZE,
+            &uniform_and(4, &[true, true, true, false]),
+        );
+        let camera = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("camera"),
+            size: std::mem::size_of::<CameraUniform>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let frames = Growable::new(&device, "frames", storage);
+        let tile_ranges = Growable::new(&device, "tile ranges", storage);
+        let tile_list = Growable::new(&device, "tile list", storage);
+        let image = Growable::new(
+            &device,
+            "image",
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        );
+        let image_readback = Growable::new(
+            &device,
+            "image read-back",
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        Ok(Some(Self {
+            adapter: adapter.get_info(),
+            limits,
+            device,
+            queue,
+            bind_pipeline,
+            project_pipeline,
+            raster_pipeline,
+            camera,
+            scene: None,
+            frames,
+            tile_ranges,
+            tile_list,
+            image,
+            image_readback,
+            timings: StageTimings::default(),
+            sort_scratch: TileBins::default(),
+        }))
+    }
+
+    /// Name, driver and type of the adapter in use.
+    pub fn adapter_description(&self) -> String {
+        format!(
+            "{} ({:?}, {}{})",
+            self.adapter.name,
+            self.adapter.device_type,
+            self.adapter.driver,
+            if self.adapter.driver_info.is_empty() {
+                String::new()
+            } else {
+                format!(" {}", self.adapter.driver_info)
+            }
+        )
+    }
+
+    /// True when rendering on a CPU (software) adapter such as lavapipe.
+    pub fn is_software(&self) -> bool {
+        self.adapter.device_type == wgpu::DeviceType::Cpu
+    }
+
+    /// Uploads triangle-bound Gaussians (call when the selection changes). SH above
+    /// what fits the device's largest storage binding is truncated.
+    pub fn set_gaussians(&mut self, set: &GaussianSet) -> Result<()> {
+        let n = set.len();
+        let mut local = Vec::with_capacity(n * 12);
+        for i in 0..n {
+            let p = set.position[i];
+            let q = set.rotation[i];
+            let s = set.log_scale[i];
+            local.extend_from_slice(&[p.x, p.y, p.z, f32::from_bits(set.binding[i])]);
+            local.extend_from_slice(&[q.w, q.x, q.y, q.z]);
+            local.extend_from_slice(&[s.x, s.y, s.z, set.opacity_logit[i]]);
+        }
+        let max_binding = self.limits.max_storage_buffer_binding_size;
+        let mut degree = set.sh_degree;
+        while degree > 0 && (n as u64) * 12 * (degree as u64 + 1).pow(2) > max_binding {
+            degree -= 1;
+        }
+        if (n as u64) * 48 > max_binding {
+            return Err(Error::input(format!(
+                "{n} Gaussians do not fit this device's largest storage buffer ({max_binding} bytes)"
+            )));
+        }
+        let stride = 3 * (degree as usize + 1).pow(2);
+        let sh: Vec<f32> = if degree == set.sh_degree {
+            set.sh.clone()
+        } else {
+            (0..n)
+                .flat_map(|i| set.sh_of(i)[..stride].iter().copied())
+                .collect()
+        };
+        let storage = wgpu::BufferUsages::STORAGE;
+        let init = |label, contents: &[u8], usage| {
+            self.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents: if contents.is_empty() {
+                        &[0u8; 16]
+                    } else {
+                        contents
+                    },
+                    usage,
+                })
+        };
+        let empty = |label, size: u64, usage| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        self.scene = Some(SceneBuffers {
+            count: n as u32,
+            sh_degree: degree,
+            sh_stride: stride as u32,
+            local: init("local gaussians", bytemuck::cast_slice(&local), storage),
+            sh: init("sh", bytemuck::cast_slice(&sh), storage),
+            world: empty("world gaussians", n as u64 * 48, storage),
+            projected: empty("projected", n as u64 * 48, storage),
+            keys: empty(
+                "keys",
+                n as u64 * 16,
+                storage | wgpu::BufferUsages::COPY_SRC,
+            ),
+            keys_readback: empty(
+                "keys read-back",
+                n as u64 * 16,
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            ),
+        });
+        Ok(())
+    }
+
+    /// Uploads a world-space scene (e.g. a PLY file): each Gaussian is bound to a
+    /// single identity frame. Render it with [`GpuRenderer::render_world`].
+    pub fn set_world_scene(&mut self, scene: &SplatScene) -> Result<()> {
+        self.set_gaussians(&scene.as_bound_to_identity())
+    }
+
+    /// Renders the uploaded Gaussians placed on `frames` (one per triangle).
+    pub fn render(
+        &mut self,
+        frames: &[TriangleFrame],
+        camera: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<RgbImage> {
+        let scene = self
+            .scene
+            .as_ref()
+            .ok_or_else(|| Error::input("no Gaussians uploaded to the renderer"))?;
+        if frames.is_empty() {
+            return Err(Error::input("no triangle frames to bind the Gaussians to"));
+        }
+        let (width, height) = (camera.width.max(1), camera.height.max(1));
+        let tiles = (width.div_ceil(TILE), height.div_ceil(TILE));
+        let mut timings = StageTimings::default();
+
+        // Upload: camera and frames.
+        let t = Instant::now();
+        let uniform = camera_uniform(camera, settings, scene, frames.len() as u32, tiles);
+        self.queue
+            .write_buffer(&self.camera, 0, bytemuck::bytes_of(&uniform));
+        let mut frame_data = Vec::with_capacity(frames.len() * 20);
+        for f in frames {
+            let r = f.rotation;
+            frame_data.extend_from_slice(&[r.x_axis.x, r.x_axis.y, r.x_axis.z, f.scale]);
+            frame_data.extend_from_slice(&[r.y_axis.x, r.y_axis.y, r.y_axis.z, 0.0]);
+            frame_data.extend_from_slice(&[r.z_axis.x, r.z_axis.y, r.z_axis.z, 0.0]);
+            frame_data.extend_from_slice(&[f.center.x, f.center.y, f.center.z, 0.0]);
+            frame_data.extend_from_slice(&[f.quat.w, f.quat.x, f.quat.y, f.quat.z]);
+        }
+        self.frames
+            .ensure(&self.device, frame_data.len() as u64 * 4);
+        self.queue
+            .write_buffer(&self.frames.buffer, 0, bytemuck::cast_slice(&frame_data));
+        timings.upload = ms(t);
+
+        // bind + project, then read the keys back.
+        let t = Instant::now();
+        let n = scene.count;
+        let groups = n.div_ceil(256).max(1);
+        let bind_group = self.bind_group(
+            &self.bind_pipeline,
+            &[
+                &self.camera,
+                &scene.local,
+                &self.frames.buffer,
+                &scene.world,
+            ],
+        );
+        let project_group = self.bind_group(
+            &self.project_pipeline,
+            &[
+                &self.camera,
+                &scene.world,
+                &scene.sh,
+                &scene.projected,
+                &scene.keys,
+            ],
+        );
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.bind_pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(groups, 1, 1);
+            pass.set_pipeline(&self.project_pipeline);
+            pass.set_bind_group(0, &project_group, &[]);
+            pass.dispatch_workgroups(groups, 1, 1);
+        }
+        let key_bytes = n as u64 * 16;
+        if key_bytes > 0 {
+            encoder.copy_buffer_to_buffer(&scene.keys, 0, &scene.keys_readback, 0, key_bytes);
+        }
+        self.queue.submit([encoder.finish()]);
+        let keys: Vec<[u32; 4]> = if key_bytes > 0 {
+            read_buffer(&self.device, &scene.keys_readback, key_bytes)?
+        } else {
+            Vec::new()
+        };
+        timings.project = ms(t);
+
+        // CPU: depth sort and tile binning.
+        let t = Instant::now();
+        let scratch = &mut self.sort_scratch;
+        scratch.bin(&keys, tiles, settings.sort_bits);
+        let list_bytes = (scratch.list.len().max(1) * 4) as u64;
+        self.tile_ranges
+            .ensure(&self.device, (scratch.ranges.len() * 8) as u64);
+        self.tile_list.ensure(&self.device, list_bytes);
+        self.queue.write_buffer(
+            &self.tile_ranges.buffer,
+            0,
+            bytemuck::cast_slice(&scratch.ranges),
+        );
+        if !scratch.list.is_empty() {
+            self.queue.write_buffer(
+                &self.tile_list.buffer,
+                0,
+                bytemuck::cast_slice(&scratch.list),
+            );
+        }
+        timings.sort = ms(t);
+
+        // Rasterise.
+        let t = Instant::now();
+        let image_bytes = width as u64 * height as u64 * 4;
+        self.image.ensure(&self.device, image_bytes);
+        self.image_readback.ensure(&self.device, image_bytes);
+        let raster_group = self.bind_group(
+            &self.raster_pipeline,
+            &[
+                &self.camera,
+                &scene.projected,
+                &self.tile_ranges.buffer,
+                &self.tile_list.buffer,
+                &self.image.buffer,
+            ],
+        );
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.raster_pipeline);
+            pass.set_bind_group(0, &raster_group, &[]);
+            pass.dispatch_workgroups(tiles.0, tiles.1, 1);
+        }
+        encoder.copy_buffer_to_buffer(
+            &self.image.buffer,
+            0,
+            &self.image_readback.buffer,
+            0,
+            image_bytes,
+        );
+        self.queue.submit([encoder.finish()]);
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| Error::input(format!("the graphics device failed: {e}")))?;
+        timings.rasterize = ms(t);
+
+        // Read back.
+        let t = Instant::now();
+        let rgba: Vec<u32> = read_buffer(&self.device, &self.image_readback.buffer, image_bytes)?;
+        let mut pixels = Vec::with_capacity((width * height * 3) as usize);
+        for p in rgba {
+            pixels.extend_from_slice(&[p as u8, (p >> 8) as u8, (p >> 16) as u8]);
+        }
+        timings.readback = ms(t);
+        self.timings = timings;
+        Ok(RgbImage {
+            width,
+            height,
+            pixels,
+        })
+    }
+
+    fn bind_group(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        buffers: &[&wgpu::Buffer],
+    ) -> wgpu::BindGroup {
+        let layout = pipeline.get_bind_group_layout(0);
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &layout,
+            entries: &entries,
+        })
+    }
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+fn camera_uniform(
+    camera: &Camera,
+    settings: &RenderSettings,
+    scene: &SceneBuffers,
+    triangles: u32,
+    tiles: (u32, u32),
+) -> CameraUniform {
+    let view = camera.view();
+    let (fx, fy) = camera.focal_px();
+    let (w, h) = (camera.width as f32, camera.height as f32);
+    let guard = super::projection::FRUSTUM_GUARD as f32;
+    CameraUniform {
+        view: view.to_cols_array_2d(),
+        position: camera.eye.extend(0.0).to_array(),
+        intrinsics: [fx, fy, 0.5 * w, 0.5 * h],
+        limits: [
+            guard * 0.5 * w / fx,
+            guard * 0.5 * h / fy,
+            camera.near,
+            camera.far,
+        ],
+        size: [camera.width, camera.height, tiles.0, tiles.1],
+        counts: [
+            scene.count,
+            settings.sh_degree.min(scene.sh_degree) as u32,
+            scene.sh_stride,
+            triangles,
+        ],
+        extra: [
+            settings.scale_modifier,
+            settings.background[0],
+            settings.background[1],
+            settings.background[2],
+        ],
+        tuning: [settings.early_stop.clamp(0.0, 1.0), 0.0, 0.0, 0.0],
+    }
+}
+
+/// Maps a read-back buffer, copies `bytes` out as `T`, and unmaps it.
+fn read_buffer<T: Pod>(device: &wgpu::Device, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<T>> {
+    let slice = buffer.slice(..bytes);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| Error::input(format!("the graphics device failed: {e}")))?;
+    rx.recv()
+        .map_err(|_| Error::input("the graphics device dropped a read-back"))?
+        .map_err(|e| Error::input(format!("cannot read back from the graphics device: {e}")))?;
+    let data = {
+        let view = slice
+            .get_mapped_range()
+            .map_err(|e| Error::input(format!("cannot read back from the graphics device: {e}")))?;
+        bytemuck::cast_slice::<u8, T>(&view).to_vec()
+    };
+    buffer.unmap();
+    Ok(data)
+}

@@ -1,0 +1,297 @@
+//! Renderers against the f64 reference: the built-in composite and hard scenes,
+//! on wgpu (lavapipe in CI) and on the CPU renderer.
+
+use std::sync::{Mutex, OnceLock};
+
+use glam::{Quat, Vec3};
+use visage::compose::engine::{Engine, PosedMesh};
+use visage::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
+use visage::model::builtin::build_head;
+use visage::model::synthetic::{builtin_database, SyntheticOptions};
+use visage::render::camera::{Camera, Orbit};
+use visage::render::image::{psnr, RgbImage};
+use visage::render::reference::{render_reference, render_reference_f32, RenderSettings};
+use visage::render::scene::SplatScene;
+use visage::render::{Backend, SplatRenderer};
+
+/// One wgpu renderer for the whole test binary (shader compilation is slow on lavapipe).
+fn gpu() -> &'static Mutex<SplatRenderer> {
+    static GPU: OnceLock<Mutex<SplatRenderer>> = OnceLock::new();
+    GPU.get_or_init(|| {
+        Mutex::new(SplatRenderer::open(Backend::Gpu).expect("a wgpu adapter (lavapipe in CI)"))
+    })
+}
+
+fn renderers() -> Vec<(&'static str, std::sync::MutexGuard<'static, SplatRenderer>)> {
+    static CPU: OnceLock<Mutex<SplatRenderer>> = OnceLock::new();
+    let cpu = CPU.get_or_init(|| Mutex::new(SplatRenderer::open(Backend::Cpu).unwrap()));
+    vec![
+        ("gpu", gpu().lock().unwrap_or_else(|e| e.into_inner())),
+        ("cpu", cpu.lock().unwrap_or_else(|e| e.into_inner())),
+    ]
+}
+
+fn camera_at(eye: Vec3, target: Vec3, w: u32, h: u32, fov_deg: f32) -> Camera {
+    Camera {
+        eye,
+        target,
+        up: Vec3::Y,
+        fov_y: fov_deg.to_radians(),
+        width: w,
+        height: h,
+        near: 0.01,
+        far: 100.0,
+    }
+}
+
+/// Renders a world scene on every renderer and checks it against the reference.
+fn check_scene(name: &str, scene: &SplatScene, camera: &Camera, min_psnr: f64) {
+    let settings = RenderSettings {
+        background: [0.1, 0.2, 0.3],
+        ..Default::default()
+    };
+    let float = render_reference_f32(scene, camera, &settings);
+    assert!(
+        float.iter().all(|c| c.is_finite()),
+        "{name}: NaN in the reference"
+    );
+    let reference = RgbImage::from_f32(camera.width, camera.height, &float);
+    let background = RgbImage::new(camera.width, camera.height, [26, 51, 77]);
+    let drawn = reference
+        .pixels
+        .chunks(3)
+        .zip(background.pixels.chunks(3))
+        .filter(|(a, b)| a != b)
+        .count();
+    if min_psnr < 99.0 {
+        assert!(
+            drawn > 0,
+            "{name}: the scene draws nothing; the test would prove nothing"
+        );
+    } else {
+        assert_eq!(drawn, 0, "{name}: expected only background");
+    }
+    for (backend, mut r) in renderers() {
+        r.set_world_scene(scene).unwrap();
+        let a = r.render_world(camera, &settings).unwrap();
+        let b = r.render_world(camera, &settings).unwrap();
+        assert_eq!(
+            a, b,
+            "{name} on {backend}: the same scene renders the same bytes"
+        );
+        let p = psnr(&a, &reference).unwrap();
+        assert!(
+            p >= min_psnr,
+            "{name} on {backend}: PSNR {p:.1} dB against the reference"
+        );
+    }
+}
+
+fn grey_sh(degree: u8, seed: u32) -> Vec<f32> {
+    let n = 3 * (degree as usize + 1).pow(2);
+    (0..n)
+        .map(|k| {
+            let h = (k as u32 * 2_654_435_761).wrapping_add(seed.wrapping_mul(40_503));
+            if k < 3 {
+                ((h >> 8) % 1000) as f32 / 1000.0 * 2.0 - 0.5
+            } else {
+                ((h >> 8) % 1000) as f32 / 1000.0 * 0.4 - 0.2
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn builtin_composite_matches_the_reference_on_every_renderer() {
+    let db = builtin_database(
+        build_head(),
+        SyntheticOptions {
+            seed: 2,
+            sources: 3,
+            gaussians_per_avatar: 15_000,
+        },
+    )
+    .unwrap();
+    let engine = Engine::new(db).unwrap();
+    let mut recipe = Recipe::unedited("ada");
+    recipe.groups.insert(
+        "nose".into(),
+        GroupEdit {
+            gaussians: "cleo".into(),
+            shape: [("cleo".to_string(), 1.0)].into(),
+        },
+    );
+    recipe.groups.insert(
+        "eyes".into(),
+        GroupEdit {
+            gaussians: "bram".into(),
+            shape: [("bram".to_string(), 0.5), ("ada".to_string(), 0.5)].into(),
+        },
+    );
+    recipe.post.smoothing = Smoothing::Crossfade;
+    recipe.post.colour = ColourCorrection::Thesis;
+    recipe.animation.motion = "talk".into();
+    let resolved = recipe.resolve(engine.database()).unwrap();
+    let composite = engine.compose(&resolved);
+    let mut posed = PosedMesh::default();
+    engine.pose(&composite, 30, &mut posed);
+    let scene = engine.scene(&composite, &posed);
+    for (yaw, size) in [(0.0, (96, 128)), (35.0, (120, 90))] {
+        let camera = Orbit {
+            yaw_deg: yaw,
+            ..Orbit::STUDY
+        }
+        .camera(size.0, size.1);
+        let reference = render_reference(&scene, &camera, &RenderSettings::default());
+        for (backend, mut r) in renderers() {
+            r.set_gaussians(&composite.gaussians).unwrap();
+            let image = r
+                .render(&posed.frames, &camera, &RenderSettings::default())
+                .unwrap();
+            let p = psnr(&image, &reference).unwrap();
+            assert!(
+                p >= 40.0,
+                "composite at yaw {yaw} on {backend}: PSNR {p:.1} dB"
+            );
+            // Something was drawn: the head covers a good part of the image.
+            let lit = image
+                .pixels
+                .chunks(3)
+                .filter(|c| c.iter().any(|&v| v > 10))
+                .count();
+            assert!(
+                lit * 5 > (size.0 * size.1) as usize,
+                "{backend}: only {lit} pixels drawn"
+            );
+        }
+    }
+}
+
+#[test]
+fn gaussians_behind_the_camera_and_across_the_near_plane() {
+    let camera = camera_at(Vec3::ZERO, Vec3::NEG_Z, 64, 48, 60.0);
+    let mut scene = SplatScene::with_degree(0);
+    for (k, z) in [
+        0.5f32, 0.02, 0.0101, 0.0099, 0.0, -0.005, -0.5, -0.02, -0.015,
+    ]
+    .iter()
+    .enumerate()
+    {
+        let x = (k as f32 - 4.0) * 0.004 * z.abs().max(0.01) * 10.0;
+        scene.push(
+            Vec3::new(x, 0.0, -z),
+            Quat::IDENTITY,
+            Vec3::splat(0.01),
+            0.8,
+            &grey_sh(0, k as u32),
+        );
+    }
+    // A big one straddling the near plane.
+    scene.push(
+        Vec3::new(0.0, 0.0, -0.012),
+        Quat::IDENTITY,
+        Vec3::splat(0.05),
+        0.6,
+        &grey_sh(0, 99),
+    );
+    check_scene("near plane", &scene, &camera, 40.0);
+}
+
+#[test]
+fn huge_tiny_zero_scales_and_bad_rotations() {
+    let camera = camera_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 64, 64, 40.0);
+    let mut scene = SplatScene::with_degree(3);
+    let cases = [
+        (Vec3::new(0.0, 0.0, -2.0), Vec3::splat(1e3), 0.3), // huge, fills the view
+        (Vec3::new(0.3, 0.2, 0.0), Vec3::splat(1e-7), 0.9), // tiny: only the dilation shows
+        (Vec3::new(-0.3, 0.2, 0.0), Vec3::ZERO, 0.9),       // zero scale
+        (Vec3::new(0.0, -0.3, 0.0), Vec3::new(0.5, 1e-6, 0.05), 0.9), // needle
+        (Vec3::new(0.2, -0.2, 0.5), Vec3::new(0.02, 0.3, 0.02), 1.0),
+    ];
+    for (k, (p, s, o)) in cases.into_iter().enumerate() {
+        scene.push(
+            p,
+            Quat::from_rotation_z(0.4 * k as f32),
+            s,
+            o,
+            &grey_sh(3, k as u32),
+        );
+    }
+    // A zero quaternion becomes the identity rotation.
+    scene.push(
+        Vec3::new(-0.2, -0.2, 0.2),
+        Quat::from_xyzw(0.0, 0.0, 0.0, 0.0),
+        Vec3::new(0.1, 0.02, 0.02),
+        0.8,
+        &grey_sh(3, 7),
+    );
+    check_scene("scales", &scene, &camera, 40.0);
+}
+
+#[test]
+fn opaque_stacks_terminate_early_without_artefacts() {
+    let camera = camera_at(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 48, 48, 30.0);
+    let mut scene = SplatScene::with_degree(1);
+    for k in 0..200 {
+        let z = -(k as f32) * 0.01;
+        scene.push(
+            Vec3::new(0.01 * (k % 7) as f32, 0.01 * (k % 5) as f32, z),
+            Quat::IDENTITY,
+            Vec3::new(0.2, 0.2, 0.005),
+            1.0,
+            &grey_sh(1, k),
+        );
+    }
+    check_scene("opaque stack", &scene, &camera, 40.0);
+}
+
+#[test]
+fn sh_degree_zero_and_three_and_camera_inside_a_gaussian() {
+    for degree in [0u8, 3] {
+        let camera = camera_at(Vec3::new(0.4, 0.3, 1.5), Vec3::ZERO, 64, 48, 50.0);
+        let mut scene = SplatScene::with_degree(degree);
+        for k in 0..400u32 {
+            let t = k as f32 * 0.37;
+            scene.push(
+                Vec3::new(t.sin() * 0.4, (t * 1.3).cos() * 0.3, (t * 0.7).sin() * 0.3),
+                Quat::from_rotation_y(t),
+                Vec3::new(0.03, 0.02, 0.004),
+                0.7,
+                &grey_sh(degree, k),
+            );
+        }
+        check_scene(&format!("SH degree {degree}"), &scene, &camera, 40.0);
+    }
+    // The camera sits inside a large Gaussian whose centre is just in front of it.
+    let camera = camera_at(Vec3::ZERO, Vec3::NEG_Z, 48, 48, 70.0);
+    let mut scene = SplatScene::with_degree(0);
+    scene.push(
+        Vec3::new(0.0, 0.0, -0.05),
+        Quat::IDENTITY,
+        Vec3::splat(2.0),
+        0.5,
+        &grey_sh(0, 1),
+    );
+    scene.push(
+        Vec3::new(0.1, 0.0, -1.0),
+        Quat::IDENTITY,
+        Vec3::splat(0.1),
+        0.9,
+        &grey_sh(0, 2),
+    );
+    check_scene("camera inside", &scene, &camera, 40.0);
+}
+
+#[test]
+fn empty_and_fully_culled_scenes_show_the_background() {
+    let camera = camera_at(Vec3::ZERO, Vec3::NEG_Z, 32, 16, 60.0);
+    let mut scene = SplatScene::with_degree(0);
+    scene.push(
+        Vec3::new(0.0, 0.0, 1.0),
+        Quat::IDENTITY,
+        Vec3::splat(0.1),
+        0.9,
+        &[1.0, 1.0, 1.0],
+    );
+    check_scene("behind only", &scene, &camera, 99.0);
+}
