@@ -13,3 +13,4 @@ pub mod error;
 pub mod io;
 pub mod model;
 pub mod render;
+pub mod tui;

@@ -31,6 +31,8 @@ enum BenchWhat {
     Engine(EngineBenchArgs),
     /// Frame time per resolution and stage, and speed against error per knob.
     Render(super::bench_render::RenderBenchArgs),
+    /// Encode time, bytes and end-to-end FPS per terminal graphics protocol.
+    Terminal(super::bench_terminal::TerminalBenchArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -56,6 +58,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     match &args.what {
         BenchWhat::Engine(a) => engine_bench(a),
         BenchWhat::Render(a) => super::bench_render::run(a),
+        BenchWhat::Terminal(a) => super::bench_terminal::run(a),
     }
 }
 
@@ -113,6 +116,7 @@ fn recipe(
         motion,
         frame: 0,
         mode,
+        offsets: Default::default(),
         camera: Orbit::STUDY,
     }
 }

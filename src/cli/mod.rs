@@ -3,8 +3,10 @@
 
 mod bench;
 mod bench_render;
+mod bench_terminal;
 mod compose;
 mod db;
+mod edit;
 mod info;
 mod render;
 
@@ -18,14 +20,21 @@ use crate::error::Result;
 
 /// Compose photo-realistic, animatable Gaussian head avatars in the terminal.
 #[derive(Parser, Debug)]
-#[command(name = "visage", version, about, long_about = None)]
+#[command(name = "visage", version, about, long_about = None, args_conflicts_with_subcommands = true)]
 pub struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
+    /// Without a command: open the editor.
+    #[command(flatten)]
+    edit: edit::EditArgs,
 }
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Open the editor (the default command).
+    Edit(edit::EditArgs),
+    /// Replay a session file headless, with snapshots and checks.
+    Replay(edit::ReplayArgs),
     /// Describe the database: model, regions, sources and motions.
     Info(info::InfoArgs),
     /// Build a composite from a recipe and describe it.
@@ -60,7 +69,9 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Export(args)) => compose::run_export(&args),
         Some(Command::Render(args)) => render::run(&args),
         Some(Command::Bench(args)) => bench::run(&args),
-        None => info::run(&info::InfoArgs::default()),
+        Some(Command::Edit(args)) => edit::run_edit(&args),
+        Some(Command::Replay(args)) => edit::run_replay(&args),
+        None => edit::run_edit(&cli.edit),
     }
 }
 

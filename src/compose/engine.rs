@@ -19,7 +19,7 @@ use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
 use crate::avatar::database::Database;
 use crate::avatar::gaussians::{logit, sigmoid, GaussianSet};
 use crate::error::Result;
-use crate::model::head::Pose;
+use crate::model::head::{Joint, Pose};
 use crate::model::regions::Region;
 use crate::render::scene::SplatScene;
 
@@ -223,14 +223,31 @@ impl Engine {
     }
 
     /// Expression and pose of the recipe's frame (rest when it has no motion).
+    /// Includes the recipe's manual pose and expression offsets.
     pub fn frame_parameters(&self, recipe: &ResolvedRecipe, frame: usize) -> (Vec<f32>, Pose) {
-        match recipe.motion {
+        let (mut expression, mut pose) = match recipe.motion {
             Some(m) => {
                 let (e, p) = self.db.motions[m].frame(frame);
                 (e.to_vec(), *p)
             }
             None => (Vec::new(), Pose::REST),
+        };
+        let o = &recipe.offsets;
+        if !o.is_zero() {
+            let add = |v: &mut glam::Vec3, d: [f32; 3]| *v += glam::Vec3::from(d);
+            add(&mut pose.joints[Joint::Jaw as usize], o.jaw);
+            add(&mut pose.joints[Joint::Neck as usize], o.neck);
+            add(&mut pose.joints[Joint::LeftEye as usize], o.eyes);
+            add(&mut pose.joints[Joint::RightEye as usize], o.eyes);
+            let n = self.db.model.expression_basis.len();
+            if expression.len() < n.min(o.expression.len()) {
+                expression.resize(n.min(o.expression.len()), 0.0);
+            }
+            for (e, d) in expression.iter_mut().zip(o.expression) {
+                *e += d;
+            }
         }
+        (expression, pose)
     }
 
     /// Poses the composite at `frame` of its motion, in the recipe's animation mode.

@@ -94,8 +94,30 @@ pub struct PostProcess {
     pub colour: ColourCorrection,
 }
 
+/// Manual adjustments added to the motion's frame (axis-angle radians and
+/// expression coefficients), as set from the editor's animation panel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PoseOffsets {
+    /// Added to the jaw rotation.
+    pub jaw: [f32; 3],
+    /// Added to the neck rotation.
+    pub neck: [f32; 3],
+    /// Added to both eye rotations.
+    pub eyes: [f32; 3],
+    /// Added to the first expression components.
+    pub expression: [f32; 5],
+}
+
+impl PoseOffsets {
+    /// True when nothing is offset.
+    pub fn is_zero(&self) -> bool {
+        *self == PoseOffsets::default()
+    }
+}
+
 /// The driving motion and frame.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Animation {
     /// Motion name, or "rest".
@@ -104,6 +126,9 @@ pub struct Animation {
     pub frame: usize,
     /// Fast (blend once) or exact (blend every frame).
     pub mode: AnimationMode,
+    /// Manual pose and expression adjustments.
+    #[serde(skip_serializing_if = "PoseOffsets::is_zero")]
+    pub offsets: PoseOffsets,
 }
 
 impl Default for Animation {
@@ -112,6 +137,7 @@ impl Default for Animation {
             motion: "rest".into(),
             frame: 0,
             mode: AnimationMode::Fast,
+            offsets: PoseOffsets::default(),
         }
     }
 }
@@ -200,6 +226,8 @@ pub struct ResolvedRecipe {
     pub frame: usize,
     /// Animation mode.
     pub mode: AnimationMode,
+    /// Manual pose and expression adjustments.
+    pub offsets: PoseOffsets,
     /// Camera.
     pub camera: Orbit,
 }
@@ -302,6 +330,17 @@ impl Recipe {
             })?),
         };
         let c = &self.camera;
+        let o = &self.animation.offsets;
+        if !o
+            .jaw
+            .iter()
+            .chain(&o.neck)
+            .chain(&o.eyes)
+            .chain(&o.expression)
+            .all(|x| x.is_finite())
+        {
+            return Err(Error::input("animation offsets must be finite numbers"));
+        }
         let camera_ok = c.radius.is_finite()
             && c.radius > 0.0
             && c.fov_deg.is_finite()
@@ -323,6 +362,7 @@ impl Recipe {
             motion,
             frame: self.animation.frame,
             mode: self.animation.mode,
+            offsets: self.animation.offsets,
             camera: self.camera,
         })
     }

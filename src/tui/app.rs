@@ -1,0 +1,636 @@
+//! The interactive editor: terminal set-up and restore (quit, error, panic,
+//! SIGINT, SIGTERM, SIGHUP), the event loop on 25 Hz logical ticks, the render
+//! worker (only the latest frame in flight), adaptive resolution while moving,
+//! the `:` prompt, and the session journal.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+use crossterm::event::{self, Event, KeyCode, KeyEventKind};
+use crossterm::{cursor, execute, terminal};
+use ratatui::backend::CrosstermBackend;
+use ratatui::Terminal;
+
+use super::command::{complete, Command};
+use super::graphics::{
+    detect, encode_iterm2, encode_kitty, encode_sixel, kitty_delete, tmux_wrap, GraphicsChoice,
+    KittyTransport, Protocol, TerminalGraphics, SYNC_BEGIN, SYNC_END,
+};
+use super::keymap::Keymap;
+use super::pacing::next_scale;
+use super::replay::{catalog_of, initial_state, replay_commands};
+use super::session::{Recorder, Session, SessionHeader};
+use super::state::{Catalog, EditorState, Effect};
+use super::view::{draw, layout, InfoPanel, ViewModel};
+use super::workbench::{check_parent, source_swatches, FrameRequest, FrameResult, Workbench};
+use crate::cli::DbArgs;
+use crate::compose::engine::Engine;
+use crate::error::{Error, Result};
+use crate::render::image::RgbImage;
+use crate::render::Backend;
+
+/// Options of `visage edit`.
+#[derive(Clone, Debug)]
+pub struct EditOptions {
+    /// Database.
+    pub db: DbArgs,
+    /// Session to resume.
+    pub session: Option<PathBuf>,
+    /// Journal to record to.
+    pub record: Option<PathBuf>,
+    /// Extra keymap layer.
+    pub keymap: Option<PathBuf>,
+    /// Graphics protocol choice.
+    pub graphics: GraphicsChoice,
+    /// Renderer.
+    pub renderer: Backend,
+}
+
+/// Input within this long keeps the view "moving" (low resolution allowed).
+const SETTLE: Duration = Duration::from_millis(300);
+
+/// A job for the render worker.
+enum Job {
+    Frame(FrameJob),
+    Export(crate::compose::recipe::Recipe, PathBuf),
+    Snapshot(FrameRequest, PathBuf),
+}
+
+struct FrameJob {
+    request: FrameRequest,
+    version: u64,
+    protocol: Protocol,
+    cells: (u16, u16),
+    /// Full-size pixels for sixel (which draws 1:1).
+    full: (u32, u32),
+    kitty: KittyTransport,
+    tmux: bool,
+}
+
+enum Reply {
+    Frame {
+        version: u64,
+        result: Box<FrameResult>,
+        encoded: Vec<u8>,
+        encode_ms: f64,
+        exact: bool,
+    },
+    Message(String),
+}
+
+/// The latest-frame slot shared with the worker plus a queue for effects.
+#[derive(Default)]
+struct Mailbox {
+    frame: Option<FrameJob>,
+    effects: Vec<Job>,
+    stop: bool,
+}
+
+fn worker(mut bench: Workbench, mailbox: Arc<(Mutex<Mailbox>, Condvar)>, replies: Sender<Reply>) {
+    loop {
+        let job = {
+            let (lock, cv) = &*mailbox;
+            let mut m = lock.lock().unwrap_or_else(|e| e.into_inner());
+            loop {
+                if m.stop {
+                    return;
+                }
+                if !m.effects.is_empty() {
+                    break m.effects.remove(0);
+                }
+                if let Some(f) = m.frame.take() {
+                    break Job::Frame(f);
+                }
+                m = cv.wait(m).unwrap_or_else(|e| e.into_inner());
+            }
+        };
+        let reply = match job {
+            Job::Frame(f) => match bench.render(&f.request) {
+                Ok(result) => {
+                    let t = Instant::now();
+                    let encoded = encode(&result.image, &f).unwrap_or_default();
+                    Reply::Frame {
+                        version: f.version,
+                        encode_ms: t.elapsed().as_secs_f64() * 1e3,
+                        exact: f.request.exact,
+                        result: Box::new(result),
+                        encoded,
+                    }
+                }
+                Err(e) => Reply::Message(format!("render failed: {e}")),
+            },
+            Job::Export(recipe, path) => match bench.export_ply(&recipe, &path) {
+                Ok(n) => Reply::Message(format!("wrote {n} Gaussians to {}", path.display())),
+                Err(e) => Reply::Message(format!("export failed: {e}")),
+            },
+            Job::Snapshot(request, path) => match bench.snapshot(&request, &path) {
+                Ok(img) => Reply::Message(format!(
+                    "wrote {}x{} snapshot {}",
+                    img.width,
+                    img.height,
+                    path.display()
+                )),
+                Err(e) => Reply::Message(format!("snapshot failed: {e}")),
+            },
+        };
+        if replies.send(reply).is_err() {
+            return;
+        }
+    }
+}
+
+/// Encodes a rendered frame for the terminal (nothing for half-blocks).
+fn encode(image: &RgbImage, job: &FrameJob) -> std::result::Result<Vec<u8>, String> {
+    let bytes = match job.protocol {
+        Protocol::Halfblocks => return Ok(Vec::new()),
+        Protocol::Kitty => encode_kitty(image, job.cells, job.kitty).map_err(|e| e.to_string())?,
+        Protocol::Iterm2 => encode_iterm2(image, job.cells)?,
+        Protocol::Sixel => {
+            if (image.width, image.height) != job.full {
+                encode_sixel(&image.resized(job.full.0, job.full.1))?
+            } else {
+                encode_sixel(image)?
+            }
+        }
+    };
+    Ok(if job.tmux { tmux_wrap(&bytes) } else { bytes })
+}
+
+/// A `Write` that collects ratatui's output so a frame goes out in one write.
+#[derive(Clone, Default)]
+pub struct Collector(Arc<Mutex<Vec<u8>>>);
+
+impl Collector {
+    /// Takes the bytes collected so far.
+    pub fn take(&self) -> Vec<u8> {
+        std::mem::take(&mut *self.0.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+}
+
+impl Write for Collector {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .extend_from_slice(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Restores the terminal when dropped (normal exit, error, unwinding panic).
+struct TerminalGuard {
+    kitty: bool,
+}
+
+fn restore_terminal(kitty: bool) {
+    let mut out = std::io::stdout();
+    if kitty {
+        let _ = out.write_all(&kitty_delete());
+    }
+    let _ = out.write_all(SYNC_END);
+    let _ = execute!(out, terminal::LeaveAlternateScreen, cursor::Show);
+    let _ = terminal::disable_raw_mode();
+    let _ = out.flush();
+}
+
+impl Drop for TerminalGuard {
+    fn drop(&mut self) {
+        restore_terminal(self.kitty);
+    }
+}
+
+/// Runs the editor until the user quits or a signal arrives.
+pub fn run_editor(options: EditOptions) -> Result<()> {
+    // Everything that can fail on bad input fails before the terminal changes.
+    let keymap = Keymap::load(options.keymap.as_deref())?;
+    if let Some(r) = &options.record {
+        check_parent(r)?;
+    }
+    let resume = options.session.as_deref().map(Session::load).transpose()?;
+    let db_args = match &resume {
+        Some(s) => s.header.db_args(),
+        None => options.db.clone(),
+    };
+    eprintln!("visage: opening the {} database…", db_args.db);
+    let (db, _) = db_args.load()?;
+    let engine = Engine::new(db)?;
+    let catalog = catalog_of(&engine);
+    let swatches = source_swatches(&engine);
+    let mut state = initial_state(&catalog);
+    let mut tick = 0u64;
+    if let Some(session) = &resume {
+        let (last, failed) = replay_commands(session, &catalog, &mut state);
+        tick = last;
+        state.status = format!(
+            "resumed {} commands at tick {last} ({failed} failed)",
+            session.lines.len()
+        );
+    }
+    let bench = Workbench::new(engine, options.renderer)?;
+    let renderer_name = bench.renderer_description();
+    let graphics = detect(options.graphics);
+    let size = terminal::size().unwrap_or((120, 40));
+    let mut recorder = match &options.record {
+        Some(path) => Some(Recorder::open(
+            path,
+            &SessionHeader::new(&db_args, size, graphics.protocol),
+        )?),
+        None => None,
+    };
+
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [
+        signal_hook::consts::SIGINT,
+        signal_hook::consts::SIGTERM,
+        signal_hook::consts::SIGHUP,
+    ] {
+        signal_hook::flag::register(signal, Arc::clone(&stop))
+            .map_err(|e| Error::input(format!("cannot install signal handler: {e}")))?;
+    }
+    let kitty = graphics.protocol == Protocol::Kitty;
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        restore_terminal(kitty);
+        default_hook(info);
+    }));
+    terminal::enable_raw_mode()
+        .map_err(|e| Error::input(format!("cannot use this terminal: {e}")))?;
+    let _guard = TerminalGuard { kitty };
+    execute!(
+        std::io::stdout(),
+        terminal::EnterAlternateScreen,
+        cursor::Hide
+    )
+    .map_err(|e| Error::input(format!("cannot use this terminal: {e}")))?;
+
+    let mailbox = Arc::new((Mutex::new(Mailbox::default()), Condvar::new()));
+    let (reply_tx, replies) = channel();
+    let handle = {
+        let mailbox = Arc::clone(&mailbox);
+        std::thread::spawn(move || worker(bench, mailbox, reply_tx))
+    };
+    let mut app = App {
+        state,
+        catalog,
+        swatches,
+        keymap,
+        graphics,
+        renderer_name,
+        recorder,
+        tick,
+        mailbox,
+        replies,
+        version: 1,
+        requested: 0,
+        shown_version: 0,
+        last_input: Instant::now(),
+        scale: 1.0,
+        image: None,
+        encoded: Vec::new(),
+        image_dirty: true,
+        info: InfoPanel::default(),
+        frames_shown: 0,
+        fps_clock: Instant::now(),
+        last_exact: false,
+        edit_time: None,
+    };
+    let result = app.event_loop(&stop);
+    {
+        let (lock, cv) = &*app.mailbox;
+        lock.lock().unwrap_or_else(|e| e.into_inner()).stop = true;
+        cv.notify_all();
+    }
+    let _ = handle.join();
+    recorder = app.recorder.take();
+    drop(recorder);
+    result
+}
+
+struct App {
+    state: EditorState,
+    catalog: Catalog,
+    swatches: Vec<[u8; 3]>,
+    keymap: Keymap,
+    graphics: TerminalGraphics,
+    renderer_name: String,
+    recorder: Option<Recorder>,
+    tick: u64,
+    mailbox: Arc<(Mutex<Mailbox>, Condvar)>,
+    replies: Receiver<Reply>,
+    /// Bumped on every change that affects the picture.
+    version: u64,
+    requested: u64,
+    shown_version: u64,
+    last_input: Instant,
+    scale: f64,
+    image: Option<RgbImage>,
+    encoded: Vec<u8>,
+    image_dirty: bool,
+    info: InfoPanel,
+    frames_shown: u32,
+    fps_clock: Instant,
+    last_exact: bool,
+    edit_time: Option<(u64, Instant)>,
+}
+
+impl App {
+    fn event_loop(&mut self, stop: &AtomicBool) -> Result<()> {
+        let collector = Collector::default();
+        let mut term = Terminal::new(CrosstermBackend::new(collector.clone()))
+            .map_err(|e| Error::input(format!("cannot use this terminal: {e}")))?;
+        let tick_len = Duration::from_millis(1000 / super::session::TICKS_PER_SECOND);
+        let mut next_tick = Instant::now() + tick_len;
+        let mut viewport = None;
+        while !self.state.quit {
+            if stop.load(Ordering::Relaxed) {
+                break;
+            }
+            let timeout = next_tick
+                .saturating_duration_since(Instant::now())
+                .min(Duration::from_millis(10));
+            if event::poll(timeout).unwrap_or(false) {
+                match event::read() {
+                    Ok(Event::Key(k)) if k.kind != KeyEventKind::Release => self.on_key(k),
+                    Ok(Event::Resize(..)) => {
+                        self.version += 1;
+                        self.image_dirty = true;
+                        let _ = term.clear();
+                    }
+                    _ => {}
+                }
+            }
+            while Instant::now() >= next_tick {
+                next_tick += tick_len;
+                self.tick += 1;
+                if self.state.playing {
+                    self.state.tick(&self.catalog);
+                    self.version += 1;
+                }
+            }
+            self.receive();
+            let area = term
+                .size()
+                .map(|s| ratatui::layout::Rect::new(0, 0, s.width, s.height))
+                .unwrap_or_default();
+            let new_viewport = layout(area).map(|a| a.viewport);
+            if new_viewport != viewport {
+                viewport = new_viewport;
+                self.version += 1;
+                self.image_dirty = true;
+            }
+            if let Some(v) = viewport {
+                self.request_frame(v);
+            }
+            self.present(&mut term, &collector, viewport)?;
+        }
+        Ok(())
+    }
+
+    fn moving(&self) -> bool {
+        self.state.playing || self.last_input.elapsed() < SETTLE
+    }
+
+    fn on_key(&mut self, key: crossterm::event::KeyEvent) {
+        self.last_input = Instant::now();
+        if let Some(text) = self.state.prompt.as_mut() {
+            match key.code {
+                KeyCode::Esc => self.state.prompt = None,
+                KeyCode::Backspace => {
+                    text.pop();
+                }
+                KeyCode::Tab => {
+                    let matches = complete(text.trim());
+                    if matches.len() == 1 {
+                        *text = format!("{} ", matches[0]);
+                    } else if !matches.is_empty() {
+                        self.state.status = matches.join(" ");
+                    }
+                }
+                KeyCode::Enter => {
+                    let line = text.clone();
+                    self.state.prompt = None;
+                    match Command::parse(&line) {
+                        Ok(c) => self.run(c),
+                        Err(e) => self.state.status = e,
+                    }
+                }
+                KeyCode::Char(c) if !c.is_control() => text.push(c),
+                _ => {}
+            }
+            return;
+        }
+        if self.state.help && key.code == KeyCode::Esc {
+            self.state.help = false;
+            // The image under the overlay was removed: draw a fresh one.
+            self.version += 1;
+            return;
+        }
+        if let Some(c) = self.keymap.lookup(&key).cloned() {
+            self.run(c);
+        }
+    }
+
+    fn run(&mut self, command: Command) {
+        match self.state.apply(&self.catalog, &command) {
+            Ok(effects) => {
+                if !matches!(command, Command::Quit | Command::Help | Command::Prompt) {
+                    if let Some(r) = &mut self.recorder {
+                        if let Err(e) = r.record(self.tick, &command) {
+                            self.state.status = format!("cannot journal the session: {e}");
+                        }
+                    }
+                }
+                self.version += 1;
+                if command.is_edit() {
+                    self.edit_time = Some((self.version, Instant::now()));
+                }
+                for e in effects {
+                    self.effect(e);
+                }
+            }
+            Err(e) => self.state.status = e,
+        }
+    }
+
+    fn effect(&mut self, effect: Effect) {
+        let job = match effect {
+            Effect::SaveRecipe(p) => {
+                self.state.status = match std::fs::write(&p, self.state.recipe.to_toml()) {
+                    Ok(()) => format!("saved recipe {p}"),
+                    Err(e) => format!("cannot write {p}: {e}"),
+                };
+                return;
+            }
+            Effect::ExportPly(p) => Job::Export(self.state.recipe.clone(), PathBuf::from(p)),
+            Effect::Snapshot(p) => {
+                let (w, h) = self.info.image_size;
+                Job::Snapshot(
+                    self.frame_request(w.max(64), h.max(48), true),
+                    PathBuf::from(p),
+                )
+            }
+        };
+        let (lock, cv) = &*self.mailbox;
+        lock.lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .effects
+            .push(job);
+        cv.notify_one();
+    }
+
+    fn frame_request(&self, width: u32, height: u32, exact: bool) -> FrameRequest {
+        FrameRequest {
+            recipe: self.state.recipe.clone(),
+            debug: self.state.debug,
+            group: self.state.selected_group(),
+            width,
+            height,
+            exact,
+        }
+    }
+
+    /// Asks for a new frame when the picture is out of date, or for a full-quality
+    /// one once the view has settled.
+    fn request_frame(&mut self, viewport: ratatui::layout::Rect) {
+        let moving = self.moving();
+        let refine = !moving && !self.last_exact && self.requested == self.shown_version;
+        if self.requested == self.version && !refine {
+            return;
+        }
+        let cells = (viewport.width, viewport.height);
+        let full = match self.graphics.protocol {
+            Protocol::Halfblocks => (cells.0 as u32, 2 * cells.1 as u32),
+            _ => (
+                cells.0 as u32 * self.graphics.cell_px.0 as u32,
+                cells.1 as u32 * self.graphics.cell_px.1 as u32,
+            ),
+        };
+        let scale = if moving { self.scale } else { 1.0 };
+        let (w, h) = (
+            ((full.0 as f64 * scale).round() as u32).max(8),
+            ((full.1 as f64 * scale).round() as u32).max(8),
+        );
+        let job = FrameJob {
+            request: self.frame_request(w, h, !moving),
+            version: self.version,
+            protocol: self.graphics.protocol,
+            cells,
+            full,
+            kitty: if self.graphics.remote {
+                KittyTransport::Zlib
+            } else {
+                KittyTransport::TempFile
+            },
+            tmux: self.graphics.tmux,
+        };
+        let (lock, cv) = &*self.mailbox;
+        lock.lock().unwrap_or_else(|e| e.into_inner()).frame = Some(job);
+        cv.notify_one();
+        self.requested = self.version;
+        if refine {
+            self.last_exact = true;
+        }
+    }
+
+    fn receive(&mut self) {
+        while let Ok(reply) = self.replies.try_recv() {
+            match reply {
+                Reply::Message(m) => self.state.status = m,
+                Reply::Frame {
+                    version,
+                    result,
+                    encoded,
+                    encode_ms,
+                    exact,
+                } => {
+                    self.last_exact = exact;
+                    self.shown_version = version;
+                    let t = &result.timings;
+                    let spent = t.compose + t.pose + t.render + encode_ms;
+                    if !exact {
+                        self.scale = next_scale(self.scale, spent);
+                    }
+                    if let Some((v, at)) = self.edit_time {
+                        if version >= v {
+                            self.state.status =
+                                format!("edit shown in {:.0} ms", at.elapsed().as_secs_f64() * 1e3);
+                            self.edit_time = None;
+                        }
+                    }
+                    self.info = InfoPanel {
+                        gaussians: result.gaussians,
+                        extras: result.extras,
+                        timings: result.timings,
+                        encode_ms,
+                        fps: self.info.fps,
+                        image_size: (result.image.width, result.image.height),
+                        renderer: self.renderer_name.clone(),
+                    };
+                    self.image = Some(result.image);
+                    self.encoded = encoded;
+                    self.image_dirty = true;
+                    self.frames_shown += 1;
+                }
+            }
+        }
+        let elapsed = self.fps_clock.elapsed().as_secs_f64();
+        if elapsed >= 1.0 {
+            self.info.fps = self.frames_shown as f64 / elapsed;
+            self.frames_shown = 0;
+            self.fps_clock = Instant::now();
+        }
+    }
+
+    /// Draws the cells and, for image protocols, the frame — one write in
+    /// synchronized output.
+    fn present(
+        &mut self,
+        term: &mut Terminal<CrosstermBackend<Collector>>,
+        collector: &Collector,
+        viewport: Option<ratatui::layout::Rect>,
+    ) -> Result<()> {
+        let vm = ViewModel {
+            state: &self.state,
+            catalog: &self.catalog,
+            swatches: &self.swatches,
+            keymap: &self.keymap,
+            info: &self.info,
+            protocol: self.graphics.protocol,
+            image: self.image.as_ref(),
+        };
+        term.draw(|f| draw(f, &vm))
+            .map_err(|e| Error::input(format!("cannot draw: {e}")))?;
+        let mut out = SYNC_BEGIN.to_vec();
+        out.extend(collector.take());
+        if self.image_dirty && self.graphics.protocol != Protocol::Halfblocks {
+            if let Some(v) = viewport {
+                if self.state.help {
+                    if self.graphics.protocol == Protocol::Kitty {
+                        out.extend_from_slice(&kitty_delete());
+                    }
+                } else if !self.encoded.is_empty() {
+                    out.extend_from_slice(format!("\x1b7\x1b[{};{}H", v.y + 1, v.x + 1).as_bytes());
+                    out.extend_from_slice(&self.encoded);
+                    out.extend_from_slice(b"\x1b8");
+                }
+            }
+        }
+        self.image_dirty = false;
+        if out.len() == SYNC_BEGIN.len() {
+            return Ok(()); // nothing changed on screen
+        }
+        out.extend_from_slice(SYNC_END);
+        let mut stdout = std::io::stdout().lock();
+        stdout
+            .write_all(&out)
+            .and_then(|_| stdout.flush())
+            .map_err(|e| Error::input(format!("cannot write to the terminal: {e}")))
+    }
+}

@@ -1,0 +1,414 @@
+//! Session files: plain text, a versioned header, then one command per line on
+//! logical frame ticks (25 per second; never wall-clock time):
+//!
+//! ```text
+//! visage-session 1
+//! db builtin seed=1 gaussians-per-avatar=50000 sources=14
+//! terminal 120x40
+//! graphics halfblocks
+//! render 160x120
+//! ---
+//! 0 select-group nose
+//! 0 set-gaussians nose bram
+//! 30 play
+//! 80 expect state-hash 3f2a9c0d1e2b4a5c
+//! 80 expect image nose.png psnr>=40
+//! 80 snapshot nose-now.png
+//! ```
+//!
+//! `expect` lines are checks for `visage replay --check`; paths are relative to
+//! the session file (expected images) or to `--out` (snapshots). The recorder
+//! writes and flushes one line per command, so a crash or a kill loses nothing.
+
+use std::fs::{File, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::cli::DbArgs;
+use crate::error::{Error, Result};
+
+use super::command::Command;
+use super::graphics::Protocol;
+
+/// Version written in the first line.
+pub const SESSION_VERSION: u32 = 1;
+
+/// Logical ticks per second.
+pub const TICKS_PER_SECOND: u64 = 25;
+
+/// The header of a session file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionHeader {
+    /// Database: "builtin" or a folder.
+    pub db: String,
+    /// Built-in database seed.
+    pub seed: u64,
+    /// Built-in Gaussians per avatar.
+    pub gaussians_per_avatar: usize,
+    /// Built-in source count.
+    pub sources: usize,
+    /// Terminal size (columns, rows) when recorded.
+    pub terminal: (u16, u16),
+    /// Graphics protocol when recorded.
+    pub graphics: Protocol,
+    /// Size of snapshots and image checks in replay.
+    pub render: (u32, u32),
+}
+
+impl SessionHeader {
+    /// A header for a database.
+    pub fn new(db: &DbArgs, terminal: (u16, u16), graphics: Protocol) -> Self {
+        Self {
+            db: db.db.clone(),
+            seed: db.seed,
+            gaussians_per_avatar: db.gaussians_per_avatar,
+            sources: db.source_count,
+            terminal,
+            graphics,
+            render: (160, 120),
+        }
+    }
+
+    /// The database options this header names.
+    pub fn db_args(&self) -> DbArgs {
+        DbArgs {
+            db: self.db.clone(),
+            seed: self.seed,
+            gaussians_per_avatar: self.gaussians_per_avatar,
+            source_count: self.sources,
+        }
+    }
+
+    fn write(&self, out: &mut impl Write) -> std::io::Result<()> {
+        writeln!(out, "visage-session {SESSION_VERSION}")?;
+        writeln!(
+            out,
+            "db {} seed={} gaussians-per-avatar={} sources={}",
+            self.db, self.seed, self.gaussians_per_avatar, self.sources
+        )?;
+        writeln!(out, "terminal {}x{}", self.terminal.0, self.terminal.1)?;
+        writeln!(out, "graphics {}", self.graphics.name())?;
+        writeln!(out, "render {}x{}", self.render.0, self.render.1)?;
+        writeln!(out, "---")
+    }
+}
+
+/// A check in a session file.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Expectation {
+    /// The composite's state hash equals this.
+    StateHash(String),
+    /// The view matches a stored PNG (relative to the session file) within a PSNR.
+    Image {
+        /// Stored image.
+        path: PathBuf,
+        /// Smallest PSNR accepted, in dB.
+        min_psnr: f64,
+    },
+}
+
+/// What a session line does.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Action {
+    /// Run a command.
+    Command(Command),
+    /// Check something.
+    Expect(Expectation),
+}
+
+/// One line of a session body.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionLine {
+    /// Logical tick at which it runs.
+    pub tick: u64,
+    /// What it does.
+    pub action: Action,
+    /// Line number in the file (for messages).
+    pub line: usize,
+}
+
+/// A parsed session file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Session {
+    /// Header.
+    pub header: SessionHeader,
+    /// Body lines, ticks non-decreasing.
+    pub lines: Vec<SessionLine>,
+}
+
+fn size(text: &str, what: &str, line: usize, name: &str) -> Result<(u32, u32)> {
+    let bad = || {
+        Error::input(format!(
+            "{name}:{line}: {what} must be WxH, not '{}'",
+            crate::io::printable(text)
+        ))
+    };
+    let (w, h) = text.split_once('x').ok_or_else(bad)?;
+    let w: u32 = w.parse().map_err(|_| bad())?;
+    let h: u32 = h.parse().map_err(|_| bad())?;
+    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+impl Session {
+    /// Reads a session file.
+    pub fn load(path: &Path) -> Result<Session> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::input(format!("cannot read session {}: {e}", path.display())))?;
+        Session::parse(&text, &path.display().to_string())
+    }
+
+    /// Parses session text; `name` labels errors (`name:line: problem`).
+    pub fn parse(text: &str, name: &str) -> Result<Session> {
+        let err = |line: usize, msg: String| Error::input(format!("{name}:{line}: {msg}"));
+        let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
+        match lines.next() {
+            Some((_, l)) if l == format!("visage-session {SESSION_VERSION}") => {}
+            Some((n, l)) if l.starts_with("visage-session ") => return Err(err(
+                n,
+                format!(
+                    "session version '{}' is not supported (this build reads {SESSION_VERSION})",
+                    crate::io::printable(&l[15..])
+                ),
+            )),
+            _ => {
+                return Err(err(
+                    1,
+                    "not a visage session (first line must be 'visage-session 1')".into(),
+                ))
+            }
+        }
+        let mut header = SessionHeader {
+            db: "builtin".into(),
+            seed: 1,
+            gaussians_per_avatar: 50_000,
+            sources: crate::model::synthetic::MAX_SOURCES,
+            terminal: (120, 40),
+            graphics: Protocol::Halfblocks,
+            render: (160, 120),
+        };
+        let mut body = false;
+        let mut out = Vec::new();
+        let mut last_tick = 0u64;
+        for (n, l) in lines {
+            if l.is_empty() || l.starts_with('#') {
+                continue;
+            }
+            if !body {
+                let (key, rest) = l.split_once(' ').unwrap_or((l, ""));
+                match key {
+                    "---" => body = true,
+                    "db" => {
+                        let mut words = rest.split_whitespace();
+                        header.db = words
+                            .next()
+                            .ok_or_else(|| err(n, "db needs a name".into()))?
+                            .to_string();
+                        for kv in words {
+                            let (k, v) = kv.split_once('=').ok_or_else(|| {
+                                err(
+                                    n,
+                                    format!("'{}' is not key=value", crate::io::printable(kv)),
+                                )
+                            })?;
+                            let bad = || {
+                                err(
+                                    n,
+                                    format!("bad value '{}' for {k}", crate::io::printable(v)),
+                                )
+                            };
+                            match k {
+                                "seed" => header.seed = v.parse().map_err(|_| bad())?,
+                                "gaussians-per-avatar" => {
+                                    header.gaussians_per_avatar = v.parse().map_err(|_| bad())?
+                                }
+                                "sources" => header.sources = v.parse().map_err(|_| bad())?,
+                                _ => {
+                                    return Err(err(
+                                        n,
+                                        format!("unknown db option '{}'", crate::io::printable(k)),
+                                    ))
+                                }
+                            }
+                        }
+                    }
+                    "terminal" => {
+                        let (w, h) = size(rest, "terminal", n, name)?;
+                        header.terminal =
+                            (w.min(u16::MAX as u32) as u16, h.min(u16::MAX as u32) as u16);
+                    }
+                    "graphics" => {
+                        header.graphics = Protocol::from_name(rest.trim()).ok_or_else(|| {
+                            err(
+                                n,
+                                format!(
+                                    "unknown graphics protocol '{}'",
+                                    crate::io::printable(rest)
+                                ),
+                            )
+                        })?
+                    }
+                    "render" => header.render = size(rest, "render", n, name)?,
+                    _ => {
+                        return Err(err(
+                            n,
+                            format!("unknown header line '{}'", crate::io::printable(l)),
+                        ))
+                    }
+                }
+                continue;
+            }
+            let (tick, rest) = l
+                .split_once(' ')
+                .ok_or_else(|| err(n, "expected 'TICK COMMAND'".into()))?;
+            let tick: u64 = tick.parse().map_err(|_| {
+                err(
+                    n,
+                    format!("'{}' is not a tick number", crate::io::printable(tick)),
+                )
+            })?;
+            if tick < last_tick {
+                return Err(err(
+                    n,
+                    format!("tick {tick} goes back in time (previous line: {last_tick})"),
+                ));
+            }
+            last_tick = tick;
+            let action = if let Some(what) = rest.strip_prefix("expect ") {
+                Action::Expect(parse_expectation(what).map_err(|e| err(n, e))?)
+            } else {
+                Action::Command(Command::parse(rest).map_err(|e| err(n, e))?)
+            };
+            out.push(SessionLine {
+                tick,
+                action,
+                line: n,
+            });
+        }
+        if !body {
+            return Err(err(
+                1,
+                "the header never ends: add a '---' line before the commands".into(),
+            ));
+        }
+        Ok(Session { header, lines: out })
+    }
+}
+
+fn parse_expectation(text: &str) -> std::result::Result<Expectation, String> {
+    let mut words = text.split_whitespace();
+    match words.next() {
+        Some("state-hash") => {
+            let h = words.next().ok_or("expect state-hash needs a hash")?;
+            if words.next().is_some() {
+                return Err("expect state-hash takes one hash".into());
+            }
+            Ok(Expectation::StateHash(h.to_string()))
+        }
+        Some("image") => {
+            let path = PathBuf::from(words.next().ok_or("expect image needs a PNG path")?);
+            let mut min_psnr = 40.0;
+            for w in words {
+                let v = w.strip_prefix("psnr>=").ok_or_else(|| {
+                    format!("unknown option '{}' (psnr>=DB)", crate::io::printable(w))
+                })?;
+                min_psnr = v
+                    .parse()
+                    .map_err(|_| format!("'{}' is not a PSNR", crate::io::printable(v)))?;
+            }
+            Ok(Expectation::Image { path, min_psnr })
+        }
+        _ => Err("expect takes 'state-hash HASH' or 'image FILE [psnr>=DB]'".into()),
+    }
+}
+
+/// Appends commands to a session file, one flushed line each.
+pub struct Recorder {
+    file: File,
+}
+
+impl Recorder {
+    /// Starts a new file with `header`, or appends to an existing session file
+    /// (its header is kept).
+    pub fn open(path: &Path, header: &SessionHeader) -> Result<Recorder> {
+        let existing = path.exists()
+            && std::fs::metadata(path)
+                .map(|m| m.len() > 0)
+                .unwrap_or(false);
+        if existing {
+            Session::load(path)?;
+        }
+        let mut file = OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path)
+            .map_err(|e| Error::input(format!("cannot record to {}: {e}", path.display())))?;
+        if !existing {
+            header
+                .write(&mut file)
+                .and_then(|_| file.sync_data())
+                .map_err(|e| Error::input(format!("cannot record to {}: {e}", path.display())))?;
+        }
+        Ok(Recorder { file })
+    }
+
+    /// Journals a command run at `tick` and flushes it to disk.
+    pub fn record(&mut self, tick: u64, command: &Command) -> std::io::Result<()> {
+        writeln!(self.file, "{tick} {command}")?;
+        self.file.flush()?;
+        self.file.sync_data()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recorded_sessions_parse_back() {
+        let path = std::env::temp_dir().join(format!("visage-session-{}.vsg", std::process::id()));
+        std::fs::remove_file(&path).ok();
+        let header = SessionHeader::new(&DbArgs::default(), (100, 30), Protocol::Kitty);
+        let mut r = Recorder::open(&path, &header).unwrap();
+        r.record(0, &Command::parse("set-gaussians nose bram").unwrap())
+            .unwrap();
+        r.record(7, &Command::Play).unwrap();
+        drop(r);
+        // Appending keeps the header and adds lines.
+        let mut r = Recorder::open(&path, &header).unwrap();
+        r.record(9, &Command::Pause).unwrap();
+        let s = Session::load(&path).unwrap();
+        std::fs::remove_file(&path).ok();
+        assert_eq!(s.header, header);
+        assert_eq!(s.lines.len(), 3);
+        assert_eq!(s.lines[1].tick, 7);
+        assert_eq!(s.lines[2].action, Action::Command(Command::Pause));
+    }
+
+    #[test]
+    fn malformed_sessions_name_the_line() {
+        let cases = [
+            ("hello\n", ":1:"),
+            ("visage-session 2\n---\n", "version"),
+            ("visage-session 1\nterminal big\n---\n", ":2:"),
+            (
+                "visage-session 1\n---\n3 play\n1 pause\n",
+                ":4: tick 1 goes back",
+            ),
+            ("visage-session 1\n---\n0 fly\n", ":3: unknown command"),
+            ("visage-session 1\n---\nsoon play\n", ":3:"),
+            (
+                "visage-session 1\n---\n0 expect image a.png psnr>=x\n",
+                ":3:",
+            ),
+            ("visage-session 1\ndb builtin\n", "never ends"),
+        ];
+        for (text, needle) in cases {
+            let e = Session::parse(text, "s.vsg").unwrap_err().to_string();
+            assert!(e.contains(needle), "{text:?}: {e}");
+            assert!(!e.contains('\n'));
+        }
+    }
+}

@@ -1,0 +1,244 @@
+//! The workbench turns an editor state into pictures: it keeps the engine, the
+//! current composite and a renderer, updates the composite incrementally from the
+//! recipe, poses the frame and renders it (or the mesh, in the debug view).
+
+use std::path::Path;
+use std::time::Instant;
+
+use glam::Vec3;
+
+use super::state::DebugView;
+use crate::compose::engine::{Composite, Engine, PosedMesh};
+use crate::compose::recipe::{Recipe, ResolvedRecipe};
+use crate::compose::state_hash;
+use crate::error::{Error, Result};
+use crate::io::obj::region_colour;
+use crate::io::ply::write_splat_ply;
+use crate::model::regions::Group;
+use crate::render::image::RgbImage;
+use crate::render::mesh_preview::render_mesh;
+use crate::render::reference::RenderSettings;
+use crate::render::{Backend, SplatRenderer};
+
+/// What to draw.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameRequest {
+    /// The document.
+    pub recipe: Recipe,
+    /// Debug view toggles.
+    pub debug: DebugView,
+    /// The selected group (highlighted in the mesh view).
+    pub group: Group,
+    /// Image size in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Full accuracy (stills, idle refinement) or the interactive preset.
+    pub exact: bool,
+}
+
+/// Milliseconds spent per step of a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FrameTimings {
+    /// Recipe → composite update (blend and/or selection).
+    pub compose: f64,
+    /// Posing the frame.
+    pub pose: f64,
+    /// Rendering.
+    pub render: f64,
+}
+
+/// A rendered frame and what it cost.
+#[derive(Clone, Debug)]
+pub struct FrameResult {
+    /// The picture.
+    pub image: RgbImage,
+    /// Timings.
+    pub timings: FrameTimings,
+    /// Gaussians in the composite (border extras included).
+    pub gaussians: usize,
+    /// Border-smoothing extras among them.
+    pub extras: usize,
+    /// State hash of the rendered recipe.
+    pub state_hash: String,
+}
+
+/// The engine, the current composite and a renderer.
+pub struct Workbench {
+    engine: Engine,
+    renderer: SplatRenderer,
+    composite: Option<Composite>,
+    posed: PosedMesh,
+    uploaded: bool,
+}
+
+impl Workbench {
+    /// A workbench on an engine with a renderer of the given kind.
+    pub fn new(engine: Engine, backend: Backend) -> Result<Self> {
+        Ok(Self {
+            engine,
+            renderer: SplatRenderer::open(backend)?,
+            composite: None,
+            posed: PosedMesh::default(),
+            uploaded: false,
+        })
+    }
+
+    /// The engine.
+    pub fn engine(&self) -> &Engine {
+        &self.engine
+    }
+
+    /// What renders.
+    pub fn renderer_description(&self) -> String {
+        self.renderer.description()
+    }
+
+    /// Brings the composite up to date with `recipe` and poses its frame.
+    pub fn update(&mut self, recipe: &Recipe) -> Result<(ResolvedRecipe, f64, f64)> {
+        let resolved = recipe.resolve(self.engine.database())?;
+        let t = Instant::now();
+        match &mut self.composite {
+            Some(c) => {
+                let changes = self.engine.update(c, &resolved);
+                if changes.gaussians {
+                    self.uploaded = false;
+                }
+            }
+            None => {
+                self.composite = Some(self.engine.compose(&resolved));
+                self.uploaded = false;
+            }
+        }
+        let compose = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let composite = self.composite.as_ref().expect("composed above");
+        self.engine.pose(composite, resolved.frame, &mut self.posed);
+        Ok((resolved, compose, t.elapsed().as_secs_f64() * 1e3))
+    }
+
+    /// Renders a request.
+    pub fn render(&mut self, request: &FrameRequest) -> Result<FrameResult> {
+        let (resolved, compose, pose) = self.update(&request.recipe)?;
+        let composite = self.composite.as_ref().expect("composed");
+        let camera = resolved
+            .camera
+            .camera(request.width.max(1), request.height.max(1));
+        let t = Instant::now();
+        let image = if request.debug.mesh {
+            self.mesh_view(&camera, request)
+        } else {
+            if !self.uploaded {
+                self.renderer.set_gaussians(&composite.gaussians)?;
+                self.uploaded = true;
+            }
+            let mut settings = if request.exact {
+                RenderSettings::default()
+            } else {
+                RenderSettings::interactive()
+            };
+            settings.scale_modifier = request.debug.scale;
+            self.renderer
+                .render(&self.posed.frames, &camera, &settings)?
+        };
+        let render = t.elapsed().as_secs_f64() * 1e3;
+        let extras = composite
+            .blocks
+            .iter()
+            .filter(|b| b.extra_from.is_some())
+            .map(|b| b.end - b.start)
+            .sum();
+        Ok(FrameResult {
+            image,
+            timings: FrameTimings {
+                compose,
+                pose,
+                render,
+            },
+            gaussians: composite.gaussians.len(),
+            extras,
+            state_hash: state_hash(self.engine.database(), &resolved),
+        })
+    }
+
+    fn mesh_view(
+        &self,
+        camera: &crate::render::camera::Camera,
+        request: &FrameRequest,
+    ) -> RgbImage {
+        let model = &self.engine.database().model;
+        let colours: Vec<[u8; 3]> = model
+            .triangle_regions
+            .iter()
+            .map(|r| {
+                if !request.debug.highlight {
+                    region_colour(*r)
+                } else if r.group() == request.group {
+                    [255, 200, 40]
+                } else {
+                    [110, 110, 120]
+                }
+            })
+            .collect();
+        render_mesh(
+            &self.posed.vertices,
+            &model.triangles,
+            &colours,
+            camera.view_projection(),
+            camera.eye,
+            camera.width,
+            camera.height,
+        )
+    }
+
+    /// Writes the current frame as a standard 3DGS PLY.
+    pub fn export_ply(&mut self, recipe: &Recipe, path: &Path) -> Result<usize> {
+        self.update(recipe)?;
+        let composite = self.composite.as_ref().expect("composed");
+        let scene = self.engine.scene(composite, &self.posed);
+        write_splat_ply(path, &scene)?;
+        Ok(scene.len())
+    }
+
+    /// Renders an exact still and writes it as PNG.
+    pub fn snapshot(&mut self, request: &FrameRequest, path: &Path) -> Result<RgbImage> {
+        let still = FrameRequest {
+            exact: true,
+            ..request.clone()
+        };
+        let frame = self.render(&still)?;
+        frame.image.save_png(path)?;
+        Ok(frame.image)
+    }
+}
+
+/// The mean skin colour of each source (for the source strip's swatches).
+pub fn source_swatches(engine: &Engine) -> Vec<[u8; 3]> {
+    let db = engine.database();
+    db.sources
+        .iter()
+        .map(|s| {
+            let g = &s.gaussians;
+            let skin: Vec<u32> = (0..g.len() as u32)
+                .filter(|&i| {
+                    db.model.triangle_regions[g.binding[i as usize] as usize]
+                        == crate::model::regions::Region::Skin
+                })
+                .collect();
+            let mean =
+                crate::compose::colour::weighted_mean_colour(g, &skin).unwrap_or(Vec3::splat(0.5));
+            [mean.x, mean.y, mean.z].map(|c| (c.clamp(0.0, 1.0) * 255.0) as u8)
+        })
+        .collect()
+}
+
+/// Fails when a path's folder does not exist (a clear message before any work).
+pub fn check_parent(path: &Path) -> Result<()> {
+    match path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        Some(dir) if !dir.is_dir() => Err(Error::input(format!(
+            "folder {} does not exist",
+            dir.display()
+        ))),
+        _ => Ok(()),
+    }
+}

@@ -1,0 +1,188 @@
+//! The real editor in a real terminal: tmux runs the binary, send-keys types,
+//! capture-pane reads the screen. Needs tmux (installed by .ci/setup).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+struct Tmux {
+    socket: String,
+}
+
+impl Tmux {
+    fn new(tag: &str) -> Tmux {
+        let t = Tmux {
+            socket: format!("visage-test-{tag}-{}", std::process::id()),
+        };
+        let ok = Command::new("tmux")
+            .arg("-V")
+            .output()
+            .map(|o| o.status.success())
+            .unwrap_or(false);
+        assert!(
+            ok,
+            "tmux is needed for this test: apt-get install tmux (bash .ci/setup does)"
+        );
+        t
+    }
+
+    fn cmd(&self, args: &[&str]) -> String {
+        let out = Command::new("tmux")
+            .arg("-L")
+            .arg(&self.socket)
+            .args(args)
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+
+    fn start(&self, command: &str) {
+        self.cmd(&["new-session", "-d", "-x", "110", "-y", "36", command]);
+    }
+
+    fn screen(&self) -> String {
+        self.cmd(&["capture-pane", "-p"])
+    }
+
+    fn keys(&self, keys: &[&str]) {
+        for k in keys {
+            self.cmd(&["send-keys", k]);
+            std::thread::sleep(Duration::from_millis(60));
+        }
+    }
+
+    /// Waits until the screen satisfies `pred`; panics with the screen after `limit`.
+    fn wait_for(&self, what: &str, limit: Duration, pred: impl Fn(&str) -> bool) -> String {
+        let start = Instant::now();
+        loop {
+            let s = self.screen();
+            if pred(&s) {
+                return s;
+            }
+            assert!(
+                start.elapsed() < limit,
+                "timed out waiting for {what}; screen:\n{s}"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+}
+
+impl Drop for Tmux {
+    fn drop(&mut self) {
+        let _ = Command::new("tmux")
+            .arg("-L")
+            .arg(&self.socket)
+            .arg("kill-server")
+            .output();
+    }
+}
+
+fn temp(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("visage-tmux-{}-{name}", std::process::id()))
+}
+
+fn wait_file(path: &Path, limit: Duration) -> String {
+    let start = Instant::now();
+    loop {
+        if let Ok(s) = std::fs::read_to_string(path) {
+            if !s.is_empty() {
+                return s;
+            }
+        }
+        assert!(start.elapsed() < limit, "{} never appeared", path.display());
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn editor_command(extra: &str, status: &Path) -> String {
+    format!(
+        "{} --graphics halfblocks --gaussians-per-avatar 11000 --source-count 4 {extra} 2>/dev/null; echo EXIT=$? > {}; sleep 60",
+        env!("CARGO_BIN_EXE_visage"),
+        status.display()
+    )
+}
+
+#[test]
+fn edit_undo_and_quit_in_a_real_terminal() {
+    let tmux = Tmux::new("edit");
+    let (status, record) = (temp("status"), temp("journal.vsg"));
+    std::fs::remove_file(&status).ok();
+    std::fs::remove_file(&record).ok();
+    tmux.start(&editor_command(
+        &format!("--record {}", record.display()),
+        &status,
+    ));
+    let long = Duration::from_secs(60);
+    tmux.wait_for("the editor", long, |s| {
+        s.contains("composite") && s.contains("Gaussians (")
+    });
+    // Select the nose group, the second source, and assign its Gaussians.
+    tmux.keys(&["Down", "Down", "Down", "Down", "Down", "Right", "Enter"]);
+    let s = tmux.wait_for("the assignment", long, |s| s.contains("▶nose   bram"));
+    assert!(s.contains("undo 1 redo 0") || s.contains("undo 1"), "{s}");
+    // Undo it.
+    tmux.keys(&["u"]);
+    tmux.wait_for("the undo", long, |s| {
+        s.contains("▶nose   ada") && s.contains("redo 1")
+    });
+    // A command through the prompt.
+    tmux.keys(&[
+        ":", "s", "m", "o", "o", "t", "h", "i", "n", "g", "Space", "t", "h", "e", "s", "i", "s",
+        "Enter",
+    ]);
+    tmux.wait_for("the prompt command", long, |s| {
+        s.contains("smoothing thesis")
+    });
+    tmux.keys(&["q"]);
+    assert_eq!(wait_file(&status, long).trim(), "EXIT=0");
+    let screen = tmux.screen();
+    assert!(
+        !screen.contains("composite"),
+        "the terminal was restored:\n{screen}"
+    );
+    // The journal holds the commands, on ticks, and replays to the same state.
+    let journal = std::fs::read_to_string(&record).unwrap();
+    for c in [
+        "next-group",
+        "next-source",
+        "assign",
+        "undo",
+        "smoothing thesis",
+    ] {
+        assert!(journal.contains(c), "{c} not journaled:\n{journal}");
+    }
+    let session = visage::tui::session::Session::load(&record).unwrap();
+    assert!(session.lines.windows(2).all(|w| w[0].tick <= w[1].tick));
+    std::fs::remove_file(&record).ok();
+    std::fs::remove_file(&status).ok();
+}
+
+#[test]
+fn sigterm_restores_the_terminal() {
+    let tmux = Tmux::new("term");
+    let status = temp("term-status");
+    std::fs::remove_file(&status).ok();
+    tmux.start(&editor_command("", &status));
+    tmux.wait_for("the editor", Duration::from_secs(60), |s| {
+        s.contains("composite")
+    });
+    let shell = tmux.cmd(&["display-message", "-p", "#{pane_pid}"]);
+    let children = Command::new("pgrep")
+        .args(["-P", shell.trim()])
+        .output()
+        .unwrap();
+    let pids = String::from_utf8_lossy(&children.stdout);
+    let editor = pids
+        .lines()
+        .next()
+        .expect("the editor runs under the pane's shell");
+    Command::new("kill")
+        .args(["-TERM", editor.trim()])
+        .status()
+        .unwrap();
+    assert_eq!(wait_file(&status, Duration::from_secs(20)).trim(), "EXIT=0");
+    let s = tmux.screen();
+    assert!(!s.contains("composite"), "alternate screen left:\n{s}");
+    std::fs::remove_file(&status).ok();
+}
