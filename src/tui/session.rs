@@ -166,13 +166,15 @@ impl Session {
         let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
         match lines.next() {
             Some((_, l)) if l == format!("visage-session {SESSION_VERSION}") => {}
-            Some((n, l)) if l.starts_with("visage-session ") => return Err(err(
-                n,
-                format!(
+            Some((n, l)) if l.starts_with("visage-session ") => {
+                return Err(err(
+                    n,
+                    format!(
                     "session version '{}' is not supported (this build reads {SESSION_VERSION})",
                     crate::io::printable(&l[15..])
                 ),
-            )),
+                ))
+            }
             _ => {
                 return Err(err(
                     1,
