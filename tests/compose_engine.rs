@@ -452,11 +452,12 @@ fn degenerate_and_sliver_triangles_in_a_source_leave_no_nan() {
             if k % 2 == 0 {
                 let centre = (a + b + c) / 3.0;
                 for (&v, p) in t.iter().zip([a, b, c]) {
-                    src.static_offset[v as usize] = centre - p;
+                    src.static_offset[v as usize] = (centre - p).as_dvec3();
                 }
                 collapsed += 1;
             } else {
-                src.static_offset[t[2] as usize] = 0.5 * (a + b) - c + Vec3::splat(1e-9);
+                src.static_offset[t[2] as usize] =
+                    (0.5 * (a + b) - c + Vec3::splat(1e-9)).as_dvec3();
             }
         }
     }

@@ -91,7 +91,9 @@ fn grey_sh(degree: u8, seed: u32) -> Vec<f32> {
     let n = 3 * (degree as usize + 1).pow(2);
     (0..n)
         .map(|k| {
-            let h = (k as u32 * 2_654_435_761).wrapping_add(seed.wrapping_mul(40_503));
+            let h = (k as u32)
+                .wrapping_mul(2_654_435_761)
+                .wrapping_add(seed.wrapping_mul(40_503));
             if k < 3 {
                 ((h >> 8) % 1000) as f32 / 1000.0 * 2.0 - 0.5
             } else {

@@ -1,6 +1,6 @@
 //! Source avatars and the database of them that the editor composes from.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 use super::gaussians::GaussianSet;
 use crate::model::head::HeadModel;
@@ -14,8 +14,9 @@ pub struct SourceAvatar {
     pub name: String,
     /// Shape coefficients β.
     pub shape: Vec<f32>,
-    /// Static per-vertex offset added to the shaped template (hair, clothing).
-    pub static_offset: Vec<Vec3>,
+    /// Static per-vertex offset added to the shaped template (hair, clothing), in
+    /// f64 so exported neutral meshes read back exactly.
+    pub static_offset: Vec<DVec3>,
     /// The motion this avatar was captured with.
     pub motion: Motion,
     /// Gaussians bound to the model's triangles.

@@ -9,8 +9,9 @@ use serde_json::json;
 use super::DbArgs;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
 use crate::compose::recipe::Recipe;
-use crate::compose::state_hash;
+use crate::compose::{canonical_order, composite_hash, reordered, state_hash};
 use crate::error::{Error, Result};
+use crate::io::avatar::{neutral_offset, write_avatar, AvatarParams, FrameParams};
 use crate::io::ply::write_splat_ply;
 use crate::io::printable;
 use crate::model::regions::{Group, Region};
@@ -36,6 +37,9 @@ pub struct ComposeArgs {
 pub enum ExportFormat {
     /// World-space standard 3DGS PLY of one frame (INRIA layout).
     Ply,
+    /// A GaussianAvatars avatar folder (point_cloud.ply + flame_param.npz): the
+    /// composite's Gaussians, the blended neutral as static_offset, the motion.
+    GaussianAvatars,
 }
 
 /// Arguments of `visage export`.
@@ -139,6 +143,34 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
                 args.output.display()
             );
         }
+        ExportFormat::GaussianAvatars => {
+            let engine = &built.engine;
+            let c = &built.composite;
+            let count = c
+                .recipe
+                .motion
+                .map_or(1, |m| engine.database().motions[m].frames());
+            let frames: Vec<FrameParams> = (0..count)
+                .map(|k| {
+                    let (expression, pose) = engine.frame_parameters(&c.recipe, k);
+                    FrameParams { expression, pose }
+                })
+                .collect();
+            let model = &engine.database().model;
+            let offset = neutral_offset(&model.template, &c.neutral);
+            let params = AvatarParams {
+                shape: &[],
+                static_offset: &offset,
+                frames: &frames,
+            };
+            let gaussians = reordered(&c.gaussians, &canonical_order(model, &c.gaussians));
+            write_avatar(&args.output, &gaussians, &params)?;
+            eprintln!(
+                "visage: wrote a GaussianAvatars avatar ({} Gaussians, {count} frames) to {}",
+                c.gaussians.len(),
+                args.output.display()
+            );
+        }
     }
     Ok(())
 }
@@ -197,6 +229,7 @@ fn report(built: &Built, frame: Option<usize>) -> serde_json::Value {
     let nan = built.posed.vertices.iter().any(|v| !v.is_finite());
     json!({
         "state_hash": state_hash(db, r),
+        "composite_hash": composite_hash(&built.engine, c, frame.unwrap_or(r.frame)),
         "database": printable(&db.fingerprint),
         "base": name(r.base),
         "groups": groups,

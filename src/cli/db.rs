@@ -27,6 +27,12 @@ pub struct DbArgs {
     /// Number of built-in source avatars (1-14).
     #[arg(long = "source-count", default_value_t = MAX_SOURCES, value_name = "N")]
     pub source_count: usize,
+    /// FLAME model for `--db DIR` (flame2023.pkl or generic_model.pkl).
+    #[arg(long, value_name = "FILE")]
+    pub flame: Option<std::path::PathBuf>,
+    /// FLAME masks for `--db DIR` (FLAME_masks.pkl).
+    #[arg(long, value_name = "FILE")]
+    pub masks: Option<std::path::PathBuf>,
 }
 
 impl Default for DbArgs {
@@ -36,6 +42,8 @@ impl Default for DbArgs {
             seed: 1,
             gaussians_per_avatar: 50_000,
             source_count: MAX_SOURCES,
+            flame: None,
+            masks: None,
         }
     }
 }
@@ -44,10 +52,22 @@ impl DbArgs {
     /// Opens the database and reports how long that took.
     pub fn load(&self) -> Result<(Database, Duration)> {
         if self.db != "builtin" {
-            return Err(Error::input(format!(
-                "cannot open database '{}': only the built-in database ('--db builtin') is available in this version",
-                self.db
-            )));
+            let start = Instant::now();
+            let config = crate::io::folder::read_config().map_err(Error::Input)?;
+            let flame = self.flame.clone().or(config.flame);
+            let masks = self.masks.clone().or(config.masks);
+            let files = match (&flame, &masks) {
+                (Some(f), Some(m)) => Some((f.as_path(), m.as_path())),
+                (None, None) => None,
+                _ => {
+                    return Err(Error::input(
+                        "--flame and --masks go together (or set both in the config file)",
+                    ))
+                }
+            };
+            let db = crate::io::folder::load_folder(std::path::Path::new(&self.db), files)
+                .map_err(Error::Input)?;
+            return Ok((db, start.elapsed()));
         }
         if !(1..=MAX_GAUSSIANS_PER_AVATAR).contains(&self.gaussians_per_avatar) {
             return Err(Error::input(format!(

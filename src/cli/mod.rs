@@ -45,6 +45,9 @@ enum Command {
     Render(render::RenderArgs),
     /// Measure speed beside error.
     Bench(bench::BenchArgs),
+    /// Write test fixtures in the real formats (FLAME-layout model and masks
+    /// pickles, GaussianAvatars avatar folders) made from the built-in head.
+    Fixtures(FixturesArgs),
 }
 
 /// Parses the process arguments, runs the command and maps errors to exit codes.
@@ -69,6 +72,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Export(args)) => compose::run_export(&args),
         Some(Command::Render(args)) => render::run(&args),
         Some(Command::Bench(args)) => bench::run(&args),
+        Some(Command::Fixtures(args)) => run_fixtures(&args),
         Some(Command::Edit(args)) => edit::run_edit(&args),
         Some(Command::Replay(args)) => edit::run_replay(&args),
         None => edit::run_edit(&cli.edit),
@@ -99,4 +103,37 @@ fn usage_error(e: clap::Error) -> ExitCode {
         crate::io::printable(first)
     );
     ExitCode::from(2)
+}
+
+/// Arguments of `visage fixtures`.
+#[derive(clap::Args, Debug)]
+struct FixturesArgs {
+    /// Folder to write into.
+    dir: std::path::PathBuf,
+    /// Avatars to write.
+    #[arg(long = "source-count", default_value_t = 3)]
+    sources: usize,
+    /// Gaussians per avatar.
+    #[arg(long, default_value_t = 12_000)]
+    gaussians_per_avatar: usize,
+    /// Seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+fn run_fixtures(args: &FixturesArgs) -> Result<()> {
+    let p = crate::io::fixtures::write_fixtures(
+        &args.dir,
+        args.sources,
+        args.gaussians_per_avatar,
+        args.seed,
+    )
+    .map_err(crate::error::Error::Input)?;
+    println!(
+        "visage --db {} --flame {} --masks {}",
+        p.avatars.display(),
+        p.model.display(),
+        p.masks.display()
+    );
+    Ok(())
 }

@@ -45,9 +45,29 @@ pub struct RenderArgs {
     /// (wgpu on any adapter, lavapipe included) or cpu.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     renderer: Backend,
+    /// Render a frame sequence START..END (END excluded) of the recipe's motion;
+    /// the output path must contain `{frame}` (replaced by the zero-padded index).
+    #[arg(long, value_name = "START..END", value_parser = parse_range, conflicts_with = "frame")]
+    frames: Option<(usize, usize)>,
     /// Output PNG.
     #[arg(short = 'o', long = "output", value_name = "OUT.png")]
     output: PathBuf,
+}
+
+/// Parses "A..B" with A < B.
+pub fn parse_range(s: &str) -> std::result::Result<(usize, usize), String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("'{s}' is not START..END"))?;
+    let a: usize = a.parse().map_err(|_| format!("'{s}' is not START..END"))?;
+    let b: usize = b.parse().map_err(|_| format!("'{s}' is not START..END"))?;
+    if a >= b {
+        return Err(format!("'{s}' is empty: END must be greater than START"));
+    }
+    if b - a > 100_000 {
+        return Err(format!("'{s}' has more than 100000 frames"));
+    }
+    Ok((a, b))
 }
 
 /// Parses "WxH" with both sides in 1..=8192.
@@ -63,6 +83,51 @@ pub fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
             .ok_or_else(|| format!("size '{s}' needs sides between 1 and 8192"))
     };
     Ok((parse(w)?, parse(h)?))
+}
+
+/// Renders frames `start..end` of a composite's motion to numbered PNGs.
+fn render_sequence(
+    args: &RenderArgs,
+    subject: &Subject,
+    camera: &crate::render::camera::Camera,
+    settings: &RenderSettings,
+    start: usize,
+    end: usize,
+) -> Result<()> {
+    let Subject::Composite(b) = subject else {
+        return Err(Error::input(
+            "--frames renders a recipe's motion; a PLY has one frame",
+        ));
+    };
+    let pattern = args.output.to_string_lossy().into_owned();
+    if !pattern.contains("{frame}") {
+        return Err(Error::input(
+            "with --frames the output path must contain {frame}, e.g. -o shots/frame-{frame}.png",
+        ));
+    }
+    let mut renderer = (!args.reference)
+        .then(|| SplatRenderer::open(args.renderer))
+        .transpose()?;
+    if let Some(r) = &mut renderer {
+        r.set_gaussians(&b.composite.gaussians)?;
+    }
+    let mut posed = crate::compose::engine::PosedMesh::default();
+    let t = Instant::now();
+    for k in start..end {
+        b.engine.pose(&b.composite, k, &mut posed);
+        let image = match &mut renderer {
+            Some(r) => r.render(&posed.frames, camera, settings)?,
+            None => render_reference(&b.engine.scene(&b.composite, &posed), camera, settings),
+        };
+        image.save_png(std::path::Path::new(
+            &pattern.replace("{frame}", &format!("{k:04}")),
+        ))?;
+    }
+    eprintln!(
+        "visage: rendered frames {start}..{end} in {:.1} s",
+        t.elapsed().as_secs_f64()
+    );
+    Ok(())
 }
 
 /// What a still shows: a world-space PLY scene, or a posed composite.
@@ -100,6 +165,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     let camera = orbit.camera(args.size.0, args.size.1);
     let settings = RenderSettings::default();
+    if let Some((start, end)) = args.frames {
+        return render_sequence(args, &subject, &camera, &settings, start, end);
+    }
     let t = Instant::now();
     let (image, count, device) = match (&subject, args.reference) {
         (Subject::Ply(scene), true) => (

@@ -202,8 +202,22 @@ impl Engine {
         changes
     }
 
-    /// Blends the sources' neutral meshes with the recipe's shape weights.
+    /// Blends the sources' neutral meshes with the recipe's shape weights. When
+    /// every group takes its whole shape from one source, that source's mesh is
+    /// the exact answer (moved so the pinned vertex sits where the base has it).
     pub fn blend_neutral(&self, recipe: &ResolvedRecipe) -> (Vec<Vec3>, f64) {
+        let single = |row: &Vec<f64>| row.iter().position(|&w| w == 1.0);
+        let first = single(&recipe.shape[0]);
+        if let Some(f) = first.filter(|_| recipe.shape.iter().all(|row| single(row) == first)) {
+            let p = self.blender.pinned_vertex() as usize;
+            let shift = self.neutrals[recipe.base][p] - self.neutrals[f][p];
+            let mesh = if f == recipe.base {
+                self.neutrals[f].clone()
+            } else {
+                self.neutrals[f].iter().map(|v| *v + shift).collect()
+            };
+            return (mesh, 0.0);
+        }
         let mut rhs = vec![DVec3::ZERO; self.blender.vertex_count()];
         for r in Region::ALL {
             for (f, &w) in recipe.shape[r.group().index()].iter().enumerate() {

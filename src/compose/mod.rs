@@ -19,3 +19,74 @@ pub fn state_hash(db: &Database, recipe: &ResolvedRecipe) -> String {
     h.update(format!("{recipe:?}").as_bytes());
     h.finalize().to_hex()[..16].to_string()
 }
+
+/// A hash of the composite's content: the blended neutral mesh, every selected
+/// Gaussian (after post-processing) and the frame's expression and pose. Equal
+/// for composites that look and move the same however they were made — e.g. a
+/// composite and its GaussianAvatars export loaded back.
+pub fn composite_hash(
+    engine: &engine::Engine,
+    composite: &engine::Composite,
+    frame: usize,
+) -> String {
+    let mut h = blake3::Hasher::new();
+    let mut floats = |xs: &mut dyn Iterator<Item = f32>| {
+        for x in xs {
+            h.update(&x.to_le_bytes());
+        }
+    };
+    floats(&mut composite.neutral.iter().flat_map(|v| v.to_array()));
+    let g = &reordered(
+        &composite.gaussians,
+        &canonical_order(&engine.database().model, &composite.gaussians),
+    );
+    floats(&mut g.binding.iter().map(|&b| b as f32));
+    floats(&mut g.position.iter().flat_map(|v| v.to_array()));
+    floats(&mut g.rotation.iter().flat_map(|q| q.to_array()));
+    floats(&mut g.log_scale.iter().flat_map(|v| v.to_array()));
+    floats(&mut g.opacity_logit.iter().copied());
+    floats(&mut g.sh.iter().copied());
+    let (expression, pose) = engine.frame_parameters(&composite.recipe, frame);
+    let used = engine.database().model.expression_basis.len();
+    floats(
+        &mut expression
+            .iter()
+            .take(used)
+            .copied()
+            .chain(std::iter::repeat(0.0))
+            .take(used),
+    );
+    floats(
+        &mut pose
+            .joints
+            .iter()
+            .flat_map(|j| j.to_array())
+            .chain(pose.translation.to_array()),
+    );
+    h.finalize().to_hex()[..16].to_string()
+}
+
+/// The order a composite's Gaussians are compared and exported in: by region of
+/// their triangle (table order), keeping the composite's order within a region —
+/// the order selection produces when the export is loaded back as a source.
+pub fn canonical_order(
+    model: &crate::model::head::HeadModel,
+    set: &crate::avatar::gaussians::GaussianSet,
+) -> Vec<u32> {
+    let mut order: Vec<u32> = (0..set.len() as u32).collect();
+    order.sort_by_key(|&i| model.triangle_regions[set.binding[i as usize] as usize].index());
+    order
+}
+
+/// A copy of a Gaussian set in the given order.
+pub fn reordered(
+    set: &crate::avatar::gaussians::GaussianSet,
+    order: &[u32],
+) -> crate::avatar::gaussians::GaussianSet {
+    let mut out = crate::avatar::gaussians::GaussianSet::with_degree(set.sh_degree);
+    out.reserve(order.len());
+    for &i in order {
+        out.push_from(set, i as usize, set.opacity_logit[i as usize]);
+    }
+    out
+}

@@ -1,6 +1,13 @@
 //! File formats and terminal-safe text.
 
+pub mod avatar;
+pub mod fixtures;
+pub mod flame;
+pub mod folder;
+pub mod npy;
 pub mod obj;
+pub mod pickle;
+pub mod pickle_write;
 pub mod ply;
 
 /// Strips control characters (and the escape sequences they start) so untrusted

@@ -6,7 +6,7 @@
 //! [`HeadModel::pose`] animates any neutral mesh. The composition engine blends
 //! neutral meshes once and then animates the result as a single head.
 
-use glam::{Mat3, Quat, Vec3};
+use glam::{DVec3, Mat3, Quat, Vec3};
 
 use super::regions::Region;
 
@@ -146,16 +146,24 @@ impl HeadModel {
         self.triangles.len()
     }
 
-    /// A source's identity mesh: template + shape blendshapes + static offset.
-    pub fn neutral(&self, shape: &[f32], static_offset: Option<&[Vec3]>) -> Vec<Vec3> {
-        let mut v = self.template.clone();
-        self.shape_basis.accumulate(shape, &mut v);
+    /// A source's identity mesh: template + shape blendshapes + static offset,
+    /// summed in f64 and rounded once, so an offset written as `neutral - template`
+    /// (in f64) reproduces `neutral` exactly.
+    pub fn neutral(&self, shape: &[f32], static_offset: Option<&[DVec3]>) -> Vec<Vec3> {
+        let mut v: Vec<DVec3> = self.template.iter().map(|p| p.as_dvec3()).collect();
+        for (k, &c) in shape.iter().enumerate().take(self.shape_basis.len()) {
+            if c != 0.0 {
+                for (o, d) in v.iter_mut().zip(self.shape_basis.component(k)) {
+                    *o += c as f64 * d.as_dvec3();
+                }
+            }
+        }
         if let Some(offset) = static_offset {
             for (o, d) in v.iter_mut().zip(offset) {
                 *o += *d;
             }
         }
-        v
+        v.into_iter().map(|p| p.as_vec3()).collect()
     }
 
     /// Joint positions regressed from a shaped (unposed) mesh.
@@ -191,7 +199,7 @@ impl HeadModel {
     pub fn forward(
         &self,
         shape: &[f32],
-        static_offset: Option<&[Vec3]>,
+        static_offset: Option<&[DVec3]>,
         expression: &[f32],
         pose: &Pose,
     ) -> Vec<Vec3> {

@@ -299,7 +299,10 @@ fn make_source(
             u - 1.5
         })
         .collect();
-    let static_offset = hair_offset(model, normals, look);
+    let static_offset: Vec<glam::DVec3> = hair_offset(model, normals, look)
+        .iter()
+        .map(|o| o.as_dvec3())
+        .collect();
     let neutral = model.neutral(&shape, Some(&static_offset));
     let motion_name = BUILTIN_MOTIONS[index % BUILTIN_MOTIONS.len()];
     let motion = builtin_motion(

@@ -47,6 +47,8 @@ pub struct SessionHeader {
     pub gaussians_per_avatar: usize,
     /// Built-in source count.
     pub sources: usize,
+    /// FLAME model and masks of a folder database.
+    pub flame: Option<(PathBuf, PathBuf)>,
     /// Terminal size (columns, rows) when recorded.
     pub terminal: (u16, u16),
     /// Graphics protocol when recorded.
@@ -63,6 +65,7 @@ impl SessionHeader {
             seed: db.seed,
             gaussians_per_avatar: db.gaussians_per_avatar,
             sources: db.source_count,
+            flame: db.flame.clone().zip(db.masks.clone()),
             terminal,
             graphics,
             render: (160, 120),
@@ -76,16 +79,22 @@ impl SessionHeader {
             seed: self.seed,
             gaussians_per_avatar: self.gaussians_per_avatar,
             source_count: self.sources,
+            flame: self.flame.as_ref().map(|f| f.0.clone()),
+            masks: self.flame.as_ref().map(|f| f.1.clone()),
         }
     }
 
     fn write(&self, out: &mut impl Write) -> std::io::Result<()> {
         writeln!(out, "visage-session {SESSION_VERSION}")?;
-        writeln!(
+        write!(
             out,
             "db {} seed={} gaussians-per-avatar={} sources={}",
             self.db, self.seed, self.gaussians_per_avatar, self.sources
         )?;
+        if let Some((model, masks)) = &self.flame {
+            write!(out, " flame={} masks={}", model.display(), masks.display())?;
+        }
+        writeln!(out)?;
         writeln!(out, "terminal {}x{}", self.terminal.0, self.terminal.1)?;
         writeln!(out, "graphics {}", self.graphics.name())?;
         writeln!(out, "render {}x{}", self.render.0, self.render.1)?;
@@ -187,6 +196,7 @@ impl Session {
             seed: 1,
             gaussians_per_avatar: 50_000,
             sources: crate::model::synthetic::MAX_SOURCES,
+            flame: None,
             terminal: (120, 40),
             graphics: Protocol::Halfblocks,
             render: (160, 120),

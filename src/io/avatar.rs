@@ -1,0 +1,416 @@
+//! GaussianAvatars avatar folders: `point_cloud.ply` (triangle-local Gaussians
+//! with `binding_0`) and `flame_param.npz` (shape (300,), expr (T,100),
+//! rotation / neck_pose / jaw_pose / translation (T,3), eyes_pose (T,6),
+//! static_offset (1,V,3)), read into source avatars and written from composites.
+
+use std::path::Path;
+
+use glam::{DVec3, Quat, Vec3};
+
+use super::npy::{read_npz, write_npy, write_npz, NpyData};
+use super::pickle::NdArray;
+use super::ply::{read_element, Columns};
+use crate::avatar::database::SourceAvatar;
+use crate::avatar::gaussians::{sh_coefficients, sh_degree_for, GaussianSet};
+use crate::model::head::{HeadModel, Pose, JOINT_COUNT};
+use crate::model::motion::Motion;
+
+/// Shape coefficients GaussianAvatars stores.
+pub const SHAPE_PARAMS: usize = 300;
+/// Expression coefficients GaussianAvatars stores.
+pub const EXPRESSION_PARAMS: usize = 100;
+
+/// Reads the triangle-bound Gaussians of a GaussianAvatars `point_cloud.ply`.
+pub fn read_bound_ply(path: &Path, triangles: usize) -> Result<GaussianSet, String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    parse_bound_ply(&bytes, triangles).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn columns<'a>(c: &'a Columns, names: &[&str]) -> Result<Vec<&'a [f64]>, String> {
+    names.iter().map(|n| c.require(n)).collect()
+}
+
+/// Parses GaussianAvatars `point_cloud.ply` bytes.
+pub fn parse_bound_ply(bytes: &[u8], triangles: usize) -> Result<GaussianSet, String> {
+    let c = read_element(bytes, "vertex")?;
+    let rest = (0..)
+        .take_while(|k| c.get(&format!("f_rest_{k}")).is_some())
+        .count();
+    if rest % 3 != 0 {
+        return Err(format!("{rest} f_rest properties is not a multiple of 3"));
+    }
+    let degree = sh_degree_for(1 + rest / 3)
+        .ok_or_else(|| format!("{rest} f_rest properties is no SH degree 0-3"))?;
+    let pos = columns(&c, &["x", "y", "z"])?;
+    let dc = columns(&c, &["f_dc_0", "f_dc_1", "f_dc_2"])?;
+    let scale = columns(&c, &["scale_0", "scale_1", "scale_2"])?;
+    let rot = columns(&c, &["rot_0", "rot_1", "rot_2", "rot_3"])?;
+    let opacity = c.require("opacity")?;
+    let binding = c
+        .require("binding_0")
+        .map_err(|_| "no binding_0 property: this is not a GaussianAvatars point cloud (use --ply for world-space 3DGS files)".to_string())?;
+    let rest_cols: Vec<&[f64]> = (0..rest)
+        .map(|k| c.get(&format!("f_rest_{k}")).unwrap())
+        .collect();
+    let per_channel = rest / 3;
+    let mut set = GaussianSet::with_degree(degree);
+    set.reserve(c.rows);
+    let mut sh = vec![0.0f32; 3 * sh_coefficients(degree)];
+    for i in 0..c.rows {
+        let b = binding[i];
+        if !(b >= 0.0 && b.fract() == 0.0 && (b as usize) < triangles) {
+            return Err(format!(
+                "Gaussian {i} is bound to triangle {b}, but the mesh has {triangles} triangles"
+            ));
+        }
+        for ch in 0..3 {
+            sh[ch] = dc[ch][i] as f32;
+            for k in 0..per_channel {
+                sh[(k + 1) * 3 + ch] = rest_cols[ch * per_channel + k][i] as f32;
+            }
+        }
+        let values = [
+            pos[0][i],
+            pos[1][i],
+            pos[2][i],
+            scale[0][i],
+            scale[1][i],
+            scale[2][i],
+            rot[0][i],
+            rot[1][i],
+            rot[2][i],
+            rot[3][i],
+            opacity[i],
+        ];
+        if values.iter().any(|v| !v.is_finite()) || sh.iter().any(|v| !v.is_finite()) {
+            return Err(format!("Gaussian {i} has a NaN or infinite value"));
+        }
+        set.push(
+            b as u32,
+            Vec3::new(pos[0][i] as f32, pos[1][i] as f32, pos[2][i] as f32),
+            Quat::from_xyzw(
+                rot[1][i] as f32,
+                rot[2][i] as f32,
+                rot[3][i] as f32,
+                rot[0][i] as f32,
+            ),
+            Vec3::new(scale[0][i] as f32, scale[1][i] as f32, scale[2][i] as f32),
+            opacity[i] as f32,
+            &sh,
+        );
+    }
+    Ok(set)
+}
+
+/// Writes triangle-bound Gaussians as a GaussianAvatars `point_cloud.ply`.
+pub fn write_bound_ply(path: &Path, set: &GaussianSet) -> Result<(), String> {
+    let coefficients = sh_coefficients(set.sh_degree);
+    let rest = 3 * (coefficients - 1);
+    let mut header = String::from(
+        "ply\nformat binary_little_endian 1.0\ncomment GaussianAvatars layout, written by visage\n",
+    );
+    header += &format!("element vertex {}\n", set.len());
+    let mut names: Vec<String> = [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    names.extend((0..rest).map(|k| format!("f_rest_{k}")));
+    names.extend(
+        [
+            "opacity",
+            "scale_0",
+            "scale_1",
+            "scale_2",
+            "rot_0",
+            "rot_1",
+            "rot_2",
+            "rot_3",
+            "binding_0",
+        ]
+        .iter()
+        .map(|s| s.to_string()),
+    );
+    for n in &names {
+        header += &format!("property float {n}\n");
+    }
+    header += "end_header\n";
+    let mut out = Vec::with_capacity(header.len() + set.len() * names.len() * 4);
+    out.extend_from_slice(header.as_bytes());
+    let mut put = |v: f32| out.extend_from_slice(&v.to_le_bytes());
+    for i in 0..set.len() {
+        let p = set.position[i];
+        [p.x, p.y, p.z, 0.0, 0.0, 0.0]
+            .into_iter()
+            .for_each(&mut put);
+        let sh = set.sh_of(i);
+        (0..3).for_each(|ch| put(sh[ch]));
+        for ch in 0..3 {
+            for k in 1..coefficients {
+                put(sh[k * 3 + ch]);
+            }
+        }
+        put(set.opacity_logit[i]);
+        let s = set.log_scale[i];
+        [s.x, s.y, s.z].into_iter().for_each(&mut put);
+        let q = set.rotation[i];
+        [q.w, q.x, q.y, q.z].into_iter().for_each(&mut put);
+        put(set.binding[i] as f32);
+    }
+    std::fs::write(path, out).map_err(|e| format!("cannot write {}: {e}", path.display()))
+}
+
+fn field<'a>(
+    arrays: &'a std::collections::BTreeMap<String, NdArray>,
+    name: &str,
+) -> Result<&'a NdArray, String> {
+    let a = arrays
+        .get(name)
+        .ok_or_else(|| format!("flame_param.npz has no '{name}'"))?;
+    if a.data.iter().any(|x| !x.is_finite()) {
+        return Err(format!(
+            "flame_param.npz '{name}' has NaN or infinite values"
+        ));
+    }
+    Ok(a)
+}
+
+/// Rows of a (T, width) array, or an error naming the array.
+fn rows(a: &NdArray, name: &str, width: usize) -> Result<Vec<Vec<f32>>, String> {
+    if a.shape.len() != 2 || a.shape[1] != width {
+        return Err(format!(
+            "flame_param.npz '{name}' has shape {:?}, expected (T, {width})",
+            a.shape
+        ));
+    }
+    Ok(a.data
+        .chunks(width)
+        .map(|r| r.iter().map(|&x| x as f32).collect())
+        .collect())
+}
+
+/// Reads one avatar folder into a source avatar for `model`.
+pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAvatar, String> {
+    let gaussians = read_bound_ply(&dir.join("point_cloud.ply"), model.triangle_count())?;
+    let npz_path = dir.join("flame_param.npz");
+    let arrays = read_npz(&npz_path)?;
+    let label = |e: String| format!("{}: {e}", npz_path.display());
+    let shape = field(&arrays, "shape").map_err(label)?;
+    if shape.shape.last().copied().unwrap_or(0) < model.shape_basis.len().min(SHAPE_PARAMS)
+        && !shape.data.is_empty()
+    {
+        return Err(label(format!(
+            "'shape' has {} coefficients, the model uses {}",
+            shape.data.len(),
+            model.shape_basis.len()
+        )));
+    }
+    let shape_coeffs: Vec<f32> = shape
+        .data
+        .iter()
+        .take(model.shape_basis.len())
+        .map(|&x| x as f32)
+        .collect();
+    let expr = rows(
+        field(&arrays, "expr").map_err(label)?,
+        "expr",
+        EXPRESSION_PARAMS,
+    )
+    .map_err(label)?;
+    let frames = expr.len();
+    let three = |n: &str| -> Result<Vec<Vec<f32>>, String> {
+        let r = rows(field(&arrays, n)?, n, 3)?;
+        if r.len() != frames {
+            return Err(format!("'{n}' has {} frames, 'expr' has {frames}", r.len()));
+        }
+        Ok(r)
+    };
+    let rotation = three("rotation").map_err(label)?;
+    let neck = three("neck_pose").map_err(label)?;
+    let jaw = three("jaw_pose").map_err(label)?;
+    let translation = three("translation").map_err(label)?;
+    let eyes = rows(field(&arrays, "eyes_pose").map_err(label)?, "eyes_pose", 6).map_err(label)?;
+    if eyes.len() != frames {
+        return Err(label(format!(
+            "'eyes_pose' has {} frames, 'expr' has {frames}",
+            eyes.len()
+        )));
+    }
+    let v = model.vertex_count();
+    let static_offset = match arrays.get("static_offset") {
+        None => vec![DVec3::ZERO; v],
+        Some(a) => {
+            if a.data.iter().any(|x| !x.is_finite()) {
+                return Err(label("'static_offset' has NaN or infinite values".into()));
+            }
+            let n = a.data.len() / 3;
+            let fits = a.shape.len() == 3 && a.shape[0] == 1 && a.shape[2] == 3;
+            if !fits || !(n == v || n + super::flame::TEETH_VERTICES == v) {
+                return Err(label(format!(
+                    "'static_offset' has shape {:?}, expected (1, {v}, 3)",
+                    a.shape
+                )));
+            }
+            let mut o: Vec<DVec3> = a
+                .data
+                .chunks(3)
+                .map(|c| DVec3::new(c[0], c[1], c[2]))
+                .collect();
+            o.resize(v, DVec3::ZERO);
+            o
+        }
+    };
+    let e_len = model.expression_basis.len();
+    let v3 = |r: &[f32]| Vec3::new(r[0], r[1], r[2]);
+    let poses = (0..frames)
+        .map(|t| {
+            let mut joints = [Vec3::ZERO; JOINT_COUNT];
+            joints[0] = v3(&rotation[t]);
+            joints[1] = v3(&neck[t]);
+            joints[2] = v3(&jaw[t]);
+            joints[3] = v3(&eyes[t][..3]);
+            joints[4] = v3(&eyes[t][3..]);
+            Pose {
+                joints,
+                translation: v3(&translation[t]),
+            }
+        })
+        .collect();
+    let expression = expr.into_iter().map(|mut r| {
+        r.truncate(e_len);
+        r
+    });
+    let motion = Motion {
+        name: name.to_string(),
+        fps: 25.0,
+        expression: expression.collect(),
+        poses,
+    };
+    if motion.frames() == 0 {
+        return Err(label("'expr' has no frames".into()));
+    }
+    Ok(SourceAvatar {
+        name: name.to_string(),
+        shape: shape_coeffs,
+        static_offset,
+        motion,
+        gaussians,
+    })
+}
+
+/// One frame of the parameters GaussianAvatars stores.
+pub struct FrameParams {
+    /// Expression coefficients (padded to 100 on write).
+    pub expression: Vec<f32>,
+    /// Joint poses and translation.
+    pub pose: Pose,
+}
+
+/// What an avatar folder stores besides its Gaussians.
+pub struct AvatarParams<'a> {
+    /// Shape coefficients (padded to 300).
+    pub shape: &'a [f32],
+    /// Static per-vertex offset (written as float64).
+    pub static_offset: &'a [DVec3],
+    /// Per-frame expression and pose.
+    pub frames: &'a [FrameParams],
+}
+
+/// The static offset `neutral - template` in f64 — exact, since both are f32 —
+/// so `template + offset` (summed in f64, see `HeadModel::neutral`) gives the
+/// neutral back bit for bit (the composite export: zero shape, the blend in the offset).
+pub fn neutral_offset(template: &[Vec3], neutral: &[Vec3]) -> Vec<DVec3> {
+    template
+        .iter()
+        .zip(neutral)
+        .map(|(t, n)| n.as_dvec3() - t.as_dvec3())
+        .collect()
+}
+
+/// Writes a GaussianAvatars avatar folder.
+pub fn write_avatar(
+    dir: &Path,
+    gaussians: &GaussianSet,
+    params: &AvatarParams,
+) -> Result<(), String> {
+    let frames = params.frames;
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    write_bound_ply(&dir.join("point_cloud.ply"), gaussians)?;
+    let t = frames.len().max(1);
+    let mut expr = vec![0.0f32; t * EXPRESSION_PARAMS];
+    let (mut rotation, mut neck, mut jaw, mut eyes, mut translation) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (k, f) in frames.iter().enumerate() {
+        for (j, e) in f.expression.iter().take(EXPRESSION_PARAMS).enumerate() {
+            expr[k * EXPRESSION_PARAMS + j] = *e;
+        }
+        let j = &f.pose.joints;
+        rotation.extend(j[0].to_array());
+        neck.extend(j[1].to_array());
+        jaw.extend(j[2].to_array());
+        eyes.extend(j[3].to_array());
+        eyes.extend(j[4].to_array());
+        translation.extend(f.pose.translation.to_array());
+    }
+    if frames.is_empty() {
+        rotation = vec![0.0; 3];
+        neck = vec![0.0; 3];
+        jaw = vec![0.0; 3];
+        eyes = vec![0.0; 6];
+        translation = vec![0.0; 3];
+    }
+    let offset: Vec<f64> = params
+        .static_offset
+        .iter()
+        .flat_map(|o| o.to_array())
+        .collect();
+    let v = params.static_offset.len();
+    let mut shape = vec![0.0f32; SHAPE_PARAMS];
+    for (s, x) in shape.iter_mut().zip(params.shape) {
+        *s = *x;
+    }
+    let arrays = [
+        ("shape", write_npy(&[SHAPE_PARAMS], NpyData::F32(&shape))),
+        (
+            "expr",
+            write_npy(&[t, EXPRESSION_PARAMS], NpyData::F32(&expr)),
+        ),
+        ("rotation", write_npy(&[t, 3], NpyData::F32(&rotation))),
+        ("neck_pose", write_npy(&[t, 3], NpyData::F32(&neck))),
+        ("jaw_pose", write_npy(&[t, 3], NpyData::F32(&jaw))),
+        ("eyes_pose", write_npy(&[t, 6], NpyData::F32(&eyes))),
+        (
+            "translation",
+            write_npy(&[t, 3], NpyData::F32(&translation)),
+        ),
+        (
+            "static_offset",
+            write_npy(&[1, v, 3], NpyData::F64(&offset)),
+        ),
+    ];
+    let named: Vec<(&str, Vec<u8>)> = arrays.into_iter().collect();
+    write_npz(&dir.join("flame_param.npz"), &named, true)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn neutral_offsets_reproduce_the_neutral_exactly() {
+        // Pairs where no f32 offset works (ties-to-even skips the target) are exact in f64.
+        let template = [
+            Vec3::new(1e-3, 1.0, 0.1),
+            Vec3::new(0.05, -0.3, 0.123_456_7),
+        ];
+        let neutral = [
+            Vec3::new(-2e-3, 1e-8, 0.1000001),
+            Vec3::new(0.0501, 0.7, 0.123_456_9),
+        ];
+        let offset = neutral_offset(&template, &neutral);
+        for ((t, n), o) in template.iter().zip(&neutral).zip(&offset) {
+            assert_eq!((t.as_dvec3() + *o).as_vec3(), *n);
+        }
+    }
+}
