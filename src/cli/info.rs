@@ -118,7 +118,7 @@ fn report(db: &Database, args: &InfoArgs, generation_ms: f64) -> serde_json::Val
         .collect();
     json!({
         "database": printable(&db.label),
-        "seed": args.db.seed,
+        "seed": (args.db.db == "builtin").then_some(args.db.seed),
         "generation_ms": (generation_ms * 10.0).round() / 10.0,
         "model": {
             "vertices": model.vertex_count(),
@@ -140,12 +140,12 @@ fn report(db: &Database, args: &InfoArgs, generation_ms: f64) -> serde_json::Val
 
 fn print_text(r: &serde_json::Value) {
     let m = &r["model"];
-    println!(
-        "database {} (seed {}), generated in {:.0} ms",
-        r["database"].as_str().unwrap_or(""),
-        r["seed"],
-        r["generation_ms"].as_f64().unwrap_or(0.0)
-    );
+    let database = r["database"].as_str().unwrap_or("");
+    let ms = r["generation_ms"].as_f64().unwrap_or(0.0);
+    match r["seed"].as_u64() {
+        Some(seed) => println!("database {database} (seed {seed}), generated in {ms:.0} ms"),
+        None => println!("database {database}, loaded in {ms:.0} ms"),
+    }
     println!(
         "model: {} vertices, {} triangles, {} connected parts, {} shape and {} expression components, joints {}",
         m["vertices"],

@@ -507,6 +507,76 @@ fn assign_regions(
 mod tests {
     use super::*;
 
+    /// Writes a tiny FLAME-layout model (3 vertices, one triangle) with `edit`
+    /// applied to its entries, loads it, and returns the error.
+    fn load_error(
+        edit: impl Fn(&mut Vec<(&'static str, crate::io::pickle_write::PyObj<'static>)>),
+    ) -> String {
+        use crate::io::pickle_write::{to_pickle, PyObj};
+        static TEMPLATE: [f64; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+        static FACES: [u32; 3] = [0, 1, 2];
+        static SHAPEDIRS: [f32; 9] = [0.0; 9];
+        static WEIGHTS: [f64; 15] = [
+            1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0,
+        ];
+        static KINTREE: [i64; 10] = [4_294_967_295, 0, 1, 1, 1, 0, 1, 2, 3, 4];
+        static DATA: [f64; 0] = [];
+        static INDICES: [i32; 0] = [];
+        static INDPTR: [i32; 4] = [0, 0, 0, 0];
+        let mut entries = vec![
+            ("v_template", PyObj::F64(vec![3, 3], &TEMPLATE)),
+            ("f", PyObj::U32(vec![1, 3], &FACES)),
+            ("shapedirs", PyObj::F32(vec![3, 3, 1], &SHAPEDIRS)),
+            ("weights", PyObj::F64(vec![3, 5], &WEIGHTS)),
+            ("J_regressor", PyObj::Csc((5, 3), &DATA, &INDICES, &INDPTR)),
+            ("kintree_table", PyObj::I64(vec![2, 5], &KINTREE)),
+        ];
+        edit(&mut entries);
+        let bytes = to_pickle(&PyObj::Dict(entries));
+        let dir = std::env::temp_dir().join(format!(
+            "visage-flame-{}-{}",
+            std::process::id(),
+            blake3::hash(&bytes).to_hex()
+        ));
+        std::fs::create_dir_all(&dir).unwrap();
+        let model = dir.join("model.pkl");
+        std::fs::write(&model, bytes).unwrap();
+        let masks = dir.join("masks.pkl");
+        std::fs::write(&masks, to_pickle(&PyObj::Dict(vec![]))).unwrap();
+        let Err(e) = load_flame(&model, &masks) else {
+            panic!("the model must be refused")
+        };
+        std::fs::remove_dir_all(&dir).ok();
+        e
+    }
+
+    #[test]
+    fn broken_models_are_refused_with_the_key_named() {
+        let e = load_error(|m| m.retain(|(k, _)| *k != "shapedirs"));
+        assert!(e.contains("has no 'shapedirs'"), "{e}");
+        static FLAT: [f64; 6] = [0.0; 6];
+        let e = load_error(|m| m[0].1 = crate::io::pickle_write::PyObj::F64(vec![3, 2], &FLAT));
+        assert!(
+            e.contains("'v_template' has shape [3, 2], expected (N, 3)"),
+            "{e}"
+        );
+        static NAN: [f64; 9] = [0.0, 0.0, f64::NAN, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+        let e = load_error(|m| m[0].1 = crate::io::pickle_write::PyObj::F64(vec![3, 3], &NAN));
+        assert!(e.contains("NaN"), "{e}");
+        static WIDE: [f32; 12] = [0.0; 12];
+        let e = load_error(|m| m[2].1 = crate::io::pickle_write::PyObj::F32(vec![4, 3, 1], &WIDE));
+        assert!(
+            e.contains("'shapedirs' has shape [4, 3, 1], expected (3, 3, N)"),
+            "{e}"
+        );
+        static OUT_OF_RANGE: [u32; 3] = [0, 1, 7];
+        let e =
+            load_error(|m| m[1].1 = crate::io::pickle_write::PyObj::U32(vec![1, 3], &OUT_OF_RANGE));
+        assert!(e.contains("7"), "{e}");
+        let e = load_error(|m| m[5].1 = crate::io::pickle_write::PyObj::Str("tree"));
+        assert!(e.contains("kintree_table"), "{e}");
+    }
+
     #[test]
     fn teeth_topology_matches_gaussian_avatars() {
         let positions: Vec<Vec3> = (0..30)

@@ -122,6 +122,8 @@ pub struct Columns {
     /// Row count.
     pub rows: usize,
     columns: HashMap<String, Vec<f64>>,
+    /// Names of the element's list properties, to tell "wrong type" from "missing".
+    lists: Vec<String>,
 }
 
 impl Columns {
@@ -132,8 +134,13 @@ impl Columns {
 
     /// A required column, or an error naming it.
     pub fn require(&self, name: &str) -> Result<&[f64], String> {
-        self.get(name)
-            .ok_or_else(|| format!("PLY vertex element has no '{name}' property"))
+        self.get(name).ok_or_else(|| {
+            if self.lists.iter().any(|l| l == name) {
+                format!("PLY property '{name}' is a list; a number was expected")
+            } else {
+                format!("PLY vertex element has no '{name}' property")
+            }
+        })
     }
 }
 
@@ -321,10 +328,13 @@ pub fn read_element(bytes: &[u8], wanted: &str) -> Result<Columns, String> {
             let mut out = Columns {
                 rows: element.count,
                 columns: HashMap::new(),
+                lists: Vec::new(),
             };
             for (p, c) in element.properties.iter().zip(columns) {
                 if p.list_count.is_none() {
                     out.columns.insert(p.name.clone(), c);
+                } else {
+                    out.lists.push(crate::io::printable(&p.name));
                 }
             }
             return Ok(out);
@@ -535,5 +545,21 @@ mod tests {
         assert!(read_element(no_end, "vertex")
             .unwrap_err()
             .contains("end_header"));
+    }
+
+    #[test]
+    fn wrongly_typed_and_missing_properties_are_named() {
+        let list_x = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\nproperty float y\nproperty float z\nend_header\n2 1 2 3 4\n";
+        let c = read_element(list_x, "vertex").unwrap();
+        assert!(c.require("x").unwrap_err().contains("'x' is a list"));
+        assert!(c.require("w").unwrap_err().contains("no 'w' property"));
+        assert!(parse_splat_ply(list_x)
+            .unwrap_err()
+            .contains("'x' is a list"));
+        let bad_type =
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty quaternion x\nend_header\n1\n";
+        assert!(read_element(bad_type, "vertex").is_err());
+        let nan = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nproperty float f_dc_0\nproperty float f_dc_1\nproperty float f_dc_2\nproperty float opacity\nproperty float scale_0\nproperty float scale_1\nproperty float scale_2\nproperty float rot_0\nproperty float rot_1\nproperty float rot_2\nproperty float rot_3\nend_header\n0 0 nan 0 0 0 0 0 0 0 1 0 0 0\n";
+        assert!(parse_splat_ply(nan).unwrap_err().contains("NaN"));
     }
 }

@@ -58,14 +58,25 @@ pub struct SessionHeader {
 }
 
 impl SessionHeader {
-    /// A header for a database.
+    /// A header for a database. Folder and FLAME paths are made absolute so the
+    /// session replays from any working directory.
     pub fn new(db: &DbArgs, terminal: (u16, u16), graphics: Protocol) -> Self {
+        let absolute = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+        let folder = if db.db == "builtin" {
+            db.db.clone()
+        } else {
+            absolute(Path::new(&db.db)).display().to_string()
+        };
         Self {
-            db: db.db.clone(),
+            db: folder,
             seed: db.seed,
             gaussians_per_avatar: db.gaussians_per_avatar,
             sources: db.source_count,
-            flame: db.flame.clone().zip(db.masks.clone()),
+            flame: db
+                .flame
+                .as_deref()
+                .map(absolute)
+                .zip(db.masks.as_deref().map(absolute)),
             terminal,
             graphics,
             render: (160, 120),
@@ -89,10 +100,18 @@ impl SessionHeader {
         write!(
             out,
             "db {} seed={} gaussians-per-avatar={} sources={}",
-            self.db, self.seed, self.gaussians_per_avatar, self.sources
+            quote(&self.db),
+            self.seed,
+            self.gaussians_per_avatar,
+            self.sources
         )?;
         if let Some((model, masks)) = &self.flame {
-            write!(out, " flame={} masks={}", model.display(), masks.display())?;
+            write!(
+                out,
+                " flame={} masks={}",
+                quote(&model.display().to_string()),
+                quote(&masks.display().to_string())
+            )?;
         }
         writeln!(out)?;
         writeln!(out, "terminal {}x{}", self.terminal.0, self.terminal.1)?;
@@ -213,11 +232,13 @@ impl Session {
                 match key {
                     "---" => body = true,
                     "db" => {
-                        let mut words = rest.split_whitespace();
+                        let words = header_words(rest).map_err(|e| err(n, e))?;
+                        let mut words = words.iter();
                         header.db = words
                             .next()
                             .ok_or_else(|| err(n, "db needs a name".into()))?
                             .to_string();
+                        let (mut flame, mut masks) = (None, None);
                         for kv in words {
                             let (k, v) = kv.split_once('=').ok_or_else(|| {
                                 err(
@@ -237,6 +258,8 @@ impl Session {
                                     header.gaussians_per_avatar = v.parse().map_err(|_| bad())?
                                 }
                                 "sources" => header.sources = v.parse().map_err(|_| bad())?,
+                                "flame" => flame = Some(PathBuf::from(v)),
+                                "masks" => masks = Some(PathBuf::from(v)),
                                 _ => {
                                     return Err(err(
                                         n,
@@ -245,6 +268,16 @@ impl Session {
                                 }
                             }
                         }
+                        header.flame = match (flame, masks) {
+                            (Some(f), Some(m)) => Some((f, m)),
+                            (None, None) => None,
+                            _ => {
+                                return Err(err(
+                                    n,
+                                    "db options flame= and masks= go together".into(),
+                                ))
+                            }
+                        };
                     }
                     "terminal" => {
                         let (w, h) = size(rest, "terminal", n, name)?;
@@ -374,6 +407,55 @@ impl Recorder {
     }
 }
 
+/// A header value as written: bare, or in double quotes (with `\"` and `\\`)
+/// when it is empty or holds whitespace, quotes or backslashes.
+fn quote(value: &str) -> String {
+    if !value.is_empty()
+        && !value
+            .chars()
+            .any(|c| c.is_whitespace() || c == '"' || c == '\\')
+    {
+        return value.to_string();
+    }
+    let mut out = String::from("\"");
+    for c in value.chars() {
+        if c == '"' || c == '\\' {
+            out.push('\\');
+        }
+        out.push(c);
+    }
+    out.push('"');
+    out
+}
+
+/// Splits a header line into words; double quotes (anywhere in a word) protect
+/// whitespace, and a backslash inside them escapes the next character.
+fn header_words(line: &str) -> std::result::Result<Vec<String>, String> {
+    let mut words = Vec::new();
+    let mut word: Option<String> = None;
+    let mut quoted = false;
+    let mut chars = line.chars();
+    while let Some(c) = chars.next() {
+        match c {
+            '"' => {
+                quoted = !quoted;
+                word.get_or_insert_with(String::new);
+            }
+            '\\' if quoted => {
+                let next = chars.next().ok_or("a backslash ends the line")?;
+                word.get_or_insert_with(String::new).push(next);
+            }
+            c if c.is_whitespace() && !quoted => words.extend(word.take()),
+            c => word.get_or_insert_with(String::new).push(c),
+        }
+    }
+    if quoted {
+        return Err("a quoted value is not closed".into());
+    }
+    words.extend(word);
+    Ok(words)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -397,6 +479,37 @@ mod tests {
         assert_eq!(s.lines.len(), 3);
         assert_eq!(s.lines[1].tick, 7);
         assert_eq!(s.lines[2].action, Action::Command(Command::Pause));
+    }
+
+    #[test]
+    fn folder_databases_with_flame_files_and_odd_paths_parse_back() {
+        let db = DbArgs {
+            db: "/data/my avatars".into(),
+            flame: Some("/models/flame \"2023\".pkl".into()),
+            masks: Some("relative/FLAME_masks.pkl".into()),
+            ..DbArgs::default()
+        };
+        let header = SessionHeader::new(&db, (80, 24), Protocol::Sixel);
+        let mut text = Vec::new();
+        header.write(&mut text).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        assert!(text.contains("db \"/data/my avatars\" "), "{text}");
+        let back = Session::parse(&text, "s.vsg").unwrap().header;
+        assert_eq!(back, header);
+        let (model, masks) = back.flame.unwrap();
+        assert_eq!(model, Path::new("/models/flame \"2023\".pkl"));
+        assert!(masks.is_absolute() && masks.ends_with("relative/FLAME_masks.pkl"));
+        let e = Session::parse("visage-session 1\ndb /d flame=/f.pkl\n---\n", "s.vsg")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(":2: db options flame= and masks= go together"),
+            "{e}"
+        );
+        let e = Session::parse("visage-session 1\ndb \"/d\n---\n", "s.vsg")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not closed"), "{e}");
     }
 
     #[test]
