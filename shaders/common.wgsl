@@ -56,3 +56,16 @@ fn quat_to_mat(q: vec4<f32>) -> mat3x3<f32> {
         vec3<f32>(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)),
     );
 }
+
+// Parameters of the sort and binning kernels (one uniform slot per dispatch).
+struct SortParams {
+    count: u32,   // elements in this dispatch
+    shift: u32,   // radix pass: bit offset of the digit
+    blocks: u32,  // radix pass: workgroup blocks of SORT_BLOCK elements
+    bits: u32,    // depth key: how many top bits of the depth sort on
+    tiles: vec4<u32>,  // tiles x, tiles y, unused x2
+}
+
+// Elements per workgroup of the radix and scan kernels (256 invocations x 4).
+const SORT_BLOCK: u32 = 1024u;
+const SORT_ITEMS: u32 = 4u;

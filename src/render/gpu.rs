@@ -3,10 +3,9 @@
 //!
 //! Stages per frame: upload the triangle frames (the Gaussians only when the
 //! selection changes) → `bind` (local → world) → `project` (cull, 2D covariance,
-//! SH colour, depth, touched tiles) → read back the sort keys → CPU radix sort by
-//! depth and tile binning (no workgroup ever waits for another, which hangs some
-//! drivers; on lavapipe the CPU is the device anyway) → `rasterize` (per 16×16
-//! tile, front to back, early termination) → read back RGBA8.
+//! SH colour, depth, touched tiles) → depth sort and tile binning on the GPU
+//! ([`super::gpu_binning`]: radix sorts, prefix sums; 4 bytes read back) →
+//! `rasterize` (per 16×16 tile, front to back, early termination) → read back RGBA8.
 
 use std::time::Instant;
 
@@ -14,10 +13,10 @@ use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
 use super::camera::Camera;
+use super::gpu_binning::GpuBinning;
 use super::image::RgbImage;
 use super::reference::RenderSettings;
 use super::scene::SplatScene;
-use super::tiles::TileBins;
 use crate::avatar::binding::TriangleFrame;
 use crate::avatar::gaussians::GaussianSet;
 use crate::error::{Error, Result};
@@ -48,9 +47,9 @@ struct CameraUniform {
 pub struct StageTimings {
     /// Frame upload.
     pub upload: f64,
-    /// bind + project kernels and the key read-back.
+    /// bind + project kernels.
     pub project: f64,
-    /// CPU depth sort and tile binning (and their upload).
+    /// Depth sort and tile binning kernels.
     pub sort: f64,
     /// rasterize kernel.
     pub rasterize: f64,
@@ -74,18 +73,19 @@ struct SceneBuffers {
     world: wgpu::Buffer,
     projected: wgpu::Buffer,
     keys: wgpu::Buffer,
-    keys_readback: wgpu::Buffer,
 }
 
 /// A growable GPU buffer.
-struct Growable {
-    buffer: wgpu::Buffer,
+pub(super) struct Growable {
+    /// The buffer (replaced when it grows).
+    pub buffer: wgpu::Buffer,
     usage: wgpu::BufferUsages,
     label: &'static str,
 }
 
 impl Growable {
-    fn new(device: &wgpu::Device, label: &'static str, usage: wgpu::BufferUsages) -> Self {
+    /// A small buffer that grows on demand.
+    pub fn new(device: &wgpu::Device, label: &'static str, usage: wgpu::BufferUsages) -> Self {
         Self {
             buffer: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -99,7 +99,7 @@ impl Growable {
     }
 
     /// Makes room for `bytes`; returns true when the buffer was replaced.
-    fn ensure(&mut self, device: &wgpu::Device, bytes: u64) -> bool {
+    pub fn ensure(&mut self, device: &wgpu::Device, bytes: u64) -> bool {
         if self.buffer.size() >= bytes {
             return false;
         }
@@ -127,14 +127,11 @@ pub struct GpuRenderer {
     camera: wgpu::Buffer,
     scene: Option<SceneBuffers>,
     frames: Growable,
-    tile_ranges: Growable,
-    tile_list: Growable,
+    binning: GpuBinning,
     image: Growable,
     image_readback: Growable,
     /// Timings of the last frame.
     pub timings: StageTimings,
-    /// Scratch for sorting.
-    sort_scratch: TileBins,
 }
 
 fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
@@ -161,6 +158,48 @@ fn uniform_entry() -> wgpu::BindGroupLayoutEntry {
         },
         count: None,
     }
+}
+
+/// Layout entries: a uniform at binding 0, then storage buffers (read-only or not).
+pub(super) fn uniform_and_storage(read_only: &[bool]) -> Vec<wgpu::BindGroupLayoutEntry> {
+    let mut entries = vec![uniform_entry()];
+    entries.extend(
+        read_only
+            .iter()
+            .enumerate()
+            .map(|(i, &r)| storage_entry(i as u32 + 1, r)),
+    );
+    entries
+}
+
+/// Compiles a kernel (shaders/common.wgsl prepended; entry point `main`).
+pub(super) fn compute_pipeline(
+    device: &wgpu::Device,
+    name: &str,
+    source: &str,
+    entries: &[wgpu::BindGroupLayoutEntry],
+) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(name),
+        source: wgpu::ShaderSource::Wgsl(format!("{COMMON}\n{source}").into()),
+    });
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(name),
+        entries,
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(name),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(name),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    })
 }
 
 impl GpuRenderer {
@@ -216,45 +255,25 @@ impl GpuRenderer {
             })
             .await
             .map_err(|e| Error::input(format!("cannot open the graphics device: {e}")))?;
-        let uniform_and = |n: u32, read_only: &[bool]| {
-            let mut entries = vec![uniform_entry()];
-            entries.extend((1..=n).map(|b| storage_entry(b, read_only[(b - 1) as usize])));
-            entries
-        };
-        let make = |name: &str, source: &str, entries: &[wgpu::BindGroupLayoutEntry]| {
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(name),
-                source: wgpu::ShaderSource::Wgsl(format!("{COMMON}\n{source}").into()),
-            });
-            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some(name),
-                entries,
-            });
-            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(name),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(name),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
-        let bind_pipeline = make("bind", BIND, &uniform_and(3, &[true, true, false]));
-        let project_pipeline = make(
+        let bind_pipeline = compute_pipeline(
+            &device,
+            "bind",
+            BIND,
+            &uniform_and_storage(&[true, true, false]),
+        );
+        let project_pipeline = compute_pipeline(
+            &device,
             "project",
             PROJECT,
-            &uniform_and(4, &[true, true, false, false]),
+            &uniform_and_storage(&[true, true, false, false]),
         );
-        let raster_pipeline = make(
+        let raster_pipeline = compute_pipeline(
+            &device,
             "rasterize",
             RASTERIZE,
-            &uniform_and(4, &[true, true, true, false]),
+            &uniform_and_storage(&[true, true, true, false]),
         );
+        let binning = GpuBinning::new(&device);
         let camera = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("camera"),
             size: std::mem::size_of::<CameraUniform>() as u64,
@@ -263,8 +282,6 @@ impl GpuRenderer {
         });
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let frames = Growable::new(&device, "frames", storage);
-        let tile_ranges = Growable::new(&device, "tile ranges", storage);
-        let tile_list = Growable::new(&device, "tile list", storage);
         let image = Growable::new(
             &device,
             "image",
@@ -286,12 +303,10 @@ impl GpuRenderer {
             camera,
             scene: None,
             frames,
-            tile_ranges,
-            tile_list,
+            binning,
             image,
             image_readback,
             timings: StageTimings::default(),
-            sort_scratch: TileBins::default(),
         }))
     }
 
@@ -308,6 +323,12 @@ impl GpuRenderer {
                 format!(" {}", self.adapter.driver_info)
             }
         )
+    }
+
+    /// The device and queue, for tests of single stages.
+    #[cfg(test)]
+    pub(super) fn device_and_queue(&self) -> (&wgpu::Device, &wgpu::Queue) {
+        (&self.device, &self.queue)
     }
 
     /// True when rendering on a CPU (software) adapter such as lavapipe.
@@ -379,11 +400,6 @@ impl GpuRenderer {
                 "keys",
                 n as u64 * 16,
                 storage | wgpu::BufferUsages::COPY_SRC,
-            ),
-            keys_readback: empty(
-                "keys read-back",
-                n as u64 * 16,
-                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             ),
         });
         Ok(())
@@ -466,38 +482,21 @@ impl GpuRenderer {
             pass.set_bind_group(0, &project_group, &[]);
             pass.dispatch_workgroups(groups, 1, 1);
         }
-        let key_bytes = n as u64 * 16;
-        if key_bytes > 0 {
-            encoder.copy_buffer_to_buffer(&scene.keys, 0, &scene.keys_readback, 0, key_bytes);
-        }
         self.queue.submit([encoder.finish()]);
-        let keys: Vec<[u32; 4]> = if key_bytes > 0 {
-            read_buffer(&self.device, &scene.keys_readback, key_bytes)?
-        } else {
-            Vec::new()
-        };
+        wait(&self.device)?;
         timings.project = ms(t);
 
-        // CPU: depth sort and tile binning.
+        // Depth sort and tile binning on the GPU.
         let t = Instant::now();
-        let scratch = &mut self.sort_scratch;
-        scratch.bin(&keys, tiles, settings.sort_bits);
-        let list_bytes = (scratch.list.len().max(1) * 4) as u64;
-        self.tile_ranges
-            .ensure(&self.device, (scratch.ranges.len() * 8) as u64);
-        self.tile_list.ensure(&self.device, list_bytes);
-        self.queue.write_buffer(
-            &self.tile_ranges.buffer,
-            0,
-            bytemuck::cast_slice(&scratch.ranges),
-        );
-        if !scratch.list.is_empty() {
-            self.queue.write_buffer(
-                &self.tile_list.buffer,
-                0,
-                bytemuck::cast_slice(&scratch.list),
-            );
-        }
+        self.binning.bin(
+            &self.device,
+            &self.queue,
+            &scene.keys,
+            n,
+            tiles,
+            settings.sort_bits,
+        )?;
+        wait(&self.device)?;
         timings.sort = ms(t);
 
         // Rasterise.
@@ -510,8 +509,8 @@ impl GpuRenderer {
             &[
                 &self.camera,
                 &scene.projected,
-                &self.tile_ranges.buffer,
-                &self.tile_list.buffer,
+                &self.binning.ranges.buffer,
+                self.binning.list(),
                 &self.image.buffer,
             ],
         );
@@ -530,9 +529,7 @@ impl GpuRenderer {
             image_bytes,
         );
         self.queue.submit([encoder.finish()]);
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| Error::input(format!("the graphics device failed: {e}")))?;
+        wait(&self.device)?;
         timings.rasterize = ms(t);
 
         // Read back.
@@ -615,8 +612,20 @@ fn camera_uniform(
     }
 }
 
+/// Waits until the device has finished the work submitted so far.
+fn wait(device: &wgpu::Device) -> Result<()> {
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map(|_| ())
+        .map_err(|e| Error::input(format!("the graphics device failed: {e}")))
+}
+
 /// Maps a read-back buffer, copies `bytes` out as `T`, and unmaps it.
-fn read_buffer<T: Pod>(device: &wgpu::Device, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<T>> {
+pub(super) fn read_buffer<T: Pod>(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    bytes: u64,
+) -> Result<Vec<T>> {
     let slice = buffer.slice(..bytes);
     let (tx, rx) = std::sync::mpsc::channel();
     slice.map_async(wgpu::MapMode::Read, move |r| {

@@ -4,6 +4,7 @@
 pub mod camera;
 pub mod cpu;
 pub mod gpu;
+mod gpu_binning;
 pub mod image;
 pub mod mesh_preview;
 pub mod projection;

@@ -1,0 +1,24 @@
+// radix_histogram: per workgroup block, how many keys have each 8-bit digit at
+// `shift`. Written digit-major (digit * blocks + block) so one exclusive scan
+// gives every block's first output slot per digit.
+
+@group(0) @binding(0) var<uniform> params: SortParams;
+@group(0) @binding(1) var<storage, read> keys: array<u32>;
+@group(0) @binding(2) var<storage, read_write> counts: array<u32>;
+
+var<workgroup> histogram: array<atomic<u32>, 256>;
+
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) t: u32) {
+    atomicStore(&histogram[t], 0u);
+    workgroupBarrier();
+    let base = group.x * SORT_BLOCK;
+    for (var k = 0u; k < SORT_ITEMS; k++) {
+        let i = base + k * 256u + t;
+        if (i < params.count) {
+            atomicAdd(&histogram[(keys[i] >> params.shift) & 255u], 1u);
+        }
+    }
+    workgroupBarrier();
+    counts[t * params.blocks + group.x] = atomicLoad(&histogram[t]);
+}

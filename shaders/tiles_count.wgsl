@@ -1,0 +1,25 @@
+// tiles_count: how many tiles each Gaussian touches, in depth order (0 when
+// culled). Its exclusive prefix sum is where each one's tile entries start.
+
+@group(0) @binding(0) var<uniform> params: SortParams;
+@group(0) @binding(1) var<storage, read> keys: array<vec4<u32>>;
+@group(0) @binding(2) var<storage, read> order: array<u32>;
+@group(0) @binding(3) var<storage, read_write> entries: array<u32>;
+
+@compute @workgroup_size(256)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let s = id.x;
+    if (s >= params.count) {
+        return;
+    }
+    let k = keys[order[s]];
+    var n = 0u;
+    if (k.w != 0u) {
+        let x0 = k.y & 0xffffu;
+        let y0 = k.y >> 16u;
+        let x1 = min(k.z & 0xffffu, params.tiles.x - 1u);
+        let y1 = min(k.z >> 16u, params.tiles.y - 1u);
+        n = (x1 - x0 + 1u) * (y1 - y0 + 1u);
+    }
+    entries[s] = n;
+}

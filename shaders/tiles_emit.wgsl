@@ -1,0 +1,34 @@
+// tiles_emit: one (tile, Gaussian) entry per touched tile, written in depth order;
+// a stable sort by tile then gives every tile its Gaussians front to back.
+
+@group(0) @binding(0) var<uniform> params: SortParams;
+@group(0) @binding(1) var<storage, read> keys: array<vec4<u32>>;
+@group(0) @binding(2) var<storage, read> order: array<u32>;
+@group(0) @binding(3) var<storage, read> starts: array<u32>;
+@group(0) @binding(4) var<storage, read_write> tile_keys: array<u32>;
+@group(0) @binding(5) var<storage, read_write> tile_values: array<u32>;
+
+@compute @workgroup_size(256)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let s = id.x;
+    if (s >= params.count) {
+        return;
+    }
+    let i = order[s];
+    let k = keys[i];
+    if (k.w == 0u) {
+        return;
+    }
+    let x0 = k.y & 0xffffu;
+    let y0 = k.y >> 16u;
+    let x1 = min(k.z & 0xffffu, params.tiles.x - 1u);
+    let y1 = min(k.z >> 16u, params.tiles.y - 1u);
+    var at = starts[s];
+    for (var ty = y0; ty <= y1; ty++) {
+        for (var tx = x0; tx <= x1; tx++) {
+            tile_keys[at] = ty * params.tiles.x + tx;
+            tile_values[at] = i;
+            at++;
+        }
+    }
+}

@@ -1,0 +1,590 @@
+//! Depth sort and tile binning on the GPU: the same lists the CPU's
+//! [`TileBins`](super::tiles::TileBins) builds, bit for bit, made by compute
+//! kernels so a frame never leaves the device until its image does.
+//!
+//! 1. `sort_keys`: (depth bits, Gaussian index) for every Gaussian, culled ones last.
+//! 2. A stable LSD radix sort on the top `sort_bits` of the depth, 8 bits a pass
+//!    (`radix_histogram` → prefix sum → `radix_scatter`), so ties keep index order.
+//! 3. `tiles_count` + prefix sum: where each Gaussian's tile entries start, in depth
+//!    order; the total comes back to size the entry buffers (4 bytes read back).
+//! 4. `tiles_emit` writes (tile, Gaussian) entries in depth order; a stable radix
+//!    sort by tile makes each tile's run front to back; `tiles_ranges` finds the runs.
+//!
+//! Every kernel is its own dispatch (no workgroup waits for another), so it runs
+//! on any driver, lavapipe included.
+
+use super::gpu::{compute_pipeline, read_buffer, uniform_and_storage, Growable};
+use crate::error::{Error, Result};
+
+const SORT_KEYS: &str = include_str!("../../shaders/sort_keys.wgsl");
+const RADIX_HISTOGRAM: &str = include_str!("../../shaders/radix_histogram.wgsl");
+const RADIX_SCATTER: &str = include_str!("../../shaders/radix_scatter.wgsl");
+const SCAN_REDUCE: &str = include_str!("../../shaders/scan_reduce.wgsl");
+const SCAN_SUMS: &str = include_str!("../../shaders/scan_sums.wgsl");
+const SCAN_APPLY: &str = include_str!("../../shaders/scan_apply.wgsl");
+const TILES_COUNT: &str = include_str!("../../shaders/tiles_count.wgsl");
+const TILES_EMIT: &str = include_str!("../../shaders/tiles_emit.wgsl");
+const TILES_RANGES: &str = include_str!("../../shaders/tiles_ranges.wgsl");
+
+/// Elements per workgroup of the radix and scan kernels (`SORT_BLOCK` in WGSL).
+const BLOCK: u32 = 1024;
+/// Invocations per workgroup of the per-element kernels.
+const GROUP: u32 = 256;
+/// Bytes between uniform slots (the largest offset alignment wgpu allows devices to ask).
+const SLOT: u64 = 256;
+/// Uniform slots per frame.
+const SLOTS: u64 = 32;
+/// Most workgroups in one dispatch dimension (wgpu's downlevel limit).
+const MAX_GROUPS: u32 = 65_535;
+
+/// `SortParams` in shaders/common.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct SortParams {
+    count: u32,
+    shift: u32,
+    blocks: u32,
+    bits: u32,
+    tiles: [u32; 4],
+}
+
+struct Pipelines {
+    sort_keys: wgpu::ComputePipeline,
+    histogram: wgpu::ComputePipeline,
+    scatter: wgpu::ComputePipeline,
+    scan_reduce: wgpu::ComputePipeline,
+    scan_sums: wgpu::ComputePipeline,
+    scan_apply: wgpu::ComputePipeline,
+    tiles_count: wgpu::ComputePipeline,
+    tiles_emit: wgpu::ComputePipeline,
+    tiles_ranges: wgpu::ComputePipeline,
+}
+
+/// A pair of key/value buffers the radix passes ping-pong between.
+struct KeyValues {
+    keys: [Growable; 2],
+    values: [Growable; 2],
+}
+
+impl KeyValues {
+    fn new(device: &wgpu::Device, label: &'static str) -> Self {
+        // COPY_SRC so tests can compare the lists with the CPU's.
+        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let g = || Growable::new(device, label, storage);
+        Self {
+            keys: [g(), g()],
+            values: [g(), g()],
+        }
+    }
+
+    fn ensure(&mut self, device: &wgpu::Device, count: u32) {
+        let bytes = u64::from(count.max(1)) * 4;
+        for b in self.keys.iter_mut().chain(self.values.iter_mut()) {
+            b.ensure(device, bytes);
+        }
+    }
+}
+
+/// The GPU sort and binning stage with its reusable buffers.
+pub(super) struct GpuBinning {
+    pipelines: Pipelines,
+    params: wgpu::Buffer,
+    slots: Vec<SortParams>,
+    depth: KeyValues,
+    tiles: KeyValues,
+    /// Per Gaussian in depth order: tile entries, then (scanned) where they start.
+    entries: Growable,
+    histogram: Growable,
+    sums: Growable,
+    total_readback: wgpu::Buffer,
+    /// Per tile: start and end of its run in the sorted entries.
+    pub ranges: Growable,
+    /// Which of `tiles.values` holds the sorted entries after [`GpuBinning::bin`].
+    result: usize,
+}
+
+/// What a pass binds: a parameter slot and storage buffers in binding order.
+struct Dispatch<'a> {
+    pipeline: &'a wgpu::ComputePipeline,
+    slot: u64,
+    buffers: Vec<&'a wgpu::Buffer>,
+    groups: u32,
+}
+
+impl GpuBinning {
+    /// Compiles the kernels.
+    pub fn new(device: &wgpu::Device) -> Self {
+        let make = |name, source, read_only: &[bool]| {
+            compute_pipeline(device, name, source, &uniform_and_storage(read_only))
+        };
+        let pipelines = Pipelines {
+            sort_keys: make("sort_keys", SORT_KEYS, &[true, false, false]),
+            histogram: make("radix_histogram", RADIX_HISTOGRAM, &[true, false]),
+            scatter: make(
+                "radix_scatter",
+                RADIX_SCATTER,
+                &[true, true, true, false, false],
+            ),
+            scan_reduce: make("scan_reduce", SCAN_REDUCE, &[true, false]),
+            scan_sums: make("scan_sums", SCAN_SUMS, &[false]),
+            scan_apply: make("scan_apply", SCAN_APPLY, &[false, true]),
+            tiles_count: make("tiles_count", TILES_COUNT, &[true, true, false]),
+            tiles_emit: make("tiles_emit", TILES_EMIT, &[true, true, true, false, false]),
+            tiles_ranges: make("tiles_ranges", TILES_RANGES, &[true, false]),
+        };
+        let storage = wgpu::BufferUsages::STORAGE;
+        Self {
+            pipelines,
+            params: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("sort params"),
+                size: SLOT * SLOTS,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            slots: Vec::new(),
+            depth: KeyValues::new(device, "depth sort"),
+            tiles: KeyValues::new(device, "tile entries"),
+            entries: Growable::new(device, "tile entry counts", storage),
+            histogram: Growable::new(device, "radix histogram", storage),
+            sums: Growable::new(device, "scan sums", storage | wgpu::BufferUsages::COPY_SRC),
+            total_readback: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("entry total read-back"),
+                size: 4,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            ranges: Growable::new(
+                device,
+                "tile ranges",
+                storage | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            ),
+            result: 0,
+        }
+    }
+
+    /// The tile-sorted Gaussian indices (valid after [`GpuBinning::bin`]).
+    pub fn list(&self) -> &wgpu::Buffer {
+        &self.tiles.values[self.result].buffer
+    }
+
+    fn slot(&mut self, params: SortParams) -> u64 {
+        self.slots.push(params);
+        assert!(self.slots.len() as u64 <= SLOTS, "too many sort dispatches");
+        self.slots.len() as u64 - 1
+    }
+
+    /// Sorts the `count` Gaussians whose keys `project` wrote by depth (top
+    /// `sort_bits` bits) and bins them into the tiles of a `tiles` grid.
+    pub fn bin(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        keys: &wgpu::Buffer,
+        count: u32,
+        tiles: (u32, u32),
+        sort_bits: u8,
+    ) -> Result<()> {
+        let tile_count = tiles.0 * tiles.1;
+        self.ranges.ensure(device, u64::from(tile_count.max(1)) * 8);
+        self.slots.clear();
+        check_groups(count, "Gaussians")?;
+        let tile_grid = [tiles.0, tiles.1, 0, 0];
+        let per_gaussian = self.slot(SortParams {
+            count,
+            shift: 0,
+            blocks: 0,
+            bits: 0,
+            tiles: tile_grid,
+        });
+
+        // Phase 1: depth keys, depth sort, tile entry counts and their starts.
+        self.depth.ensure(device, count);
+        self.entries.ensure(device, u64::from(count.max(1)) * 4);
+        let depth_passes = u32::from(sort_bits.clamp(8, 32)).div_ceil(8);
+        let first_byte = 4 - depth_passes;
+        let depth_sort = self.radix_plan(count, first_byte..4);
+        let entry_scan = self.scan_plan(count);
+        self.ensure_scratch(device, &depth_sort, &entry_scan);
+        self.write_slots(queue);
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            let p = &self.pipelines;
+            let d = &self.depth;
+            self.run(
+                device,
+                &mut pass,
+                Dispatch {
+                    pipeline: &p.sort_keys,
+                    slot: per_gaussian,
+                    buffers: vec![keys, &d.keys[0].buffer, &d.values[0].buffer],
+                    groups: count.div_ceil(GROUP),
+                },
+            );
+            let order = self.encode_radix(device, &mut pass, &depth_sort, &self.depth);
+            let order = &self.depth.values[order].buffer;
+            self.run(
+                device,
+                &mut pass,
+                Dispatch {
+                    pipeline: &p.tiles_count,
+                    slot: per_gaussian,
+                    buffers: vec![keys, order, &self.entries.buffer],
+                    groups: count.div_ceil(GROUP),
+                },
+            );
+            self.encode_scan(device, &mut pass, &entry_scan, &self.entries.buffer);
+        }
+        encoder.copy_buffer_to_buffer(
+            &self.sums.buffer,
+            u64::from(entry_scan.sums) * 4,
+            &self.total_readback,
+            0,
+            4,
+        );
+        queue.submit([encoder.finish()]);
+        let total: Vec<u32> = read_buffer(device, &self.total_readback, 4)?;
+        let entries = total[0];
+
+        // Phase 2: entries in depth order, stable sort by tile, tile runs.
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(&self.ranges.buffer, 0, None);
+        if entries > 0 {
+            check_groups(entries, "tile entries")?;
+            self.tiles.ensure(device, entries);
+            let order = depth_sort.result;
+            let tile_bytes = (32 - (tile_count.max(2) - 1).leading_zeros()).div_ceil(8);
+            let tile_sort = self.radix_plan(entries, 0..tile_bytes);
+            let per_entry = self.slot(SortParams {
+                count: entries,
+                shift: 0,
+                blocks: 0,
+                bits: 0,
+                tiles: tile_grid,
+            });
+            self.ensure_scratch(device, &tile_sort, &tile_sort.scan);
+            self.write_slots(queue);
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                let p = &self.pipelines;
+                let t = &self.tiles;
+                self.run(
+                    device,
+                    &mut pass,
+                    Dispatch {
+                        pipeline: &p.tiles_emit,
+                        slot: per_gaussian,
+                        buffers: vec![
+                            keys,
+                            &self.depth.values[order].buffer,
+                            &self.entries.buffer,
+                            &t.keys[0].buffer,
+                            &t.values[0].buffer,
+                        ],
+                        groups: count.div_ceil(GROUP),
+                    },
+                );
+                let sorted = self.encode_radix(device, &mut pass, &tile_sort, &self.tiles);
+                self.run(
+                    device,
+                    &mut pass,
+                    Dispatch {
+                        pipeline: &p.tiles_ranges,
+                        slot: per_entry,
+                        buffers: vec![&t.keys[sorted].buffer, &self.ranges.buffer],
+                        groups: entries.div_ceil(GROUP),
+                    },
+                );
+            }
+            self.result = tile_sort.result;
+        }
+        queue.submit([encoder.finish()]);
+        Ok(())
+    }
+
+    /// Plans a radix sort of `count` elements over the bytes `bytes` (low to high).
+    fn radix_plan(&mut self, count: u32, bytes: std::ops::Range<u32>) -> RadixPlan {
+        let blocks = count.div_ceil(BLOCK).max(1);
+        let passes: Vec<u64> = bytes
+            .clone()
+            .map(|b| {
+                self.slot(SortParams {
+                    count,
+                    shift: b * 8,
+                    blocks,
+                    bits: 0,
+                    tiles: [0; 4],
+                })
+            })
+            .collect();
+        let scan = self.scan_plan(256 * blocks);
+        RadixPlan {
+            blocks,
+            result: passes.len() % 2,
+            passes,
+            scan,
+        }
+    }
+
+    /// Plans an exclusive prefix sum over `count` elements.
+    fn scan_plan(&mut self, count: u32) -> ScanPlan {
+        let sums = count.div_ceil(BLOCK).max(1);
+        let per_element = self.slot(SortParams {
+            count,
+            shift: 0,
+            blocks: sums,
+            bits: 0,
+            tiles: [0; 4],
+        });
+        let per_sum = self.slot(SortParams {
+            count: sums,
+            shift: 0,
+            blocks: 0,
+            bits: 0,
+            tiles: [0; 4],
+        });
+        ScanPlan {
+            per_element,
+            per_sum,
+            sums,
+        }
+    }
+
+    /// Makes room for a radix sort's histogram and for the block sums of its
+    /// scan and of `other`.
+    fn ensure_scratch(&mut self, device: &wgpu::Device, sort: &RadixPlan, other: &ScanPlan) {
+        self.histogram
+            .ensure(device, 256 * u64::from(sort.blocks) * 4);
+        let sums = sort.scan.sums.max(other.sums);
+        self.sums.ensure(device, (u64::from(sums) + 1) * 4);
+    }
+
+    fn write_slots(&self, queue: &wgpu::Queue) {
+        let mut bytes = vec![0u8; (SLOT as usize) * self.slots.len()];
+        for (k, s) in self.slots.iter().enumerate() {
+            let at = k * SLOT as usize;
+            bytes[at..at + std::mem::size_of::<SortParams>()]
+                .copy_from_slice(bytemuck::bytes_of(s));
+        }
+        queue.write_buffer(&self.params, 0, &bytes);
+    }
+
+    /// Encodes a radix sort of `kv` (input in buffers 0); returns the buffer
+    /// index holding the result.
+    fn encode_radix(
+        &self,
+        device: &wgpu::Device,
+        pass: &mut wgpu::ComputePass<'_>,
+        plan: &RadixPlan,
+        kv: &KeyValues,
+    ) -> usize {
+        let p = &self.pipelines;
+        let mut from = 0;
+        for &slot in &plan.passes {
+            self.run(
+                device,
+                pass,
+                Dispatch {
+                    pipeline: &p.histogram,
+                    slot,
+                    buffers: vec![&kv.keys[from].buffer, &self.histogram.buffer],
+                    groups: plan.blocks,
+                },
+            );
+            self.encode_scan(device, pass, &plan.scan, &self.histogram.buffer);
+            self.run(
+                device,
+                pass,
+                Dispatch {
+                    pipeline: &p.scatter,
+                    slot,
+                    buffers: vec![
+                        &kv.keys[from].buffer,
+                        &kv.values[from].buffer,
+                        &self.histogram.buffer,
+                        &kv.keys[1 - from].buffer,
+                        &kv.values[1 - from].buffer,
+                    ],
+                    groups: plan.blocks,
+                },
+            );
+            from = 1 - from;
+        }
+        from
+    }
+
+    /// Encodes an in-place exclusive prefix sum of `data`.
+    fn encode_scan(
+        &self,
+        device: &wgpu::Device,
+        pass: &mut wgpu::ComputePass<'_>,
+        plan: &ScanPlan,
+        data: &wgpu::Buffer,
+    ) {
+        let p = &self.pipelines;
+        let sums = &self.sums.buffer;
+        for (pipeline, slot, buffers, groups) in [
+            (
+                &p.scan_reduce,
+                plan.per_element,
+                vec![data, sums],
+                plan.sums,
+            ),
+            (&p.scan_sums, plan.per_sum, vec![sums], 1),
+            (&p.scan_apply, plan.per_element, vec![data, sums], plan.sums),
+        ] {
+            self.run(
+                device,
+                pass,
+                Dispatch {
+                    pipeline,
+                    slot,
+                    buffers,
+                    groups,
+                },
+            );
+        }
+    }
+
+    fn run(&self, device: &wgpu::Device, pass: &mut wgpu::ComputePass<'_>, d: Dispatch) {
+        let mut entries = vec![wgpu::BindGroupEntry {
+            binding: 0,
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: &self.params,
+                offset: d.slot * SLOT,
+                size: wgpu::BufferSize::new(std::mem::size_of::<SortParams>() as u64),
+            }),
+        }];
+        entries.extend(
+            d.buffers
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry {
+                    binding: i as u32 + 1,
+                    resource: b.as_entire_binding(),
+                }),
+        );
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &d.pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        pass.set_pipeline(d.pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups(d.groups.max(1), 1, 1);
+    }
+}
+
+struct ScanPlan {
+    per_element: u64,
+    per_sum: u64,
+    sums: u32,
+}
+
+struct RadixPlan {
+    blocks: u32,
+    passes: Vec<u64>,
+    scan: ScanPlan,
+    /// Buffer index of the result (passes alternate 0 → 1 → 0 …).
+    result: usize,
+}
+
+fn check_groups(count: u32, what: &str) -> Result<()> {
+    if count.div_ceil(GROUP) > MAX_GROUPS {
+        return Err(Error::input(format!(
+            "{count} {what} are more than the GPU renderer handles in one frame ({})",
+            MAX_GROUPS * GROUP
+        )));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::{Rng, SeedableRng};
+    use wgpu::util::DeviceExt;
+
+    use super::*;
+    use crate::render::gpu::GpuRenderer;
+    use crate::render::tiles::{pack_tile, TileBins, TileKey};
+
+    fn read_back(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        buffer: &wgpu::Buffer,
+        words: usize,
+    ) -> Vec<u32> {
+        let bytes = (words.max(1) * 4) as u64;
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes);
+        queue.submit([encoder.finish()]);
+        read_buffer(device, &staging, bytes).unwrap()
+    }
+
+    /// Random keys: depths with many exact ties, some culled, rectangles that
+    /// may run past the grid (the binning clamps them).
+    fn keys(n: usize, tiles: (u32, u32), seed: u64) -> Vec<TileKey> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        (0..n)
+            .map(|_| {
+                if rng.random_bool(0.1) {
+                    return [0; 4];
+                }
+                let depth = 0.5 + (rng.random_range(0..400) as f32) * 0.037;
+                let x0 = rng.random_range(0..tiles.0);
+                let y0 = rng.random_range(0..tiles.1);
+                let x1 = x0 + rng.random_range(0..4);
+                let y1 = y0 + rng.random_range(0..3);
+                [depth.to_bits(), pack_tile(x0, y0), pack_tile(x1, y1), 1]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn gpu_binning_builds_the_same_lists_as_the_cpu() {
+        let renderer = GpuRenderer::new().expect("a wgpu adapter (lavapipe in CI)");
+        let (device, queue) = renderer.device_and_queue();
+        let mut binning = GpuBinning::new(device);
+        // Sizes across block boundaries; grids needing one and two tile passes;
+        // full, 16-bit and 8-bit depth keys; nothing visible; nothing at all.
+        let cases: [(usize, (u32, u32), u8); 7] = [
+            (5_000, (40, 30), 32),
+            (1_024, (3, 2), 32),
+            (3_333, (80, 45), 16),
+            (2_500, (17, 9), 8),
+            (70_001, (80, 45), 32),
+            (1, (4, 4), 32),
+            (0, (4, 4), 32),
+        ];
+        for (k, &(n, tiles, bits)) in cases.iter().enumerate() {
+            let mut keys = keys(n, tiles, k as u64);
+            if n == 1 {
+                keys[0] = [0; 4];
+            }
+            let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: None,
+                contents: bytemuck::cast_slice(if keys.is_empty() { &[[0u32; 4]] } else { &keys }),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+            binning
+                .bin(device, queue, &buffer, n as u32, tiles, bits)
+                .unwrap();
+            let mut cpu = TileBins::default();
+            cpu.bin(&keys, tiles, bits);
+            let tile_count = (tiles.0 * tiles.1) as usize;
+            let ranges = read_back(device, queue, &binning.ranges.buffer, 2 * tile_count);
+            let list = read_back(device, queue, binning.list(), cpu.list.len());
+            for t in 0..tile_count {
+                let (a, b) = (ranges[2 * t] as usize, ranges[2 * t + 1] as usize);
+                let gpu_tile = if a < b { &list[a..b] } else { &[][..] };
+                assert_eq!(gpu_tile, cpu.tile(t), "case {k}: tile {t} differs");
+            }
+        }
+    }
+}
