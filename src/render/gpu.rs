@@ -23,11 +23,14 @@ use crate::error::{Error, Result};
 
 /// Tile edge in pixels (must match `TILE` in shaders/common.wgsl).
 pub const TILE: u32 = 16;
+/// Most workgroups in one dispatch dimension (wgpu's downlevel limit).
+pub(super) const MAX_GROUPS: u32 = 65_535;
 
 const COMMON: &str = include_str!("../../shaders/common.wgsl");
 const BIND: &str = include_str!("../../shaders/bind.wgsl");
 const PROJECT: &str = include_str!("../../shaders/project.wgsl");
 const RASTERIZE: &str = include_str!("../../shaders/rasterize.wgsl");
+const PACK_RGB: &str = include_str!("../../shaders/pack_rgb.wgsl");
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -124,14 +127,19 @@ pub struct GpuRenderer {
     bind_pipeline: wgpu::ComputePipeline,
     project_pipeline: wgpu::ComputePipeline,
     raster_pipeline: wgpu::ComputePipeline,
+    pack_pipeline: wgpu::ComputePipeline,
     camera: wgpu::Buffer,
     scene: Option<SceneBuffers>,
     frames: Growable,
     binning: GpuBinning,
     image: Growable,
+    packed: Growable,
     image_readback: Growable,
     /// Timings of the last frame.
     pub timings: StageTimings,
+    /// Wait for the device after every stage so `timings` attribute GPU time to
+    /// the right stage (costs a round trip per stage; off for normal frames).
+    pub profile_stages: bool,
 }
 
 fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
@@ -273,6 +281,12 @@ impl GpuRenderer {
             RASTERIZE,
             &uniform_and_storage(&[true, true, true, false]),
         );
+        let pack_pipeline = compute_pipeline(
+            &device,
+            "pack_rgb",
+            PACK_RGB,
+            &uniform_and_storage(&[true, false]),
+        );
         let binning = GpuBinning::new(&device);
         let camera = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("camera"),
@@ -282,9 +296,10 @@ impl GpuRenderer {
         });
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let frames = Growable::new(&device, "frames", storage);
-        let image = Growable::new(
+        let image = Growable::new(&device, "image", wgpu::BufferUsages::STORAGE);
+        let packed = Growable::new(
             &device,
-            "image",
+            "packed image",
             wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         );
         let image_readback = Growable::new(
@@ -300,13 +315,16 @@ impl GpuRenderer {
             bind_pipeline,
             project_pipeline,
             raster_pipeline,
+            pack_pipeline,
             camera,
             scene: None,
             frames,
             binning,
             image,
+            packed,
             image_readback,
             timings: StageTimings::default(),
+            profile_stages: false,
         }))
     }
 
@@ -483,7 +501,9 @@ impl GpuRenderer {
             pass.dispatch_workgroups(groups, 1, 1);
         }
         self.queue.submit([encoder.finish()]);
-        wait(&self.device)?;
+        if self.profile_stages {
+            wait(&self.device)?;
+        }
         timings.project = ms(t);
 
         // Depth sort and tile binning on the GPU.
@@ -496,14 +516,19 @@ impl GpuRenderer {
             tiles,
             settings.sort_bits,
         )?;
-        wait(&self.device)?;
+        if self.profile_stages {
+            wait(&self.device)?;
+        }
         timings.sort = ms(t);
 
         // Rasterise.
         let t = Instant::now();
         let image_bytes = width as u64 * height as u64 * 4;
+        let rgb_bytes = width as u64 * height as u64 * 3;
+        let packed_bytes = rgb_bytes.next_multiple_of(4);
         self.image.ensure(&self.device, image_bytes);
-        self.image_readback.ensure(&self.device, image_bytes);
+        self.packed.ensure(&self.device, packed_bytes);
+        self.image_readback.ensure(&self.device, packed_bytes);
         let raster_group = self.bind_group(
             &self.raster_pipeline,
             &[
@@ -514,31 +539,42 @@ impl GpuRenderer {
                 &self.image.buffer,
             ],
         );
+        let pack_group = self.bind_group(
+            &self.pack_pipeline,
+            &[&self.camera, &self.image.buffer, &self.packed.buffer],
+        );
+        let pack_groups = (packed_bytes / 4).div_ceil(256) as u32;
         let mut encoder = self.device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&self.raster_pipeline);
             pass.set_bind_group(0, &raster_group, &[]);
             pass.dispatch_workgroups(tiles.0, tiles.1, 1);
+            pass.set_pipeline(&self.pack_pipeline);
+            pass.set_bind_group(0, &pack_group, &[]);
+            let columns = pack_groups.min(MAX_GROUPS);
+            pass.dispatch_workgroups(columns, pack_groups.div_ceil(columns), 1);
         }
         encoder.copy_buffer_to_buffer(
-            &self.image.buffer,
+            &self.packed.buffer,
             0,
             &self.image_readback.buffer,
             0,
-            image_bytes,
+            packed_bytes,
         );
         self.queue.submit([encoder.finish()]);
         wait(&self.device)?;
         timings.rasterize = ms(t);
 
-        // Read back.
+        // Read back: the packed RGB bytes are the image.
         let t = Instant::now();
-        let rgba: Vec<u32> = read_buffer(&self.device, &self.image_readback.buffer, image_bytes)?;
-        let mut pixels = Vec::with_capacity((width * height * 3) as usize);
-        for p in rgba {
-            pixels.extend_from_slice(&[p as u8, (p >> 8) as u8, (p >> 16) as u8]);
-        }
+        let mut pixels = vec![0u8; rgb_bytes as usize];
+        map_and_read(
+            &self.device,
+            &self.image_readback.buffer,
+            packed_bytes,
+            |rgb| pixels.copy_from_slice(&rgb[..rgb_bytes as usize]),
+        )?;
         timings.readback = ms(t);
         self.timings = timings;
         Ok(RgbImage {
@@ -626,6 +662,20 @@ pub(super) fn read_buffer<T: Pod>(
     buffer: &wgpu::Buffer,
     bytes: u64,
 ) -> Result<Vec<T>> {
+    let mut out = Vec::new();
+    map_and_read(device, buffer, bytes, |b| {
+        out = bytemuck::cast_slice::<u8, T>(b).to_vec()
+    })?;
+    Ok(out)
+}
+
+/// Maps the first `bytes` of a read-back buffer, hands them to `read`, and unmaps it.
+fn map_and_read(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    bytes: u64,
+    read: impl FnOnce(&[u8]),
+) -> Result<()> {
     let slice = buffer.slice(..bytes);
     let (tx, rx) = std::sync::mpsc::channel();
     slice.map_async(wgpu::MapMode::Read, move |r| {
@@ -637,12 +687,12 @@ pub(super) fn read_buffer<T: Pod>(
     rx.recv()
         .map_err(|_| Error::input("the graphics device dropped a read-back"))?
         .map_err(|e| Error::input(format!("cannot read back from the graphics device: {e}")))?;
-    let data = {
+    {
         let view = slice
             .get_mapped_range()
             .map_err(|e| Error::input(format!("cannot read back from the graphics device: {e}")))?;
-        bytemuck::cast_slice::<u8, T>(&view).to_vec()
-    };
+        read(&view);
+    }
     buffer.unmap();
-    Ok(data)
+    Ok(())
 }

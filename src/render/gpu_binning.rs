@@ -13,7 +13,7 @@
 //! Every kernel is its own dispatch (no workgroup waits for another), so it runs
 //! on any driver, lavapipe included.
 
-use super::gpu::{compute_pipeline, read_buffer, uniform_and_storage, Growable};
+use super::gpu::{compute_pipeline, read_buffer, uniform_and_storage, Growable, MAX_GROUPS};
 use crate::error::{Error, Result};
 
 const SORT_KEYS: &str = include_str!("../../shaders/sort_keys.wgsl");
@@ -34,8 +34,6 @@ const GROUP: u32 = 256;
 const SLOT: u64 = 256;
 /// Uniform slots per frame.
 const SLOTS: u64 = 32;
-/// Most workgroups in one dispatch dimension (wgpu's downlevel limit).
-const MAX_GROUPS: u32 = 65_535;
 
 /// `SortParams` in shaders/common.wgsl.
 #[repr(C)]

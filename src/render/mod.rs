@@ -99,6 +99,14 @@ impl SplatRenderer {
         self.render(&[scene::IDENTITY_FRAME], camera, settings)
     }
 
+    /// Makes the GPU renderer wait after each stage so its stage timings are
+    /// exact (slower frames; the CPU renderer's stages are always exact).
+    pub fn set_stage_profiling(&mut self, on: bool) {
+        if let SplatRenderer::Gpu(g) = self {
+            g.profile_stages = on;
+        }
+    }
+
     /// Stage timings of the last frame.
     pub fn timings(&self) -> gpu::StageTimings {
         match self {
