@@ -172,4 +172,12 @@ fn bench_engine_json_rows_carry_speed_and_error() {
         .find(|r| r["action"] == "animate" && r["mode"] == "exact")
         .unwrap();
     assert!(exact["max_residual"].as_f64().unwrap() <= 1e-10);
+    // The solve row times a real blend (all sources mixed), not the one-hot short
+    // cut, whose residual would be exactly 0.
+    let solve = rows.iter().find(|r| r["action"] == "solve").unwrap();
+    let residual = solve["max_residual"].as_f64().unwrap();
+    assert!(
+        residual > 0.0 && residual <= 1e-10,
+        "solve residual {residual}"
+    );
 }

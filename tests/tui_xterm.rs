@@ -1,7 +1,8 @@
 //! The editor in a real sixel terminal: xterm emulating a VT340 under Xvfb runs
 //! the binary; `xwd` takes a screenshot of the window; the viewport found in the
-//! screenshot must match the frame visage renders for the same view. Needs
-//! Xvfb, xterm, xwd and X fonts (installed by .ci/setup).
+//! screenshot must match the frame visage renders for the same view; when the
+//! terminal is killed the editor must exit (not spin on a dead tty). Needs Xvfb,
+//! xterm, xwd and X fonts (installed by .ci/setup).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -152,6 +153,22 @@ fn crop(image: &RgbImage, (x0, y0, w, h): (u32, u32, u32, u32)) -> RgbImage {
     out
 }
 
+/// Whether a process whose command line contains `marker` is alive.
+fn editor_running(marker: &str) -> bool {
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return false;
+    };
+    entries.flatten().any(|e| {
+        let alive = std::fs::read_to_string(e.path().join("stat"))
+            .map(|s| !s.contains(") Z "))
+            .unwrap_or(false);
+        alive
+            && std::fs::read(e.path().join("cmdline"))
+                .map(|c| String::from_utf8_lossy(&c).contains(marker))
+                .unwrap_or(false)
+    })
+}
+
 fn rendered(size: (u32, u32), dir: &Path) -> RgbImage {
     let path = dir.join(format!("expected-{}x{}.png", size.0, size.1));
     let out = Command::new(env!("CARGO_BIN_EXE_visage"))
@@ -179,6 +196,9 @@ fn xterm_vt340_shows_the_rendered_view_as_sixel() {
     std::fs::create_dir_all(&dir).unwrap();
     let config = dir.join("config");
     std::fs::create_dir_all(&config).unwrap();
+    // The journal's path marks the editor's process (its command line holds it).
+    let journal = dir.join(format!("journal-{}.vsg", std::process::id()));
+    let _ = std::fs::remove_file(&journal);
     let mut procs = Processes(Vec::new());
     let display = start_xvfb(&mut procs);
     let xterm = Command::new("xterm")
@@ -191,7 +211,8 @@ fn xterm_vt340_shows_the_rendered_view_as_sixel() {
         ])
         .arg("-e")
         .arg(env!("CARGO_BIN_EXE_visage"))
-        .args(["--graphics", "sixel", "--renderer", "cpu"])
+        .args(["--graphics", "sixel", "--renderer", "cpu", "--record"])
+        .arg(&journal)
         .args(DB)
         .env("XDG_CONFIG_HOME", &config)
         .env("NODEVICE_SELECT", "1")
@@ -225,6 +246,24 @@ fn xterm_vt340_shows_the_rendered_view_as_sixel() {
         if db >= 30.0 {
             eprintln!("xterm showed the view: {last}");
             shown.save_png(&dir.join("viewport.png")).unwrap();
+            let marker = journal.display().to_string();
+            assert!(
+                editor_running(&marker),
+                "the editor's process was not found"
+            );
+            // Kill the terminal: the tty hangs up and the editor must end.
+            let mut xterm = procs.0.pop().unwrap();
+            xterm.kill().unwrap();
+            xterm.wait().unwrap();
+            let killed = Instant::now();
+            while editor_running(&marker) {
+                assert!(
+                    killed.elapsed() < Duration::from_secs(10),
+                    "the editor kept running after its terminal was killed"
+                );
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            assert!(journal.is_file(), "the session journal was not written");
             return;
         }
     }

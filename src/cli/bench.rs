@@ -240,8 +240,9 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
             }));
         }
     }
-    // The factorisation and a bare solve, with its residual.
-    let solve_recipe = engine
+    // The factorisation and a bare solve, with its residual: every group blends
+    // all sources equally (a one-hot recipe would take the exact-source short cut).
+    let mut solve_recipe = engine
         .compose(&recipe(
             total,
             PostProcess::default(),
@@ -249,6 +250,9 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
             motion,
         ))
         .recipe;
+    for row in solve_recipe.shape.iter_mut() {
+        row.iter_mut().for_each(|w| *w = 1.0 / total as f64);
+    }
     let mut ms = Vec::new();
     let mut residual = 0.0f64;
     for it in 0..iterations {

@@ -77,14 +77,15 @@ struct Case {
     scale: f32,
 }
 
-/// Times `frames` animated renders; returns the per-frame totals and stage medians.
+/// Times `frames` animated renders; returns the per-frame totals and, with
+/// `stages`, the stage medians of a second, profiled pass.
 fn time_frames(
     gpu: &mut SplatRenderer,
     built: &Built,
     camera: &Camera,
     case: &Case,
-    warmup: usize,
-    iterations: usize,
+    (warmup, iterations): (usize, usize),
+    stages_too: bool,
 ) -> Result<(Vec<f64>, StageTimings)> {
     let mut posed = PosedMesh::default();
     let mut totals = Vec::new();
@@ -93,6 +94,9 @@ fn time_frames(
     // Frame times as the editor sees them; then the same frames again with the
     // GPU waiting after each stage, for the stage breakdown.
     for profiled in [false, true] {
+        if profiled && !stages_too {
+            break;
+        }
         gpu.set_stage_profiling(profiled);
         for it in 0..warmup + iterations {
             built.engine.pose(&built.composite, it, &mut posed);
@@ -113,6 +117,9 @@ fn time_frames(
         }
     }
     gpu.set_stage_profiling(false);
+    if stages.is_empty() {
+        return Ok((totals, StageTimings::default()));
+    }
     let median = |f: fn(&StageTimings) -> f64| summarize(stages.iter().map(f).collect()).0;
     let stage = StageTimings {
         upload: median(|s| s.upload),
@@ -191,8 +198,8 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
                 &built,
                 camera,
                 &exact,
-                args.warmup,
-                args.iterations,
+                (args.warmup, args.iterations),
+                true,
             )?;
             let (median, p90) = summarize(totals);
             rows.push(json!({
@@ -212,8 +219,8 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
                     &built,
                     &camera,
                     &case,
-                    args.warmup,
-                    args.iterations,
+                    (args.warmup, args.iterations),
+                    false,
                 )?;
                 let (median, p90) = summarize(totals);
                 knobs.push(json!({

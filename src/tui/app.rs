@@ -6,7 +6,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
@@ -313,6 +313,40 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
     result
 }
 
+/// Reads terminal events on their own thread. crossterm's `poll` can spin
+/// without returning once the terminal hangs up; on this thread that costs
+/// nothing, since the editor loop notices the hang-up and the process exits.
+fn spawn_input_reader() -> Receiver<Event> {
+    let (tx, rx) = channel();
+    std::thread::spawn(move || loop {
+        match event::poll(Duration::from_millis(50)) {
+            Ok(true) => match event::read() {
+                Ok(e) => {
+                    if tx.send(e).is_err() {
+                        return;
+                    }
+                }
+                Err(_) => return,
+            },
+            Ok(false) => {}
+            Err(_) => return,
+        }
+    });
+    rx
+}
+
+/// True when standard input's terminal has hung up or is gone.
+fn terminal_hung_up() -> bool {
+    let mut fd = libc::pollfd {
+        fd: libc::STDIN_FILENO,
+        events: 0,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd, zero timeout; poll only writes `revents`.
+    let n = unsafe { libc::poll(&mut fd, 1, 0) };
+    n > 0 && fd.revents & (libc::POLLHUP | libc::POLLERR | libc::POLLNVAL) != 0
+}
+
 struct App {
     state: EditorState,
     catalog: Catalog,
@@ -348,23 +382,25 @@ impl App {
         let tick_len = Duration::from_millis(1000 / super::session::TICKS_PER_SECOND);
         let mut next_tick = Instant::now() + tick_len;
         let mut viewport = None;
+        let input = spawn_input_reader();
         while !self.state.quit {
-            if stop.load(Ordering::Relaxed) {
+            // A closed terminal (SSH dropped, emulator killed) ends the editor even
+            // if SIGHUP never arrives; the journal already holds every command.
+            if stop.load(Ordering::Relaxed) || terminal_hung_up() {
                 break;
             }
             let timeout = next_tick
                 .saturating_duration_since(Instant::now())
                 .min(Duration::from_millis(10));
-            if event::poll(timeout).unwrap_or(false) {
-                match event::read() {
-                    Ok(Event::Key(k)) if k.kind != KeyEventKind::Release => self.on_key(k),
-                    Ok(Event::Resize(..)) => {
-                        self.version += 1;
-                        self.image_dirty = true;
-                        let _ = term.clear();
-                    }
-                    _ => {}
+            match input.recv_timeout(timeout) {
+                Ok(Event::Key(k)) if k.kind != KeyEventKind::Release => self.on_key(k),
+                Ok(Event::Resize(..)) => {
+                    self.version += 1;
+                    self.image_dirty = true;
+                    let _ = term.clear();
                 }
+                Ok(_) | Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
             }
             while Instant::now() >= next_tick {
                 next_tick += tick_len;
