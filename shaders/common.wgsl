@@ -69,3 +69,14 @@ struct SortParams {
 // Elements per workgroup of the radix and scan kernels (256 invocations x 4).
 const SORT_BLOCK: u32 = 1024u;
 const SORT_ITEMS: u32 = 4u;
+
+// The tile rectangle (x0, y0, x1, y1) of a projection key, clamped to the grid;
+// the CPU's TileBins clamps the same way.
+fn key_tiles(k: vec4<u32>, grid: vec4<u32>) -> vec4<u32> {
+    return vec4<u32>(
+        k.y & 0xffffu,
+        k.y >> 16u,
+        min(k.z & 0xffffu, grid.x - 1u),
+        min(k.z >> 16u, grid.y - 1u),
+    );
+}

@@ -15,11 +15,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let k = keys[order[s]];
     var n = 0u;
     if (k.w != 0u) {
-        let x0 = k.y & 0xffffu;
-        let y0 = k.y >> 16u;
-        let x1 = min(k.z & 0xffffu, params.tiles.x - 1u);
-        let y1 = min(k.z >> 16u, params.tiles.y - 1u);
-        n = (x1 - x0 + 1u) * (y1 - y0 + 1u);
+        let r = key_tiles(k, params.tiles);
+        n = (r.z - r.x + 1u) * (r.w - r.y + 1u);
     }
     entries[s] = n;
 }

@@ -19,13 +19,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if (k.w == 0u) {
         return;
     }
-    let x0 = k.y & 0xffffu;
-    let y0 = k.y >> 16u;
-    let x1 = min(k.z & 0xffffu, params.tiles.x - 1u);
-    let y1 = min(k.z >> 16u, params.tiles.y - 1u);
+    let r = key_tiles(k, params.tiles);
     var at = starts[s];
-    for (var ty = y0; ty <= y1; ty++) {
-        for (var tx = x0; tx <= x1; tx++) {
+    for (var ty = r.y; ty <= r.w; ty++) {
+        for (var tx = r.x; tx <= r.z; tx++) {
             tile_keys[at] = ty * params.tiles.x + tx;
             tile_values[at] = i;
             at++;
