@@ -62,7 +62,7 @@ struct SortParams {
     count: u32,   // elements in this dispatch
     shift: u32,   // radix pass: bit offset of the digit
     blocks: u32,  // radix pass: workgroup blocks of SORT_BLOCK elements
-    bits: u32,    // depth key: how many top bits of the depth sort on
+    pad: u32,     // unused: aligns `tiles`
     tiles: vec4<u32>,  // tiles x, tiles y, unused x2
 }
 

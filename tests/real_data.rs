@@ -39,6 +39,17 @@ fn run(args: &[String]) -> std::process::Output {
     visage(&refs)
 }
 
+/// Runs visage with the fixtures database appended; the command must succeed.
+fn succeed_on_fixtures(mut args: Vec<String>, f: &FixturePaths) {
+    args.extend(db_args(f));
+    let out = run(&args);
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 fn ok_json(args: Vec<String>) -> serde_json::Value {
     let out = run(&args);
     assert!(
@@ -133,7 +144,7 @@ fn compose_render_and_export_real_avatars() {
     assert_eq!(report["frame"]["finite"], true);
     // Render a still and a two-frame sequence.
     let png = temp("still.png");
-    let mut args = vec![
+    let args = vec![
         "render".into(),
         "--recipe".into(),
         r.clone(),
@@ -144,20 +155,14 @@ fn compose_render_and_export_real_avatars() {
         "-o".into(),
         png.display().to_string(),
     ];
-    args.extend(db_args(f));
-    let out = run(&args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeed_on_fixtures(args, f);
     let img = visage::render::image::RgbImage::load_png(&png).unwrap();
     assert!(
         img.pixels.iter().filter(|&&p| p > 20).count() > 500,
         "something is drawn"
     );
     let seq = temp("seq-{frame}.png");
-    let mut args = vec![
+    let args = vec![
         "render".into(),
         "--recipe".into(),
         r.clone(),
@@ -170,13 +175,7 @@ fn compose_render_and_export_real_avatars() {
         "-o".into(),
         seq.display().to_string(),
     ];
-    args.extend(db_args(f));
-    let out = run(&args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeed_on_fixtures(args, f);
     for k in [3, 4] {
         let p = seq
             .display()
@@ -187,7 +186,7 @@ fn compose_render_and_export_real_avatars() {
     // Export as a GaussianAvatars folder, load it back: the same composite.
     let exported_root = temp("exported");
     let exported = exported_root.join("composite");
-    let mut args = vec![
+    let args = vec![
         "export".into(),
         "--recipe".into(),
         r.clone(),
@@ -196,13 +195,7 @@ fn compose_render_and_export_real_avatars() {
         "-o".into(),
         exported.display().to_string(),
     ];
-    args.extend(db_args(f));
-    let out = run(&args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeed_on_fixtures(args, f);
     let back = temp("back.toml");
     std::fs::write(&back, "base = \"composite\"\n[post]\nsmoothing = \"off\"\n[animation]\nmotion = \"composite\"\nframe = 20\n").unwrap();
     let mut args = vec![

@@ -9,7 +9,7 @@ use glam::{DVec3, Quat, Vec3};
 
 use super::npy::{read_npz, write_npy, write_npz, NpyData};
 use super::pickle::NdArray;
-use super::ply::{read_element, Columns};
+use super::ply::{encode_inria_ply, read_element, Columns, InriaRecord};
 use crate::avatar::database::SourceAvatar;
 use crate::avatar::gaussians::{sh_coefficients, sh_degree_for, GaussianSet};
 use crate::model::head::{HeadModel, Pose, JOINT_COUNT};
@@ -104,60 +104,20 @@ pub fn parse_bound_ply(bytes: &[u8], triangles: usize) -> Result<GaussianSet, St
 
 /// Writes triangle-bound Gaussians as a GaussianAvatars `point_cloud.ply`.
 pub fn write_bound_ply(path: &Path, set: &GaussianSet) -> Result<(), String> {
-    let coefficients = sh_coefficients(set.sh_degree);
-    let rest = 3 * (coefficients - 1);
-    let mut header = String::from(
-        "ply\nformat binary_little_endian 1.0\ncomment GaussianAvatars layout, written by visage\n",
+    let out = encode_inria_ply(
+        "GaussianAvatars layout, written by visage",
+        set.len(),
+        set.sh_degree,
+        Some("binding_0"),
+        |i| InriaRecord {
+            position: set.position[i],
+            sh: set.sh_of(i),
+            opacity_logit: set.opacity_logit[i],
+            log_scale: set.log_scale[i],
+            rotation: set.rotation[i],
+            extra: Some(set.binding[i] as f32),
+        },
     );
-    header += &format!("element vertex {}\n", set.len());
-    let mut names: Vec<String> = [
-        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
-    names.extend((0..rest).map(|k| format!("f_rest_{k}")));
-    names.extend(
-        [
-            "opacity",
-            "scale_0",
-            "scale_1",
-            "scale_2",
-            "rot_0",
-            "rot_1",
-            "rot_2",
-            "rot_3",
-            "binding_0",
-        ]
-        .iter()
-        .map(|s| s.to_string()),
-    );
-    for n in &names {
-        header += &format!("property float {n}\n");
-    }
-    header += "end_header\n";
-    let mut out = Vec::with_capacity(header.len() + set.len() * names.len() * 4);
-    out.extend_from_slice(header.as_bytes());
-    let mut put = |v: f32| out.extend_from_slice(&v.to_le_bytes());
-    for i in 0..set.len() {
-        let p = set.position[i];
-        [p.x, p.y, p.z, 0.0, 0.0, 0.0]
-            .into_iter()
-            .for_each(&mut put);
-        let sh = set.sh_of(i);
-        (0..3).for_each(|ch| put(sh[ch]));
-        for ch in 0..3 {
-            for k in 1..coefficients {
-                put(sh[k * 3 + ch]);
-            }
-        }
-        put(set.opacity_logit[i]);
-        let s = set.log_scale[i];
-        [s.x, s.y, s.z].into_iter().for_each(&mut put);
-        let q = set.rotation[i];
-        [q.w, q.x, q.y, q.z].into_iter().for_each(&mut put);
-        put(set.binding[i] as f32);
-    }
     std::fs::write(path, out).map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 

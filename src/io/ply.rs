@@ -423,50 +423,98 @@ pub fn parse_splat_ply(bytes: &[u8]) -> Result<SplatScene, String> {
     Ok(scene)
 }
 
-/// Writes a scene as a standard 3DGS PLY (binary little endian), readable by any
-/// splat viewer.
-pub fn write_splat_ply(path: &Path, scene: &SplatScene) -> Result<(), String> {
-    let coefficients = sh_coefficients(scene.sh_degree);
+/// One Gaussian in the units of the INRIA layout.
+pub struct InriaRecord<'a> {
+    /// Centre.
+    pub position: Vec3,
+    /// SH coefficients, coefficient-major (`3 × coefficients`).
+    pub sh: &'a [f32],
+    /// Opacity before the sigmoid.
+    pub opacity_logit: f32,
+    /// Natural log of the scales.
+    pub log_scale: Vec3,
+    /// Rotation, written w x y z.
+    pub rotation: Quat,
+    /// The value of the extra property, when the file has one.
+    pub extra: Option<f32>,
+}
+
+/// Encodes `count` Gaussians as a binary little-endian PLY in the INRIA layout
+/// (f_rest channel-major), with `extra` appended as one more float property
+/// (GaussianAvatars' `binding_0`).
+pub fn encode_inria_ply<'a>(
+    comment: &str,
+    count: usize,
+    sh_degree: u8,
+    extra: Option<&str>,
+    record: impl Fn(usize) -> InriaRecord<'a>,
+) -> Vec<u8> {
+    let coefficients = sh_coefficients(sh_degree);
     let rest = 3 * (coefficients - 1);
-    let mut header =
-        String::from("ply\nformat binary_little_endian 1.0\ncomment written by visage\n");
-    header += &format!("element vertex {}\n", scene.len());
-    for name in [
+    let mut names: Vec<String> = [
         "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
-    ] {
-        header += &format!("property float {name}\n");
-    }
-    for k in 0..rest {
-        header += &format!("property float f_rest_{k}\n");
-    }
-    for name in [
-        "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
-    ] {
-        header += &format!("property float {name}\n");
+    ]
+    .map(String::from)
+    .to_vec();
+    names.extend((0..rest).map(|k| format!("f_rest_{k}")));
+    names.extend(
+        [
+            "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+        ]
+        .map(String::from),
+    );
+    names.extend(extra.map(String::from));
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {count}\n"
+    );
+    for n in &names {
+        header += &format!("property float {n}\n");
     }
     header += "end_header\n";
-    let floats = 17 + rest;
-    let mut out = Vec::with_capacity(header.len() + scene.len() * floats * 4);
+    let mut out = Vec::with_capacity(header.len() + count * names.len() * 4);
     out.extend_from_slice(header.as_bytes());
     let mut put = |v: f32| out.extend_from_slice(&v.to_le_bytes());
-    for i in 0..scene.len() {
-        let p = scene.position[i];
+    for i in 0..count {
+        let r = record(i);
+        let p = r.position;
         [p.x, p.y, p.z, 0.0, 0.0, 0.0]
             .into_iter()
             .for_each(&mut put);
-        let sh = scene.sh_of(i);
-        (0..3).for_each(|ch| put(sh[ch]));
+        (0..3).for_each(|ch| put(r.sh[ch]));
         for ch in 0..3 {
             for k in 1..coefficients {
-                put(sh[k * 3 + ch]);
+                put(r.sh[k * 3 + ch]);
             }
         }
-        put(logit(scene.opacity[i]));
-        let s = scene.scale[i].max(Vec3::splat(1e-30)).ln();
+        put(r.opacity_logit);
+        let s = r.log_scale;
         [s.x, s.y, s.z].into_iter().for_each(&mut put);
-        let q = scene.rotation[i];
+        let q = r.rotation;
         [q.w, q.x, q.y, q.z].into_iter().for_each(&mut put);
+        if let Some(v) = r.extra {
+            put(v);
+        }
     }
+    out
+}
+
+/// Writes a scene as a standard 3DGS PLY (binary little endian), readable by any
+/// splat viewer.
+pub fn write_splat_ply(path: &Path, scene: &SplatScene) -> Result<(), String> {
+    let out = encode_inria_ply(
+        "written by visage",
+        scene.len(),
+        scene.sh_degree,
+        None,
+        |i| InriaRecord {
+            position: scene.position[i],
+            sh: scene.sh_of(i),
+            opacity_logit: logit(scene.opacity[i]),
+            log_scale: scene.scale[i].max(Vec3::splat(1e-30)).ln(),
+            rotation: scene.rotation[i],
+            extra: None,
+        },
+    );
     let mut file =
         std::fs::File::create(path).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
     file.write_all(&out)

@@ -16,7 +16,6 @@ use super::camera::Camera;
 use super::gpu_binning::GpuBinning;
 use super::image::RgbImage;
 use super::reference::RenderSettings;
-use super::scene::SplatScene;
 use crate::avatar::binding::TriangleFrame;
 use crate::avatar::gaussians::GaussianSet;
 use crate::error::{Error, Result};
@@ -421,12 +420,6 @@ impl GpuRenderer {
             ),
         });
         Ok(())
-    }
-
-    /// Uploads a world-space scene (e.g. a PLY file): each Gaussian is bound to a
-    /// single identity frame. Render it with [`GpuRenderer::render_world`].
-    pub fn set_world_scene(&mut self, scene: &SplatScene) -> Result<()> {
-        self.set_gaussians(&scene.as_bound_to_identity())
     }
 
     /// Renders the uploaded Gaussians placed on `frames` (one per triangle).

@@ -42,8 +42,21 @@ struct SortParams {
     count: u32,
     shift: u32,
     blocks: u32,
-    bits: u32,
+    pad: u32,
     tiles: [u32; 4],
+}
+
+impl SortParams {
+    /// Parameters for `count` elements, everything else zero.
+    fn new(count: u32) -> Self {
+        Self {
+            count,
+            shift: 0,
+            blocks: 0,
+            pad: 0,
+            tiles: [0; 4],
+        }
+    }
 }
 
 struct Pipelines {
@@ -188,11 +201,8 @@ impl GpuBinning {
         check_groups(count, "Gaussians")?;
         let tile_grid = [tiles.0, tiles.1, 0, 0];
         let per_gaussian = self.slot(SortParams {
-            count,
-            shift: 0,
-            blocks: 0,
-            bits: 0,
             tiles: tile_grid,
+            ..SortParams::new(count)
         });
 
         // Phase 1: depth keys, depth sort, tile entry counts and their starts.
@@ -254,11 +264,8 @@ impl GpuBinning {
             let tile_bytes = (32 - (tile_count.max(2) - 1).leading_zeros()).div_ceil(8);
             let tile_sort = self.radix_plan(entries, 0..tile_bytes);
             let per_entry = self.slot(SortParams {
-                count: entries,
-                shift: 0,
-                blocks: 0,
-                bits: 0,
                 tiles: tile_grid,
+                ..SortParams::new(entries)
             });
             self.ensure_scratch(device, &tile_sort, &tile_sort.scan);
             self.write_slots(queue);
@@ -307,11 +314,9 @@ impl GpuBinning {
             .clone()
             .map(|b| {
                 self.slot(SortParams {
-                    count,
                     shift: b * 8,
                     blocks,
-                    bits: 0,
-                    tiles: [0; 4],
+                    ..SortParams::new(count)
                 })
             })
             .collect();
@@ -328,19 +333,10 @@ impl GpuBinning {
     fn scan_plan(&mut self, count: u32) -> ScanPlan {
         let sums = count.div_ceil(BLOCK).max(1);
         let per_element = self.slot(SortParams {
-            count,
-            shift: 0,
             blocks: sums,
-            bits: 0,
-            tiles: [0; 4],
+            ..SortParams::new(count)
         });
-        let per_sum = self.slot(SortParams {
-            count: sums,
-            shift: 0,
-            blocks: 0,
-            bits: 0,
-            tiles: [0; 4],
-        });
+        let per_sum = self.slot(SortParams::new(sums));
         ScanPlan {
             per_element,
             per_sum,

@@ -169,13 +169,7 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
                 }
             }
             Action::Expect(Expectation::StateHash(expected)) => {
-                let actual = bench
-                    .render(&FrameRequest {
-                        width: 1,
-                        height: 1,
-                        ..request(&state)
-                    })?
-                    .state_hash;
+                let actual = bench.state_hash(&request(&state).recipe)?;
                 report.checks.push(CheckResult {
                     line: line.line,
                     tick,
@@ -208,13 +202,7 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
         }
     }
     report.ticks = tick;
-    report.state_hash = bench
-        .render(&FrameRequest {
-            width: 1,
-            height: 1,
-            ..request(&state)
-        })?
-        .state_hash;
+    report.state_hash = bench.state_hash(&request(&state).recipe)?;
     Ok(report)
 }
 

@@ -117,6 +117,12 @@ impl Workbench {
         Ok((resolved, compose, t.elapsed().as_secs_f64() * 1e3))
     }
 
+    /// The state hash of `recipe` on this database (nothing is composed or rendered).
+    pub fn state_hash(&self, recipe: &Recipe) -> Result<String> {
+        let resolved = recipe.resolve(self.engine.database())?;
+        Ok(state_hash(self.engine.database(), &resolved))
+    }
+
     /// Renders a request.
     pub fn render(&mut self, request: &FrameRequest) -> Result<FrameResult> {
         let (resolved, compose, pose) = self.update(&request.recipe)?;
