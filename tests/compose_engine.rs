@@ -130,6 +130,21 @@ fn recipe_files_parse_strictly() {
         r,
         "canonical text round-trips"
     );
+    // A group may give only its Gaussians: it keeps the base's shape.
+    let e = engine();
+    let n = names(e);
+    let gaussians_only = format!(
+        "base = \"{}\"\n[groups.nose]\ngaussians = \"{}\"\n",
+        n[0], n[1]
+    );
+    let r = Recipe::from_toml(&gaussians_only).unwrap();
+    let resolved = resolve(e, &r);
+    assert_eq!(resolved.gaussians[Group::Nose.index()], 1);
+    assert_eq!(
+        resolved.shape[Group::Nose.index()],
+        vec![1.0, 0.0, 0.0, 0.0]
+    );
+    assert_eq!(Recipe::from_toml(&r.to_toml()).unwrap(), r);
     for bad in [
         "base = \"ada\"\nsmoothing = \"thesis\"\n", // misplaced key
         "base = \"ada\"\n[post]\nsmoothing = \"blur\"\n", // unknown option

@@ -278,6 +278,37 @@ fn builtin_composites_export_and_reload_on_the_builtin_head() {
         "--json".into(),
     ]);
     assert_eq!(reloaded["composite_hash"], original["composite_hash"]);
+
+    // GaussianAvatars' loader reads the export: numpy alone, as its code does.
+    let summary = gaussian_avatars_reads(&avatar.join("flame_param.npz"));
+    assert_eq!(summary["frames"], 125);
+    assert_eq!(summary["vertices"], 5309);
+    assert!(summary["static_offset_max"].as_f64().unwrap() > 1e-4);
+}
+
+/// Runs tests/data/check_flame_param.py (numpy, the way GaussianAvatars loads
+/// flame_param.npz) on a file and returns its JSON summary. Uses Debian's
+/// /usr/bin/python3 (where .ci/setup installs python3-numpy) when there is one,
+/// else `python3`, or $VISAGE_TEST_PYTHON.
+fn gaussian_avatars_reads(npz: &Path) -> serde_json::Value {
+    let python = std::env::var("VISAGE_TEST_PYTHON").unwrap_or_else(|_| {
+        if Path::new("/usr/bin/python3").exists() {
+            "/usr/bin/python3".into()
+        } else {
+            "python3".into()
+        }
+    });
+    let out = Command::new(&python)
+        .arg("tests/data/check_flame_param.py")
+        .arg(npz)
+        .output()
+        .unwrap_or_else(|e| panic!("{python}: {e} (bash .ci/setup installs python3-numpy)"));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
 }
 
 /// Damages a copy of an avatar folder.
@@ -405,6 +436,32 @@ fn hostile_and_broken_files_fail_cleanly() {
             }),
             "expected (T, 100)",
         ),
+        (
+            "empty",
+            Box::new(|d: &Path| {
+                let s = visage::avatar::gaussians::GaussianSet::with_degree(0);
+                visage::io::avatar::write_bound_ply(&d.join("point_cloud.ply"), &s).unwrap();
+            }),
+            "holds no Gaussians",
+        ),
+        (
+            "dynamic",
+            Box::new(|d: &Path| {
+                use visage::io::npy::{read_npz, write_npy, write_npz, NpyData};
+                let path = d.join("flame_param.npz");
+                let arrays = read_npz(&path).unwrap();
+                let mut encoded = Vec::new();
+                for (name, a) in &arrays {
+                    let mut data: Vec<f32> = a.data.iter().map(|&x| x as f32).collect();
+                    if name == "dynamic_offset" {
+                        data[7] = 1e-3;
+                    }
+                    encoded.push((name.as_str(), write_npy(&a.shape, NpyData::F32(&data))));
+                }
+                write_npz(&path, &encoded, true).unwrap();
+            }),
+            "'dynamic_offset' is not zero",
+        ),
     ];
     for (name, break_it, needle) in cases {
         let db = bad.join(format!("db-{name}"));
@@ -509,4 +566,92 @@ fn editing_sessions_on_real_avatars_replay() {
     args.extend(db_args(f));
     let composed = ok_json(args);
     assert_eq!(composed["state_hash"], a["state_hash"]);
+}
+
+/// Unpacks the gzip-compressed real-chumpy FLAME fixture to a temporary file.
+fn real_chumpy_flame() -> PathBuf {
+    use std::io::Read;
+    let gz = std::fs::File::open("tests/data/chumpy/flame2023.pkl.gz").unwrap();
+    let mut bytes = Vec::new();
+    flate2::read::GzDecoder::new(gz)
+        .read_to_end(&mut bytes)
+        .unwrap();
+    let path = temp("flame2023.pkl");
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// Writes a folder database with one avatar (a Gaussian on every triangle) for
+/// a model with `triangles` triangles and `vertices` vertices.
+fn one_avatar_db(name: &str, triangles: usize, vertices: usize) -> PathBuf {
+    use visage::avatar::gaussians::GaussianSet;
+    use visage::io::avatar::{write_avatar, AvatarParams, FrameParams};
+    let mut set = GaussianSet::with_degree(0);
+    for t in 0..triangles as u32 {
+        set.push(
+            t,
+            glam::Vec3::ZERO,
+            glam::Quat::IDENTITY,
+            glam::Vec3::splat(-5.0),
+            2.0,
+            &[0.5, 0.2, 0.1],
+        );
+    }
+    let root = temp(name);
+    let offset = vec![glam::DVec3::ZERO; vertices];
+    let frames = [FrameParams {
+        expression: vec![0.0; 100],
+        pose: visage::model::head::Pose::REST,
+    }];
+    write_avatar(
+        &root.join("solo"),
+        &set,
+        &AvatarParams {
+            shape: &[0.1, -0.2],
+            static_offset: &offset,
+            frames: &frames,
+        },
+    )
+    .unwrap();
+    root
+}
+
+/// FLAME models pickled by the real chumpy 0.70 under Python 2.7 (cPickle,
+/// protocols 2 and 0; tests/data/chumpy/make_chumpy_flame.py) load: FLAME's
+/// 5023 vertices and 9976 triangles plus GaussianAvatars' teeth.
+#[test]
+fn flame_models_pickled_by_real_chumpy_load() {
+    let model = real_chumpy_flame();
+    let masks = Path::new("tests/data/chumpy/FLAME_masks.pkl");
+    let head = visage::io::flame::load_flame(&model, masks).unwrap();
+    assert_eq!((head.vertex_count(), head.triangle_count()), (5143, 10144));
+    assert_eq!(head.shape_basis.len(), 6);
+    assert!(head.pose_correctives.is_some());
+
+    // The same through the command line, as a user would: a folder database on it.
+    let db = one_avatar_db("chumpy-db", 10144, 5143);
+    let v = ok_json(vec![
+        "info".into(),
+        "--json".into(),
+        "--db".into(),
+        db.display().to_string(),
+        "--flame".into(),
+        model.display().to_string(),
+        "--masks".into(),
+        masks.display().to_string(),
+    ]);
+    assert_eq!(v["model"]["vertices"], 5143);
+    assert_eq!(v["model"]["triangles"], 10144);
+
+    // generic_model.pkl style: shapedirs, posedirs, J and weights all chumpy, protocol 0.
+    let small = visage::io::flame::load_flame(
+        Path::new("tests/data/chumpy/generic_model_p0.pkl"),
+        Path::new("tests/data/chumpy/generic_masks_p0.pkl"),
+    )
+    .unwrap();
+    assert_eq!(
+        (small.vertex_count(), small.triangle_count()),
+        (60 + 120, 90 + 168)
+    );
+    assert_eq!(small.shape_basis.len(), 4);
 }

@@ -20,10 +20,12 @@ pub fn state_hash(db: &Database, recipe: &ResolvedRecipe) -> String {
     h.finalize().to_hex()[..16].to_string()
 }
 
-/// A hash of the composite's content: the blended neutral mesh, every selected
-/// Gaussian (after post-processing) and the frame's expression and pose. Equal
-/// for composites that look and move the same however they were made — e.g. a
-/// composite and its GaussianAvatars export loaded back.
+/// A hash of the composite's content: the blended neutral mesh as an export
+/// stores it (template + float32 static offset, see
+/// [`crate::io::avatar::neutral_as_stored`]), every selected Gaussian (after
+/// post-processing) and the frame's expression and pose. Equal for composites
+/// that look and move the same however they were made — e.g. a composite and
+/// its GaussianAvatars export loaded back.
 pub fn composite_hash(
     engine: &engine::Engine,
     composite: &engine::Composite,
@@ -35,7 +37,9 @@ pub fn composite_hash(
             h.update(&x.to_le_bytes());
         }
     };
-    floats(&mut composite.neutral.iter().flat_map(|v| v.to_array()));
+    let model = &engine.database().model;
+    let stored = crate::io::avatar::neutral_as_stored(&model.template, &composite.neutral);
+    floats(&mut stored.iter().flat_map(|v| v.to_array()));
     let g = &reordered(
         &composite.gaussians,
         &canonical_order(&engine.database().model, &composite.gaussians),

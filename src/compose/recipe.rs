@@ -80,7 +80,9 @@ pub enum AnimationMode {
 pub struct GroupEdit {
     /// Source whose Gaussians the group shows.
     pub gaussians: String,
-    /// Shape weights by source name (non-negative, not all zero).
+    /// Shape weights by source name (non-negative, not all zero). Left out
+    /// (or empty), the group keeps the base's shape.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub shape: BTreeMap<String, f64>,
 }
 

@@ -1,7 +1,14 @@
 //! GaussianAvatars avatar folders: `point_cloud.ply` (triangle-local Gaussians
-//! with `binding_0`) and `flame_param.npz` (shape (300,), expr (T,100),
-//! rotation / neck_pose / jaw_pose / translation (T,3), eyes_pose (T,6),
-//! static_offset (1,V,3)), read into source avatars and written from composites.
+//! with `binding_0`) and `flame_param.npz`, read into source avatars and written
+//! from composites.
+//!
+//! `flame_param.npz` holds exactly what GaussianAvatars' `FlameGaussianModel`
+//! saves (`np.savez` of its `flame_param` dict after `.float()`), all float32:
+//! shape (300,), expr (T,100), rotation / neck_pose / jaw_pose / translation
+//! (T,3), eyes_pose (T,6), static_offset (1,V,3) and dynamic_offset (T,V,3),
+//! V counting the teeth. Its loader moves every array to torch as it is and
+//! indexes `dynamic_offset[[t]]` when it poses frame t, so the key set, dtypes
+//! and shapes are the contract (docs/method.md, "Avatar folders").
 
 use std::path::Path;
 
@@ -60,7 +67,8 @@ pub fn parse_bound_ply(bytes: &[u8], triangles: usize) -> Result<GaussianSet, St
         let b = binding[i];
         if !(b >= 0.0 && b.fract() == 0.0 && (b as usize) < triangles) {
             return Err(format!(
-                "Gaussian {i} is bound to triangle {b}, but the mesh has {triangles} triangles"
+                "Gaussian {i} is bound to triangle {}, but the mesh has {triangles} triangles",
+                crate::io::id_text(b)
             ));
         }
         for ch in 0..3 {
@@ -152,7 +160,15 @@ fn rows(a: &NdArray, name: &str, width: usize) -> Result<Vec<Vec<f32>>, String> 
 
 /// Reads one avatar folder into a source avatar for `model`.
 pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAvatar, String> {
-    let gaussians = read_bound_ply(&dir.join("point_cloud.ply"), model.triangle_count())?;
+    let ply = dir.join("point_cloud.ply");
+    let gaussians = read_bound_ply(&ply, model.triangle_count())?;
+    if gaussians.is_empty() {
+        // An empty source would leave holes wherever a recipe picks it.
+        return Err(format!(
+            "{}: holds no Gaussians (an avatar needs at least one)",
+            ply.display()
+        ));
+    }
     let npz_path = dir.join("flame_param.npz");
     let arrays = read_npz(&npz_path)?;
     let label = |e: String| format!("{}: {e}", npz_path.display());
@@ -198,6 +214,9 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAv
         )));
     }
     let v = model.vertex_count();
+    if let Some(d) = arrays.get("dynamic_offset") {
+        check_dynamic_offset(d, frames, v).map_err(label)?;
+    }
     let static_offset = match arrays.get("static_offset") {
         None => vec![DVec3::ZERO; v],
         Some(a) => {
@@ -259,6 +278,33 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAv
     })
 }
 
+/// Accepts a `dynamic_offset` of shape (T, V, 3) (V with or without the teeth)
+/// that is zero, as every GaussianAvatars run leaves it (its optimisation is
+/// off in GaussianAvatars' training); per-frame offsets that are not zero
+/// would change the avatar's shape frame by frame, which visage does not
+/// animate, so they are refused rather than silently dropped.
+fn check_dynamic_offset(a: &NdArray, frames: usize, vertices: usize) -> Result<(), String> {
+    let n = a.shape.get(1).copied().unwrap_or(0);
+    let fits = a.shape.len() == 3
+        && a.shape[2] == 3
+        && (n == vertices || n + super::flame::TEETH_VERTICES == vertices)
+        && (a.shape[0] == frames || a.shape[0] == 1);
+    if !fits {
+        return Err(format!(
+            "'dynamic_offset' has shape {:?}, expected ({frames}, {vertices}, 3)",
+            a.shape
+        ));
+    }
+    match a.data.iter().position(|x| *x != 0.0) {
+        None => Ok(()),
+        Some(i) => Err(format!(
+            "'dynamic_offset' is not zero (frame {}, vertex {}): per-frame offsets are not supported",
+            i / (3 * n),
+            i / 3 % n
+        )),
+    }
+}
+
 /// One frame of the parameters GaussianAvatars stores.
 pub struct FrameParams {
     /// Expression coefficients (padded to 100 on write).
@@ -271,20 +317,61 @@ pub struct FrameParams {
 pub struct AvatarParams<'a> {
     /// Shape coefficients (padded to 300).
     pub shape: &'a [f32],
-    /// Static per-vertex offset (written as float64).
+    /// Static per-vertex offset (written as float32, see [`stored_offset`]).
     pub static_offset: &'a [DVec3],
     /// Per-frame expression and pose.
     pub frames: &'a [FrameParams],
 }
 
-/// The static offset `neutral - template` in f64 — exact, since both are f32 —
-/// so `template + offset` (summed in f64, see `HeadModel::neutral`) gives the
-/// neutral back bit for bit (the composite export: zero shape, the blend in the offset).
+/// The float32 static offset that reproduces `neutral` from `template` the way
+/// a loaded avatar computes its neutral (`template + offset` summed in f64,
+/// then rounded to f32; see `HeadModel::neutral`): the f32 nearest to the
+/// difference, or a neighbour of it when that one rounds back to `neutral`
+/// and the nearest does not. Where no f32 offset reproduces a coordinate
+/// exactly the nearest is kept (an error of at most one f32 step).
+pub fn stored_offset(template: f32, neutral: f32) -> f32 {
+    let reproduces = |o: f32| (template as f64 + o as f64) as f32 == neutral;
+    let nearest = (neutral as f64 - template as f64) as f32;
+    [nearest, next_f32(nearest, 1), next_f32(nearest, -1)]
+        .into_iter()
+        .find(|&o| reproduces(o))
+        .unwrap_or(nearest)
+}
+
+/// The neighbouring f32 above (`step` 1) or below (-1) a finite `x`.
+fn next_f32(x: f32, step: i32) -> f32 {
+    if x == 0.0 {
+        return f32::from_bits(1) * step as f32;
+    }
+    let up = (x > 0.0) == (step > 0);
+    let bits = x.to_bits();
+    f32::from_bits(if up { bits + 1 } else { bits - 1 })
+}
+
+/// The static offsets an export stores for a composite whose blended neutral is
+/// `neutral` (the shape coefficients are zero, the blend lives in the offset).
 pub fn neutral_offset(template: &[Vec3], neutral: &[Vec3]) -> Vec<DVec3> {
     template
         .iter()
         .zip(neutral)
-        .map(|(t, n)| n.as_dvec3() - t.as_dvec3())
+        .map(|(t, n)| {
+            DVec3::new(
+                stored_offset(t.x, n.x) as f64,
+                stored_offset(t.y, n.y) as f64,
+                stored_offset(t.z, n.z) as f64,
+            )
+        })
+        .collect()
+}
+
+/// The neutral mesh an avatar exported with `neutral` has once loaded back:
+/// `template + stored offset`, as `HeadModel::neutral` sums it. Composite
+/// hashes are taken on this, so a composite and its reloaded export agree.
+pub fn neutral_as_stored(template: &[Vec3], neutral: &[Vec3]) -> Vec<Vec3> {
+    template
+        .iter()
+        .zip(neutral_offset(template, neutral))
+        .map(|(t, o)| (t.as_dvec3() + o).as_vec3())
         .collect()
 }
 
@@ -320,12 +407,15 @@ pub fn write_avatar(
         eyes = vec![0.0; 6];
         translation = vec![0.0; 3];
     }
-    let offset: Vec<f64> = params
+    let offset: Vec<f32> = params
         .static_offset
         .iter()
-        .flat_map(|o| o.to_array())
+        .flat_map(|o| o.as_vec3().to_array())
         .collect();
     let v = params.static_offset.len();
+    // GaussianAvatars' loader indexes dynamic_offset[[t]] for every frame t;
+    // it is zero in every avatar it trains (deflate makes it small on disk).
+    let dynamic_offset = vec![0.0f32; t * v * 3];
     let mut shape = vec![0.0f32; SHAPE_PARAMS];
     for (s, x) in shape.iter_mut().zip(params.shape) {
         *s = *x;
@@ -346,7 +436,11 @@ pub fn write_avatar(
         ),
         (
             "static_offset",
-            write_npy(&[1, v, 3], NpyData::F64(&offset)),
+            write_npy(&[1, v, 3], NpyData::F32(&offset)),
+        ),
+        (
+            "dynamic_offset",
+            write_npy(&[t, v, 3], NpyData::F32(&dynamic_offset)),
         ),
     ];
     let named: Vec<(&str, Vec<u8>)> = arrays.into_iter().collect();
@@ -357,20 +451,59 @@ pub fn write_avatar(
 mod tests {
     use super::*;
 
+    /// One f32 step of `x`.
+    fn step(x: f32) -> f32 {
+        (next_f32(x.abs(), 1) - x.abs()).max(f32::from_bits(1))
+    }
+
+    /// Head-sized coordinates and offsets: the stored offsets are float32
+    /// values, almost every neutral comes back bit for bit and none is more
+    /// than one f32 step off (f32 cannot always reach it from the template).
     #[test]
-    fn neutral_offsets_reproduce_the_neutral_exactly() {
-        // Pairs where no f32 offset works (ties-to-even skips the target) are exact in f64.
-        let template = [
-            Vec3::new(1e-3, 1.0, 0.1),
-            Vec3::new(0.05, -0.3, 0.123_456_7),
-        ];
-        let neutral = [
-            Vec3::new(-2e-3, 1e-8, 0.1000001),
-            Vec3::new(0.0501, 0.7, 0.123_456_9),
-        ];
-        let offset = neutral_offset(&template, &neutral);
-        for ((t, n), o) in template.iter().zip(&neutral).zip(&offset) {
-            assert_eq!((t.as_dvec3() + *o).as_vec3(), *n);
+    fn stored_offsets_reproduce_head_sized_neutrals() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let (mut exact, total) = (0, 100_000);
+        for _ in 0..total {
+            let t = rng.random_range(-0.3f32..0.3);
+            let n = t + rng.random_range(-0.03f32..0.03);
+            let o = neutral_offset(&[Vec3::splat(t)], &[Vec3::splat(n)])[0];
+            assert_eq!(o.as_vec3().as_dvec3(), o, "the offsets are float32 values");
+            let back = (t as f64 + o.x) as f32;
+            assert!((back - n).abs() <= step(n), "template {t:e}, neutral {n:e}");
+            exact += (back == n) as usize;
+        }
+        assert!(exact * 1000 >= total * 995, "{exact} of {total} exact");
+    }
+
+    /// Storing is idempotent: what a loaded export stores again is what it
+    /// already had — the property that keeps composite hashes equal across an
+    /// export and reload — including coordinates that cross zero, tiny and
+    /// huge magnitudes and values f32 cannot reach from the template.
+    #[test]
+    fn storing_a_stored_neutral_changes_nothing() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for k in 0..200_000 {
+            let magnitude = |rng: &mut rand_chacha::ChaCha8Rng| 10f32.powi(rng.random_range(-9..4));
+            let t = rng.random_range(-1.0f32..1.0) * magnitude(&mut rng);
+            let n = match k % 3 {
+                0 => t + rng.random_range(-1.0f32..1.0) * magnitude(&mut rng),
+                1 => -t * rng.random_range(0.0f32..2.0),
+                _ => rng.random_range(-1.0f32..1.0) * magnitude(&mut rng),
+            };
+            let once = neutral_as_stored(&[Vec3::splat(t)], &[Vec3::splat(n)])[0].x;
+            let twice = neutral_as_stored(&[Vec3::splat(t)], &[Vec3::splat(once)])[0].x;
+            assert_eq!(
+                once.to_bits(),
+                twice.to_bits(),
+                "template {t:e}, neutral {n:e}"
+            );
+            // Off by at most the rounding of the offset (one step of the larger).
+            assert!(
+                (once - n).abs() <= step(t.abs().max(n.abs())),
+                "template {t:e}, neutral {n:e}"
+            );
         }
     }
 }

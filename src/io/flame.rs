@@ -87,7 +87,8 @@ fn index(x: f64, limit: usize, what: &str) -> Result<u32, String> {
         Ok(x as u32)
     } else {
         Err(format!(
-            "{what} refers to vertex {x}, but there are {limit}"
+            "{what} refers to vertex {}, but there are {limit}",
+            crate::io::id_text(x)
         ))
     }
 }

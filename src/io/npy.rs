@@ -1,7 +1,8 @@
 //! numpy `.npy` (format versions 1.0-3.0) and `.npz` (zip archives of `.npy`,
 //! stored or deflated) reading and writing. Reads are bounded: array sizes must
 //! match the bytes present, and an archive may not inflate to more than
-//! [`MAX_INFLATION`] times its own size.
+//! [`MAX_INFLATION`] times its own size or [`MIN_INFLATION_BUDGET`], whichever
+//! is larger.
 
 use std::collections::BTreeMap;
 use std::io::{Cursor, Read, Write};
@@ -9,8 +10,12 @@ use std::path::Path;
 
 use super::pickle::{Dtype, NdArray};
 
-/// How much larger than the archive its members may inflate (zip-bomb guard).
+/// How much larger than the archive its members may inflate (zip-bomb guard)…
 pub const MAX_INFLATION: u64 = 64;
+/// …beyond a floor that any archive may inflate to: GaussianAvatars'
+/// `dynamic_offset` is all zeros, which deflate shrinks about 1000×, and a
+/// (T, 5143, 3) float32 array of a few thousand frames is this large.
+pub const MIN_INFLATION_BUDGET: u64 = 256 << 20;
 
 const MAGIC: &[u8] = b"\x93NUMPY";
 
@@ -150,11 +155,16 @@ pub fn write_npy(shape: &[usize], data: NpyData) -> Vec<u8> {
 
 /// Parses `.npz` bytes into arrays by name (without the `.npy` suffix).
 pub fn parse_npz(bytes: &[u8]) -> Result<BTreeMap<String, NdArray>, String> {
+    parse_npz_within(bytes, MIN_INFLATION_BUDGET)
+}
+
+/// [`parse_npz`] with the inflation floor given.
+fn parse_npz_within(bytes: &[u8], floor: u64) -> Result<BTreeMap<String, NdArray>, String> {
     let mut archive = zip::ZipArchive::new(Cursor::new(bytes))
         .map_err(|e| format!("not a valid .npz archive: {e}"))?;
     let budget = (bytes.len() as u64)
         .saturating_mul(MAX_INFLATION)
-        .max(1 << 20);
+        .max(floor);
     let mut used = 0u64;
     let mut out = BTreeMap::new();
     for i in 0..archive.len() {
@@ -181,7 +191,8 @@ pub fn parse_npz(bytes: &[u8]) -> Result<BTreeMap<String, NdArray>, String> {
         used += data.len() as u64;
         if used > budget {
             return Err(format!(
-                ".npz inflates to more than {MAX_INFLATION}× its size"
+                ".npz inflates to more than {} MiB (and {MAX_INFLATION}× its size)",
+                budget >> 20
             ));
         }
         let array =
@@ -244,6 +255,31 @@ mod tests {
         let b = parse_npy(&v2).unwrap();
         // Fortran [[1,3],[2,4]] in C order.
         assert_eq!(b.data, vec![1.0, 3.0, 2.0, 4.0]);
+    }
+
+    /// Deflated zeros (what GaussianAvatars' dynamic_offset is) inflate
+    /// about 1000×: accepted up to the floor, refused past it.
+    #[test]
+    fn npz_inflation_is_bounded() {
+        let zeros = vec![0.0f32; 1 << 20]; // 4 MiB
+        let dir = std::env::temp_dir().join(format!("visage-npz-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("zeros.npz");
+        write_npz(
+            &path,
+            &[("z", write_npy(&[1 << 20], NpyData::F32(&zeros)))],
+            true,
+        )
+        .unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(
+            bytes.len() * 64 < 4 << 20,
+            "deflate shrinks zeros more than 64×"
+        );
+        assert_eq!(parse_npz(&bytes).unwrap()["z"].data.len(), 1 << 20);
+        let e = parse_npz_within(&bytes, 1 << 20).unwrap_err();
+        assert!(e.contains("inflates to more than 1 MiB"), "{e}");
     }
 
     #[test]

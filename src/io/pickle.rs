@@ -32,6 +32,12 @@ pub const ALLOWED_GLOBALS: &[(&str, &str)] = &[
     ("_codecs", "encode"),
     ("numpy.core.numeric", "_frombuffer"),
     ("numpy._core.numeric", "_frombuffer"),
+    // chumpy 0.70 keeps `_dirty_vars = set()` in every Ch's state; protocols
+    // 0-3 write a set as a call of the builtin on a list.
+    ("__builtin__", "set"),
+    ("builtins", "set"),
+    ("__builtin__", "frozenset"),
+    ("builtins", "frozenset"),
 ];
 
 /// Element types of numpy arrays we read.
@@ -467,6 +473,88 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// Decodes the body of a protocol-0 `STRING`: Python 2's `repr` of a byte
+/// string (`\\`, `\'`, `\n`, `\xhh`, octal `\ooo`…). numpy arrays pickled with
+/// protocol 0 carry their raw bytes this way.
+fn unescape(body: &str) -> Result<Vec<u8>, String> {
+    let bytes = body.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let b = bytes[i];
+        i += 1;
+        if b != b'\\' {
+            out.push(b);
+            continue;
+        }
+        let e = *bytes.get(i).ok_or("STRING ends in a backslash")?;
+        i += 1;
+        match e {
+            b'\\' | b'\'' | b'"' => out.push(e),
+            b'n' => out.push(b'\n'),
+            b'r' => out.push(b'\r'),
+            b't' => out.push(b'\t'),
+            b'a' => out.push(7),
+            b'b' => out.push(8),
+            b'f' => out.push(12),
+            b'v' => out.push(11),
+            b'\n' => {}
+            b'x' => {
+                let hex = body.get(i..i + 2).ok_or("STRING has a short \\x escape")?;
+                out.push(u8::from_str_radix(hex, 16).map_err(|_| "STRING has a bad \\x escape")?);
+                i += 2;
+            }
+            b'0'..=b'7' => {
+                let mut v = (e - b'0') as u32;
+                for _ in 0..2 {
+                    match bytes.get(i) {
+                        Some(d @ b'0'..=b'7') => {
+                            v = v * 8 + (d - b'0') as u32;
+                            i += 1;
+                        }
+                        _ => break,
+                    }
+                }
+                out.push(v as u8);
+            }
+            other => {
+                out.push(b'\\');
+                out.push(other);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Decodes a protocol-0 `UNICODE` line (Python's raw-unicode-escape: only
+/// `\\uXXXX` and `\\UXXXXXXXX` are escapes).
+fn raw_unicode_unescape(line: &str) -> Result<String, String> {
+    let mut out = String::with_capacity(line.len());
+    let mut rest = line;
+    while let Some(at) = rest.find('\\') {
+        out.push_str(&rest[..at]);
+        let tail = &rest[at..];
+        let width = match tail.as_bytes().get(1) {
+            Some(b'u') => 4,
+            Some(b'U') => 8,
+            _ => {
+                out.push('\\');
+                rest = &tail[1..];
+                continue;
+            }
+        };
+        let code = tail
+            .get(2..2 + width)
+            .and_then(|h| u32::from_str_radix(h, 16).ok())
+            .and_then(char::from_u32)
+            .ok_or("UNICODE has a bad escape")?;
+        out.push(code);
+        rest = &tail[2 + width..];
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
 fn latin1(bytes: &[u8]) -> String {
     bytes.iter().map(|&b| b as char).collect()
 }
@@ -581,6 +669,12 @@ fn call(callable: Value, args: Vec<Value>) -> Result<Value, String> {
                 &bytes_of(buf)?,
             )?)))
         }
+        "set" | "frozenset" => match args.as_slice() {
+            // set() or set(iterable): read as the list of its items.
+            [] => Ok(Value::List(Vec::new())),
+            [Value::List(items)] => Ok(Value::List(items.clone())),
+            _ => Err(format!("malformed {name}() in the pickle")),
+        },
         "object" | "ndarray" | "csc_matrix" | "csr_matrix" | "Ch" => Ok(Value::Object {
             class: (module, name),
             args,
@@ -684,55 +778,44 @@ fn build(object: Value, state: Value) -> Result<Value, String> {
     }
 }
 
-/// A stack entry: the value, how deeply it nests and how many nodes it holds.
-#[derive(Clone)]
-struct Entry {
-    value: Value,
-    depth: usize,
-    weight: usize,
+/// Where an object lives in the machine's heap.
+type NodeId = usize;
+
+/// An object in the pickle machine's heap. Containers hold references, so the
+/// memo, `DUP` and `GET` share one object as Python does: an `APPEND`,
+/// `SETITEM` or `BUILD` after a `PUT` is seen through every reference.
+enum Node {
+    /// A finished value (scalars, strings, classes, arrays, dtypes, objects).
+    Done(Value),
+    /// A list, tuple or set.
+    Seq(Vec<NodeId>),
+    /// A dict, in insertion order, with the position of each string key.
+    Map(Vec<(NodeId, NodeId)>, HashMap<String, usize>),
 }
 
-impl Entry {
-    fn leaf(value: Value) -> Entry {
-        Entry {
-            value,
-            depth: 0,
-            weight: 1,
-        }
-    }
-
-    fn container(value: Value, children: &[Entry]) -> Entry {
-        Entry {
-            value,
-            depth: 1 + children.iter().map(|c| c.depth).max().unwrap_or(0),
-            weight: 1 + children.iter().map(|c| c.weight).sum::<usize>(),
-        }
-    }
-}
-
-/// The pickle machine's stack and memo, with limits on nesting and on how much
-/// cloning (GET, DUP) may multiply the input.
+/// The pickle machine: its heap, stack, marks and memo, and a budget on how
+/// many values turning the heap into a tree may produce (so shared references
+/// cannot expand a small file into an enormous tree).
 struct Machine {
-    stack: Vec<Entry>,
+    heap: Vec<Node>,
+    stack: Vec<NodeId>,
     marks: Vec<usize>,
-    memo: HashMap<usize, Entry>,
+    memo: HashMap<usize, NodeId>,
     budget: usize,
 }
 
 impl Machine {
-    fn push(&mut self, e: Entry) -> Result<(), String> {
-        if e.depth > MAX_DEPTH {
-            return Err("pickle nests too deeply".into());
-        }
-        self.stack.push(e);
-        Ok(())
+    fn alloc(&mut self, node: Node) -> NodeId {
+        self.heap.push(node);
+        self.heap.len() - 1
     }
 
-    fn leaf(&mut self, v: Value) -> Result<(), String> {
-        self.push(Entry::leaf(v))
+    fn leaf(&mut self, v: Value) {
+        let id = self.alloc(Node::Done(v));
+        self.stack.push(id);
     }
 
-    fn pop(&mut self) -> Result<Entry, String> {
+    fn pop(&mut self) -> Result<NodeId, String> {
         if self.marks.last().is_some_and(|&m| m == self.stack.len()) {
             return Err("pickle pops past a MARK".into());
         }
@@ -741,62 +824,96 @@ impl Machine {
             .ok_or_else(|| "pickle stack underflow".into())
     }
 
-    fn pop_mark(&mut self) -> Result<Vec<Entry>, String> {
+    fn top(&self) -> Result<NodeId, String> {
+        self.stack
+            .last()
+            .copied()
+            .ok_or_else(|| "pickle stack underflow".into())
+    }
+
+    fn pop_mark(&mut self) -> Result<Vec<NodeId>, String> {
         let at = self.marks.pop().ok_or("pickle MARK missing")?;
         Ok(self.stack.split_off(at))
     }
 
-    fn clone_counted(&mut self, e: &Entry) -> Result<Entry, String> {
-        self.budget = self
-            .budget
-            .checked_sub(e.weight)
-            .ok_or("pickle references expand beyond its size")?;
-        Ok(e.clone())
+    /// The string a node holds, when it is a finished string (dict keys).
+    fn string(&self, id: NodeId) -> Option<&str> {
+        match &self.heap[id] {
+            Node::Done(Value::Str(s)) => Some(s),
+            _ => None,
+        }
     }
 
-    /// Appends children to the container on top of the stack.
-    fn extend_top(&mut self, children: Vec<Entry>, what: &str) -> Result<(), String> {
-        let top = self.stack.last_mut().ok_or("pickle stack underflow")?;
-        let depth = children.iter().map(|c| c.depth + 1).max().unwrap_or(0);
-        let weight: usize = children.iter().map(|c| c.weight).sum();
-        match &mut top.value {
-            Value::List(l) => l.extend(children.into_iter().map(|c| c.value)),
-            Value::Dict(d) => {
-                if children.len() % 2 != 0 {
-                    return Err(format!("{what} with an odd number of items"));
-                }
-                let mut it = children.into_iter();
-                while let (Some(k), Some(v)) = (it.next(), it.next()) {
-                    d.push((k.value, v.value));
+    /// Adds children to the list, set or dict at `target` (a later equal
+    /// string key replaces the earlier value, as in a Python dict).
+    fn extend(&mut self, target: NodeId, children: Vec<NodeId>, what: &str) -> Result<(), String> {
+        if let Node::Map(..) = self.heap[target] {
+            if children.len() % 2 != 0 {
+                return Err(format!("{what} with an odd number of items"));
+            }
+            for pair in children.chunks(2) {
+                let key = self.string(pair[0]).map(str::to_owned);
+                let Node::Map(items, index) = &mut self.heap[target] else {
+                    unreachable!("checked above")
+                };
+                match key.as_ref().and_then(|k| index.get(k)) {
+                    Some(&at) => items[at].1 = pair[1],
+                    None => {
+                        if let Some(k) = key {
+                            index.insert(k, items.len());
+                        }
+                        items.push((pair[0], pair[1]));
+                    }
                 }
             }
-            _ => return Err(format!("{what} on {}", top.value.kind())),
+            return Ok(());
         }
-        top.depth = top.depth.max(depth);
-        top.weight += weight;
-        if top.depth > MAX_DEPTH {
-            return Err("pickle nests too deeply".into());
+        match &mut self.heap[target] {
+            Node::Seq(items) => {
+                items.extend(children);
+                Ok(())
+            }
+            Node::Done(v) => Err(format!("{what} on {}", v.kind())),
+            Node::Map(..) => unreachable!("handled above"),
         }
-        Ok(())
     }
-}
 
-fn pairs(items: Vec<Entry>, what: &str) -> Result<(Value, Vec<Entry>), String> {
-    if items.len() % 2 != 0 {
-        return Err(format!("{what} with an odd number of items"));
+    /// Turns a heap object into a value tree, charging every value made to the
+    /// budget and refusing nesting deeper than [`MAX_DEPTH`] (which also stops
+    /// an object that contains itself).
+    fn value(&mut self, id: NodeId, depth: usize) -> Result<Value, String> {
+        if depth > MAX_DEPTH {
+            return Err("pickle nests too deeply (or an object contains itself)".into());
+        }
+        self.budget = self
+            .budget
+            .checked_sub(1)
+            .ok_or("pickle references expand beyond its size")?;
+        match &self.heap[id] {
+            Node::Done(v) => Ok(v.clone()),
+            Node::Seq(items) => {
+                let items = items.clone();
+                let values = items
+                    .into_iter()
+                    .map(|c| self.value(c, depth + 1))
+                    .collect::<Result<_, _>>()?;
+                Ok(Value::List(values))
+            }
+            Node::Map(items, _) => {
+                let items = items.clone();
+                let mut pairs = Vec::with_capacity(items.len());
+                for (k, v) in items {
+                    pairs.push((self.value(k, depth + 1)?, self.value(v, depth + 1)?));
+                }
+                Ok(Value::Dict(pairs))
+            }
+        }
     }
-    let mut d = Vec::with_capacity(items.len() / 2);
-    let mut it = items.clone().into_iter();
-    while let (Some(k), Some(v)) = (it.next(), it.next()) {
-        d.push((k.value, v.value));
-    }
-    Ok((Value::Dict(d), items))
-}
 
-fn call_args(e: Entry) -> Result<Vec<Value>, String> {
-    match e.value {
-        Value::List(a) => Ok(a),
-        other => Err(format!("call arguments are {}", other.kind())),
+    /// Pushes a new sequence made of `items`.
+    fn push_seq(&mut self, items: Vec<NodeId>) {
+        let id = self.alloc(Node::Seq(items));
+        self.stack.push(id);
     }
 }
 
@@ -804,6 +921,7 @@ fn call_args(e: Entry) -> Result<Vec<Value>, String> {
 pub fn parse(data: &[u8]) -> Result<Value, String> {
     let mut r = Reader { data, pos: 0 };
     let mut m = Machine {
+        heap: Vec::new(),
         stack: Vec::new(),
         marks: Vec::new(),
         memo: HashMap::new(),
@@ -821,7 +939,10 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
             0x95 => {
                 r.take(8)?; // FRAME length: frames are only a hint
             }
-            b'.' => return Ok(m.pop()?.value),
+            b'.' => {
+                let root = m.pop()?;
+                return m.value(root, 0);
+            }
             b'(' => m.marks.push(m.stack.len()),
             b'0' => {
                 m.pop()?;
@@ -830,13 +951,12 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
                 m.pop_mark()?;
             }
             b'2' => {
-                let top = m.stack.last().cloned().ok_or("pickle stack underflow")?;
-                let e = m.clone_counted(&top)?;
-                m.push(e)?;
+                let top = m.top()?;
+                m.stack.push(top);
             }
-            b'N' => m.leaf(Value::None)?,
-            0x88 => m.leaf(Value::Bool(true))?,
-            0x89 => m.leaf(Value::Bool(false))?,
+            b'N' => m.leaf(Value::None),
+            0x88 => m.leaf(Value::Bool(true)),
+            0x89 => m.leaf(Value::Bool(false)),
             b'I' => {
                 let line = r.line()?;
                 let v = match line {
@@ -844,25 +964,25 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
                     "00" => Value::Bool(false),
                     _ => Value::Int(line.trim().parse().map_err(|_| "bad INT")?),
                 };
-                m.leaf(v)?;
+                m.leaf(v);
             }
             b'L' => {
                 let line = r.line()?.trim().trim_end_matches('L');
-                m.leaf(Value::Int(line.parse().map_err(|_| "integer too large")?))?;
+                m.leaf(Value::Int(line.parse().map_err(|_| "integer too large")?));
             }
             b'J' => {
                 let b = r.take(4)?;
                 m.leaf(Value::Int(
                     i32::from_le_bytes([b[0], b[1], b[2], b[3]]) as i64
-                ))?;
+                ));
             }
             b'K' => {
                 let v = r.byte()? as i64;
-                m.leaf(Value::Int(v))?;
+                m.leaf(Value::Int(v));
             }
             b'M' => {
                 let v = r.u16()? as i64;
-                m.leaf(Value::Int(v))?;
+                m.leaf(Value::Int(v));
             }
             0x8a | 0x8b => {
                 let n = if op == 0x8a {
@@ -881,22 +1001,25 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
                 if n > 0 && n < 8 && b[n - 1] & 0x80 != 0 {
                     v -= 1i64 << (8 * n);
                 }
-                m.leaf(Value::Int(v))?;
+                m.leaf(Value::Int(v));
             }
             b'F' => {
                 let v = r.line()?.trim().parse().map_err(|_| "bad FLOAT")?;
-                m.leaf(Value::Float(v))?;
+                m.leaf(Value::Float(v));
             }
             b'G' => {
                 let b = r.take(8)?;
-                m.leaf(Value::Float(f64::from_be_bytes(b.try_into().unwrap())))?;
+                m.leaf(Value::Float(f64::from_be_bytes(b.try_into().unwrap())));
             }
             b'S' => {
-                let line = r.line()?.trim();
-                let inner = line
-                    .get(1..line.len().saturating_sub(1))
-                    .ok_or("bad STRING")?;
-                m.leaf(Value::Str(inner.to_string()))?;
+                let line = r.line()?.trim_end_matches('\r');
+                let quoted = line.len() >= 2
+                    && (line.starts_with('\'') && line.ends_with('\'')
+                        || line.starts_with('"') && line.ends_with('"'));
+                if !quoted {
+                    return Err("bad STRING".into());
+                }
+                m.leaf(Value::Str(latin1(&unescape(&line[1..line.len() - 1])?)));
             }
             b'T' | b'U' => {
                 let n = if op == b'T' {
@@ -905,11 +1028,11 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
                     r.byte()? as usize
                 };
                 let v = latin1(r.take(n)?);
-                m.leaf(Value::Str(v))?;
+                m.leaf(Value::Str(v));
             }
             b'V' => {
-                let v = r.line()?.to_string();
-                m.leaf(Value::Str(v))?;
+                let v = raw_unicode_unescape(r.line()?)?;
+                m.leaf(Value::Str(v));
             }
             b'X' | 0x8c | 0x8d => {
                 let n = match op {
@@ -918,7 +1041,7 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
                     _ => r.u64()?,
                 };
                 let v = utf8(r.take(n)?)?;
-                m.leaf(Value::Str(v))?;
+                m.leaf(Value::Str(v));
             }
             b'B' | b'C' | 0x8e | 0x96 => {
                 let n = match op {
@@ -927,15 +1050,18 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
                     _ => r.u64()?,
                 };
                 let v = r.take(n)?.to_vec();
-                m.leaf(Value::Bytes(Rc::new(v)))?;
+                m.leaf(Value::Bytes(Rc::new(v)));
             }
-            b')' | b']' | 0x8f => m.leaf(Value::List(Vec::new()))?,
-            b'}' => m.leaf(Value::Dict(Vec::new()))?,
+            // Empty tuple, list and set (sets are read as lists).
+            b')' | b']' | 0x8f => m.push_seq(Vec::new()),
+            b'}' => {
+                let id = m.alloc(Node::Map(Vec::new(), HashMap::new()));
+                m.stack.push(id);
+            }
+            // TUPLE, LIST and FROZENSET from the items above the mark.
             b't' | b'l' | 0x91 => {
                 let items = m.pop_mark()?;
-                let v = Value::List(items.iter().map(|e| e.value.clone()).collect());
-                let e = Entry::container(v, &items);
-                m.push(e)?;
+                m.push_seq(items);
             }
             0x85..=0x87 => {
                 let n = (op - 0x84) as usize;
@@ -944,32 +1070,35 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
                     return Err("pickle stack underflow".into());
                 }
                 let items = m.stack.split_off(m.stack.len() - n);
-                let v = Value::List(items.iter().map(|e| e.value.clone()).collect());
-                let e = Entry::container(v, &items);
-                m.push(e)?;
+                m.push_seq(items);
             }
             b'd' => {
                 let items = m.pop_mark()?;
-                let (v, items) = pairs(items, "DICT")?;
-                let e = Entry::container(v, &items);
-                m.push(e)?;
+                let id = m.alloc(Node::Map(Vec::new(), HashMap::new()));
+                m.extend(id, items, "DICT")?;
+                m.stack.push(id);
             }
             b'a' => {
                 let v = m.pop()?;
-                m.extend_top(vec![v], "APPEND")?;
+                let target = m.top()?;
+                m.extend(target, vec![v], "APPEND")?;
             }
+            // APPENDS and ADDITEMS.
             b'e' | 0x90 => {
                 let items = m.pop_mark()?;
-                m.extend_top(items, "APPENDS")?;
+                let target = m.top()?;
+                m.extend(target, items, "APPENDS")?;
             }
             b's' => {
                 let v = m.pop()?;
                 let k = m.pop()?;
-                m.extend_top(vec![k, v], "SETITEM")?;
+                let target = m.top()?;
+                m.extend(target, vec![k, v], "SETITEM")?;
             }
             b'u' => {
                 let items = m.pop_mark()?;
-                m.extend_top(items, "SETITEMS")?;
+                let target = m.top()?;
+                m.extend(target, items, "SETITEMS")?;
             }
             b'g' | b'h' | b'j' => {
                 let k: usize = match op {
@@ -977,9 +1106,8 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
                     b'h' => r.byte()? as usize,
                     _ => r.u32()?,
                 };
-                let e = m.memo.get(&k).cloned().ok_or("pickle memo miss")?;
-                let e = m.clone_counted(&e)?;
-                m.push(e)?;
+                let id = *m.memo.get(&k).ok_or("pickle memo miss")?;
+                m.stack.push(id);
             }
             b'p' | b'q' | b'r' | 0x94 => {
                 let k: usize = match op {
@@ -988,22 +1116,22 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
                     b'r' => r.u32()?,
                     _ => m.memo.len(),
                 };
-                let top = m.stack.last().cloned().ok_or("pickle stack underflow")?;
-                if m.memo.len() > data.len() {
-                    return Err("pickle memo grows beyond its size".into());
-                }
+                let top = m.top()?;
                 m.memo.insert(k, top);
             }
             b'c' => {
                 let module = r.line()?.to_string();
                 let name = r.line()?.to_string();
-                m.leaf(allowed(&module, &name)?)?;
+                m.leaf(allowed(&module, &name)?);
             }
             0x93 => {
-                let name = m.pop()?.value;
-                let module = m.pop()?.value;
-                match (module, name) {
-                    (Value::Str(a), Value::Str(b)) => m.leaf(allowed(&a, &b)?)?,
+                let name = m.pop()?;
+                let module = m.pop()?;
+                match (m.string(module), m.string(name)) {
+                    (Some(a), Some(b)) => {
+                        let global = allowed(a, b)?;
+                        m.leaf(global);
+                    }
                     _ => return Err("STACK_GLOBAL needs two strings".into()),
                 }
             }
@@ -1013,22 +1141,32 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
                 }
                 let args = m.pop()?;
                 let callable = m.pop()?;
-                let children = [args.clone()];
-                let v = call(callable.value, call_args(args)?)?;
-                m.push(Entry::container(v, &children))?;
+                let Node::Seq(_) = m.heap[args] else {
+                    return Err("call arguments are not a tuple".into());
+                };
+                let Value::List(args) = m.value(args, 0)? else {
+                    unreachable!("a sequence becomes a list")
+                };
+                let callable = m.value(callable, 0)?;
+                let v = call(callable, args)?;
+                m.leaf(v);
             }
             b'b' => {
                 let state = m.pop()?;
-                let object = m.pop()?;
-                let shape = Entry::container(Value::None, &[object.clone(), state.clone()]);
-                let v = match object.value {
+                let object = m.top()?;
+                let state = m.value(state, 0)?;
+                let Node::Done(current) = &mut m.heap[object] else {
+                    return Err("pickle builds a container".into());
+                };
+                let built = match std::mem::replace(current, Value::None) {
                     Value::Dtype(d, _) => {
-                        let big = matches!(&state.value, Value::List(items) if matches!(items.get(1), Some(Value::Str(o)) if o == ">"));
+                        let big = matches!(&state, Value::List(items) if matches!(items.get(1), Some(Value::Str(o)) if o == ">"));
                         Value::Dtype(d, big)
                     }
-                    o => build(o, state.value.clone())?,
+                    o => build(o, state)?,
                 };
-                m.push(Entry { value: v, ..shape })?;
+                // Built in place: every memo reference to the object sees its state.
+                m.heap[object] = Node::Done(built);
             }
             b'i' | b'o' | b'P' | b'Q' | 0x82..=0x84 => {
                 return Err(format!(
@@ -1090,7 +1228,108 @@ mod tests {
                 vec![0.25, 0.75]
             );
             assert_eq!(v.get("scalar"), Some(&Value::Float(2.5)));
+            // One array under two keys: the second key is a memo reference.
+            let linspace = vec![0.0, 0.25, 0.5, 0.75, 1.0];
+            for key in ["shared_a", "shared_b"] {
+                let a = v.get(key).unwrap().as_array();
+                assert_eq!(
+                    a.map(|a| a.data),
+                    Ok(linspace.clone()),
+                    "protocol {protocol} {key}"
+                );
+            }
+            // Big-endian arrays whose dtype objects are memo references.
+            assert_eq!(
+                v.get("big_a").unwrap().as_array().unwrap().data,
+                vec![0.5, 1.5, 2.5, 3.5],
+                "protocol {protocol}"
+            );
+            assert_eq!(
+                v.get("big_b").unwrap().as_array().unwrap().data,
+                vec![0.0, 1000.0, 2000.0],
+                "protocol {protocol}"
+            );
+            let Some(Value::List(dirty)) = v.get("dirty") else {
+                panic!("protocol {protocol}: the set is not read as a list")
+            };
+            assert_eq!(dirty.len(), 2);
         }
+    }
+
+    /// Python shares a memoised object: changes made after `PUT` (items
+    /// appended, state built) are seen through every later `GET`.
+    #[test]
+    fn memo_references_share_the_object() {
+        // d = {}; l = []; d['a'] = l; l.append(7); d['b'] = l  (PUT before APPEND)
+        let p = b"\x80\x02}q\x00(X\x01\x00\x00\x00a]q\x01K\x07aX\x01\x00\x00\x00bh\x01u.";
+        let v = parse(p).unwrap();
+        assert_eq!(v.get("a"), Some(&Value::List(vec![Value::Int(7)])));
+        assert_eq!(v.get("b"), Some(&Value::List(vec![Value::Int(7)])));
+        // A big-endian dtype memoised before BUILD sets its byte order, then reused.
+        let dtype_then_get = b"\x80\x02cnumpy\ndtype\nX\x02\x00\x00\x00f8K\x00K\x01\x87Rq\x05(K\x03X\x01\x00\x00\x00>NNNJ\xff\xff\xff\xffJ\xff\xff\xff\xffK\x00tb0h\x05.";
+        assert_eq!(
+            parse(dtype_then_get).unwrap(),
+            Value::Dtype(Dtype::F64, true)
+        );
+        // A later value for the same key replaces the earlier one, as in Python.
+        let twice = b"\x80\x02}(X\x01\x00\x00\x00kK\x01X\x01\x00\x00\x00kK\x02u.";
+        assert_eq!(
+            parse(twice).unwrap(),
+            Value::Dict(vec![(Value::Str("k".into()), Value::Int(2))])
+        );
+        // A list that contains itself is refused, not followed forever.
+        let e = parse(b"\x80\x02]q\x00h\x00a.").unwrap_err();
+        assert!(e.contains("contains itself"), "{e}");
+    }
+
+    #[test]
+    fn protocol_zero_strings_and_unicode_unescape() {
+        let v =
+            parse(b"(dp0\nS'raw'\np1\nS'\\x00\\x01\\\\\\'\\n\\t'\np2\nsVname\\u00e9\np3\nI1\ns.")
+                .unwrap();
+        assert_eq!(v.get("raw"), Some(&Value::Str("\u{0}\u{1}\\'\n\t".into())));
+        assert_eq!(v.get("name\u{e9}"), Some(&Value::Int(1)));
+        assert!(parse(b"S'unterminated\n.").is_err());
+        assert!(parse(b"S'bad \\xZZ'\n.").is_err());
+    }
+
+    /// FLAME-layout pickles written by the real chumpy 0.70 under Python 2.7
+    /// (tests/data/chumpy/make_chumpy_flame.py): Ch state holds `set()`.
+    #[test]
+    fn reads_pickles_written_by_real_chumpy() {
+        let v = read(std::path::Path::new(
+            "tests/data/chumpy/generic_model_p0.pkl",
+        ))
+        .unwrap();
+        for key in ["shapedirs", "posedirs", "J", "weights"] {
+            let Some(Value::Object {
+                class,
+                state: Some(state),
+                ..
+            }) = v.get(key)
+            else {
+                panic!("{key} is not a chumpy object")
+            };
+            assert_eq!(*class, ("chumpy.ch", "Ch"));
+            assert!(
+                matches!(state.get("_dirty_vars"), Some(Value::List(d)) if d == &vec![Value::Str("x".into())])
+            );
+        }
+        assert_eq!(
+            v.get("shapedirs").unwrap().as_array().unwrap().shape,
+            vec![60, 3, 4]
+        );
+        assert_eq!(v.get("bs_style"), Some(&Value::Str("lbs".into())));
+        let masks = read(std::path::Path::new(
+            "tests/data/chumpy/generic_masks_p0.pkl",
+        ))
+        .unwrap();
+        let ring = masks
+            .get("lip_outside_ring_lower")
+            .unwrap()
+            .as_array()
+            .unwrap();
+        assert_eq!(ring.data, (15..30).map(|i| i as f64).collect::<Vec<_>>());
     }
 
     #[test]

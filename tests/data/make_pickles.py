@@ -47,6 +47,15 @@ model = {
     "weights": [0.25, 0.75],
     "scalar": np.float64(2.5),
 }
+# Python shares memoised objects: one array under two keys is pickled once and
+# referenced again, and big-endian arrays share one dtype object whose byte
+# order is set (BUILD) after it was memoised.
+shared = np.linspace(0.0, 1.0, 5)
+model["shared_a"] = shared
+model["shared_b"] = shared
+model["big_a"] = np.arange(4, dtype=">f4") + 0.5
+model["big_b"] = np.arange(3, dtype=">i8") * 1000
+model["dirty"] = {"x", "y"}
 for protocol in (2, 4, 5):
     with open(os.path.join(here, f"real-protocol{protocol}.pkl"), "wb") as f:
         pickle.dump(model, f, protocol=protocol)
