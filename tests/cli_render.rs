@@ -168,3 +168,166 @@ fn bench_render_json_rows_carry_size_speed_and_psnr() {
         .iter()
         .any(|k| k["knob"] == "sh_degree"));
 }
+
+/// Signs of the 16 SH basis functions (3DGS order) under the rotation by π
+/// about x, (x, y, z) → (x, −y, −z): each basis polynomial is even or odd in
+/// (y, z).
+const SH_SIGNS_UNDER_X_FLIP: [f32; 16] = [
+    1.0, -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, -1.0, 1.0, -1.0, 1.0,
+];
+
+/// The scene as a COLMAP/INRIA capture would hold it: y down, z away.
+fn y_down(scene: &SplatScene) -> SplatScene {
+    let flip = Quat::from_rotation_x(std::f32::consts::PI);
+    let mut out = SplatScene::with_degree(scene.sh_degree);
+    for i in 0..scene.len() {
+        let sh: Vec<f32> = scene
+            .sh_of(i)
+            .iter()
+            .enumerate()
+            .map(|(k, c)| c * SH_SIGNS_UNDER_X_FLIP[k / 3])
+            .collect();
+        out.push(
+            flip * scene.position[i],
+            flip * scene.rotation[i],
+            scene.scale[i],
+            scene.opacity[i],
+            &sh,
+        );
+    }
+    out
+}
+
+fn render_ply(ply: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> RgbImage {
+    let mut args = vec![
+        "render",
+        "--ply",
+        ply.to_str().unwrap(),
+        "--size",
+        "120x90",
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    let o = visage(&args);
+    assert!(
+        o.status.success(),
+        "{extra:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    RgbImage::load_png(out).unwrap()
+}
+
+/// A trained-looking scene with two floaters 24 units away renders framed on
+/// the subject (as without the floaters) and matches the reference; the same
+/// scene stored y-down renders the same with `--up -y`.
+#[test]
+fn scenes_with_floaters_render_framed_and_y_down_scenes_upright() {
+    let head = temp("head.ply");
+    let o = visage(&[
+        "export",
+        "--recipe",
+        "recipes/three-sources.toml",
+        "--gaussians-per-avatar",
+        "11000",
+        "--format",
+        "ply",
+        "-o",
+        head.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let clean = visage::io::ply::read_splat_ply(&head).unwrap();
+    let mut floaters = clean.clone();
+    let sh = vec![0.2f32; floaters.sh_stride()];
+    floaters.push(
+        Vec3::new(24.0, 1.0, -3.0),
+        Quat::IDENTITY,
+        Vec3::splat(0.5),
+        0.9,
+        &sh,
+    );
+    floaters.push(
+        Vec3::new(-5.0, -24.0, 2.0),
+        Quat::IDENTITY,
+        Vec3::splat(0.5),
+        0.9,
+        &sh,
+    );
+    let (with_floaters, flipped) = (temp("floaters.ply"), temp("y-down.ply"));
+    write_splat_ply(&with_floaters, &floaters).unwrap();
+    write_splat_ply(&flipped, &y_down(&floaters)).unwrap();
+
+    let png = temp("framed.png");
+    let framed = render_ply(&with_floaters, &png, &[]);
+    let reference = render_ply(&with_floaters, &png, &["--reference"]);
+    let without = render_ply(&head, &png, &[]);
+    assert!(
+        psnr(&framed, &reference).unwrap() >= 40.0,
+        "matches the reference"
+    );
+    assert!(
+        psnr(&framed, &without).unwrap() >= 40.0,
+        "framed as if the floaters were not there"
+    );
+    let lit = framed
+        .pixels
+        .chunks(3)
+        .filter(|p| p.iter().any(|&v| v > 20))
+        .count();
+    assert!(
+        lit * 8 > 120 * 90,
+        "the head fills the frame ({lit} pixels lit)"
+    );
+
+    let upright = render_ply(&flipped, &png, &["--up", "-y"]);
+    assert!(
+        psnr(&upright, &framed).unwrap() >= 40.0,
+        "--up -y shows a y-down capture upright"
+    );
+    let upside_down = render_ply(&flipped, &png, &[]);
+    assert!(
+        psnr(&upside_down, &framed).unwrap() < 20.0,
+        "without --up it is upside down"
+    );
+
+    // Explicit camera flags replace the framing.
+    let far = render_ply(
+        &with_floaters,
+        &png,
+        &["--radius", "30", "--target", "0,0,0", "--fov", "40"],
+    );
+    let far_lit = far
+        .pixels
+        .chunks(3)
+        .filter(|p| p.iter().any(|&v| v > 20))
+        .count();
+    assert!(
+        far_lit * 10 < lit,
+        "a far camera shows a small head ({far_lit} vs {lit})"
+    );
+    for (flag, value, needle) in [
+        ("--up", "sideways", "--up: up axis"),
+        ("--radius", "-1", "--radius: radius"),
+        ("--target", "1,2", "--target: target"),
+        ("--fov", "0", "--fov: field of view"),
+    ] {
+        let o = visage(&[
+            "render",
+            "--ply",
+            head.to_str().unwrap(),
+            flag,
+            value,
+            "-o",
+            png.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(
+            err.contains(needle) && err.trim().lines().count() == 1,
+            "{err}"
+        );
+    }
+    for p in [head, with_floaters, flipped, png] {
+        std::fs::remove_file(p).ok();
+    }
+}

@@ -655,3 +655,43 @@ fn flame_models_pickled_by_real_chumpy_load() {
     );
     assert_eq!(small.shape_basis.len(), 4);
 }
+
+/// Without a recipe, `render` and `bench render` use the folder database's own
+/// first source (no built-in names).
+#[test]
+fn render_and_bench_default_to_the_first_source_of_a_folder_database() {
+    let f = fixtures();
+    let png = temp("default.png");
+    succeed_on_fixtures(
+        vec![
+            "render".into(),
+            "--size".into(),
+            "48x36".into(),
+            "-o".into(),
+            png.display().to_string(),
+        ],
+        f,
+    );
+    let image = visage::render::image::RgbImage::load_png(&png).unwrap();
+    assert!(image.pixels.iter().any(|&v| v > 30), "the source is drawn");
+    let mut args: Vec<String> = [
+        "bench",
+        "render",
+        "--sizes",
+        "32x24",
+        "--renderers",
+        "cpu",
+        "--iterations",
+        "1",
+        "--warmup",
+        "0",
+        "--no-knobs",
+        "--json",
+    ]
+    .map(String::from)
+    .to_vec();
+    args.extend(db_args(f));
+    let report = ok_json(args);
+    assert!(report.to_string().contains("psnr"), "{report}");
+    std::fs::remove_file(png).ok();
+}

@@ -161,12 +161,25 @@ fn edit_undo_and_quit_in_a_real_terminal() {
 #[test]
 fn sigterm_restores_the_terminal() {
     let tmux = Tmux::new("term");
-    let status = temp("term-status");
+    let (status, record) = (temp("term-status"), temp("term-journal.vsg"));
     std::fs::remove_file(&status).ok();
-    tmux.start(&editor_command("", &status));
+    std::fs::remove_file(&record).ok();
+    // Camera flags start the editor there, journalled as a set-camera command.
+    tmux.start(&editor_command(
+        &format!(
+            "--radius 3.25 --fov 9 --yaw -20 --target 0,-0.03,0 --record {}",
+            record.display()
+        ),
+        &status,
+    ));
     tmux.wait_for("the editor", Duration::from_secs(60), |s| {
-        s.contains("composite")
+        s.contains("composite") && s.contains("yaw -20° pitch 0° r 3.25 fov 9.0°")
     });
+    let journal = wait_file(&record, Duration::from_secs(5));
+    assert!(
+        journal.contains("0 set-camera yaw=-20 radius=3.25 fov=9 target=0,-0.03,0"),
+        "{journal}"
+    );
     let shell = tmux.cmd(&["display-message", "-p", "#{pane_pid}"]);
     let children = Command::new("pgrep")
         .args(["-P", shell.trim()])
@@ -185,4 +198,5 @@ fn sigterm_restores_the_terminal() {
     let s = tmux.screen();
     assert!(!s.contains("composite"), "alternate screen left:\n{s}");
     std::fs::remove_file(&status).ok();
+    std::fs::remove_file(&record).ok();
 }

@@ -9,7 +9,7 @@ use clap::Args;
 use serde_json::{json, Value};
 
 use super::bench::summarize;
-use super::compose::{build, build_recipe, Built};
+use super::compose::{build, build_from, Built};
 use super::render::parse_size;
 use super::DbArgs;
 use crate::compose::engine::PosedMesh;
@@ -53,7 +53,26 @@ pub struct RenderBenchArgs {
     json: bool,
 }
 
-/// The composite benchmarked when no recipe is given.
+/// The composite benchmarked when no recipe is given: the built-in benchmark
+/// composite where the database has its sources, else the database's first
+/// source animated by the first motion (its own, for a folder database).
+pub fn bench_recipe_for(db: &crate::avatar::database::Database) -> Recipe {
+    let builtin = default_bench_recipe();
+    if builtin.resolve(db).is_ok() {
+        return builtin;
+    }
+    let first = &db.sources[0].name;
+    let mut recipe = Recipe::unedited(first);
+    recipe.animation.motion = if db.motion_index(first).is_some() {
+        first.clone()
+    } else {
+        db.motions.first().map_or("rest".into(), |m| m.name.clone())
+    };
+    recipe
+}
+
+/// The built-in database's benchmark composite (ada with jomo's eyes, bram's
+/// nose and ines's mouth, shapes blended, crossfade + skin correction).
 pub fn default_bench_recipe() -> Recipe {
     let mut r = Recipe::unedited("ada");
     let edit = |src: &str, with: &[(&str, f64)]| GroupEdit {
@@ -167,7 +186,7 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
     }
     let built = match &args.recipe {
         Some(path) => build(&args.db, path, Some(0))?,
-        None => build_recipe(&args.db, &default_bench_recipe(), Some(0))?,
+        None => build_from(&args.db, Some(0), bench_recipe_for)?,
     };
     let scene = built.engine.scene(&built.composite, &built.posed);
     let orbit = built.composite.recipe.camera;

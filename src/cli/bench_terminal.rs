@@ -13,7 +13,7 @@ use ratatui::{Terminal, TerminalOptions, Viewport};
 use serde_json::{json, Value};
 
 use super::bench::summarize;
-use super::bench_render::default_bench_recipe;
+use super::bench_render::bench_recipe_for;
 use super::DbArgs;
 use crate::compose::engine::Engine;
 use crate::error::{Error, Result};
@@ -98,11 +98,7 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
     }
     let (db, _) = args.db.load()?;
     let engine = Engine::new(db)?;
-    let mut recipe = default_bench_recipe();
-    if recipe.resolve(engine.database()).is_err() {
-        recipe = crate::compose::recipe::Recipe::unedited(&engine.database().sources[0].name);
-        recipe.animation.motion = "talk".into();
-    }
+    let recipe = bench_recipe_for(engine.database());
     let mut bench = Workbench::new(engine, args.renderer)?;
     let device = bench.renderer_description();
     let mut rows = Vec::new();

@@ -80,21 +80,27 @@ pub fn build(
     frame: Option<usize>,
 ) -> Result<Built> {
     let recipe = Recipe::load(recipe_path)?;
-    build_with(db_args, &recipe, frame, Some(recipe_path))
+    build_with(db_args, |_| recipe, frame, Some(recipe_path))
 }
 
-/// Loads the database, builds the composite of `recipe` and poses `frame`.
-pub fn build_recipe(db_args: &DbArgs, recipe: &Recipe, frame: Option<usize>) -> Result<Built> {
-    build_with(db_args, recipe, frame, None)
+/// Loads the database, builds the composite of the recipe `make` chooses for
+/// it (defaults that depend on the database's sources) and poses `frame`.
+pub fn build_from(
+    db_args: &DbArgs,
+    frame: Option<usize>,
+    make: impl FnOnce(&crate::avatar::database::Database) -> Recipe,
+) -> Result<Built> {
+    build_with(db_args, make, frame, None)
 }
 
 fn build_with(
     db_args: &DbArgs,
-    recipe: &Recipe,
+    make: impl FnOnce(&crate::avatar::database::Database) -> Recipe,
     frame: Option<usize>,
     file: Option<&std::path::Path>,
 ) -> Result<Built> {
     let (db, db_time) = db_args.load()?;
+    let recipe = make(&db);
     let resolved = recipe.resolve(&db).map_err(|e| match file {
         Some(path) => Error::input(format!("{}: {e}", path.display())),
         None => e,

@@ -4,10 +4,12 @@ use std::path::PathBuf;
 
 use clap::Args;
 
+use super::camera::CameraArgs;
 use super::DbArgs;
 use crate::error::{Error, Result};
 use crate::render::Backend;
 use crate::tui::app::{run_editor, EditOptions};
+use crate::tui::command::Command;
 use crate::tui::graphics::GraphicsChoice;
 use crate::tui::replay::replay;
 
@@ -31,11 +33,15 @@ pub struct EditArgs {
     /// Renderer: auto (hardware GPU, else CPU), gpu (wgpu on any adapter) or cpu.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     renderer: Backend,
+    /// Starting camera (run as a `set-camera` command, so sessions record it).
+    #[command(flatten)]
+    camera: CameraArgs,
 }
 
 /// Runs the editor.
 pub fn run_edit(args: &EditArgs) -> Result<()> {
     use std::io::IsTerminal;
+    let overrides = args.camera.overrides()?;
     if !std::io::stdout().is_terminal() || !std::io::stdin().is_terminal() {
         return Err(Error::input(
             "the editor needs a terminal; for scripts use 'visage replay SESSION' or 'visage render'",
@@ -48,6 +54,11 @@ pub fn run_edit(args: &EditArgs) -> Result<()> {
         keymap: args.keymap.clone(),
         graphics: args.graphics,
         renderer: args.renderer,
+        initial: if overrides.is_empty() {
+            Vec::new()
+        } else {
+            vec![Command::SetCamera(overrides)]
+        },
     })
 }
 

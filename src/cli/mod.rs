@@ -4,6 +4,7 @@
 mod bench;
 mod bench_render;
 mod bench_terminal;
+mod camera;
 mod compose;
 mod db;
 mod edit;

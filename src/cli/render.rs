@@ -5,12 +5,13 @@ use std::time::Instant;
 
 use clap::Args;
 
-use super::compose::{build, build_recipe, Built};
+use super::camera::CameraArgs;
+use super::compose::{build, build_from, Built};
 use super::DbArgs;
 use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
 use crate::io::ply::read_splat_ply;
-use crate::render::camera::Orbit;
+use crate::render::camera::{CameraOverrides, Orbit};
 use crate::render::reference::{render_reference, RenderSettings};
 use crate::render::scene::SplatScene;
 use crate::render::{Backend, SplatRenderer};
@@ -29,12 +30,10 @@ pub struct RenderArgs {
     /// Frame of the recipe's motion.
     #[arg(long, value_name = "N")]
     frame: Option<usize>,
-    /// Camera yaw in degrees (overrides the recipe's camera).
-    #[arg(long, allow_negative_numbers = true)]
-    yaw: Option<f32>,
-    /// Camera pitch in degrees (overrides the recipe's camera).
-    #[arg(long, allow_negative_numbers = true)]
-    pitch: Option<f32>,
+    /// Camera settings (each replaces that part of the recipe's camera or of
+    /// the framing of a --ply scene).
+    #[command(flatten)]
+    camera: CameraArgs,
     /// Image size as WxH.
     #[arg(long, default_value = "640x480", value_parser = parse_size)]
     size: (u32, u32),
@@ -130,6 +129,28 @@ fn render_sequence(
     Ok(())
 }
 
+/// The camera that frames a world-space scene: a 40° field of view (or the
+/// one given) from the front, around the subject without its floaters
+/// ([`SplatScene::robust_bounds`]), with the up axis given. None for a scene
+/// without a finite mean.
+pub fn frame_scene(scene: &SplatScene, overrides: &CameraOverrides) -> Option<Orbit> {
+    let (lo, hi) = scene.robust_bounds()?;
+    let start = Orbit {
+        fov_deg: overrides.fov_deg.unwrap_or(40.0),
+        up: overrides.up.unwrap_or_default(),
+        ..Orbit::STUDY
+    };
+    Some(start.framing(lo, hi))
+}
+
+/// The database's first source as it is, in the rest pose (what `render`
+/// shows without a recipe).
+fn build_first_source(db: &super::DbArgs, frame: Option<usize>) -> Result<Built> {
+    build_from(db, frame, |database| {
+        Recipe::unedited(&database.sources[0].name)
+    })
+}
+
 /// What a still shows: a world-space PLY scene, or a posed composite.
 enum Subject {
     Ply(SplatScene),
@@ -138,31 +159,21 @@ enum Subject {
 
 /// Runs `visage render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
-    let (subject, mut orbit) = if let Some(ply) = &args.ply {
+    let overrides = args.camera.overrides()?;
+    let (subject, orbit) = if let Some(ply) = &args.ply {
         let scene = read_splat_ply(ply)?;
-        let (lo, hi) = scene
-            .bounds()
+        let orbit = frame_scene(&scene, &overrides)
             .ok_or_else(|| Error::input(format!("{} holds no Gaussians", ply.display())))?;
-        let orbit = Orbit {
-            fov_deg: 40.0,
-            ..Orbit::STUDY
-        }
-        .framing(lo, hi);
         (Subject::Ply(scene), orbit)
     } else {
         let built = match &args.recipe {
             Some(path) => build(&args.db, path, args.frame)?,
-            None => build_recipe(&args.db, &Recipe::unedited("ada"), args.frame)?,
+            None => build_first_source(&args.db, args.frame)?,
         };
         let orbit = built.composite.recipe.camera;
         (Subject::Composite(Box::new(built)), orbit)
     };
-    if let Some(yaw) = args.yaw {
-        orbit.yaw_deg = yaw;
-    }
-    if let Some(pitch) = args.pitch {
-        orbit.pitch_deg = pitch;
-    }
+    let orbit = overrides.apply(orbit);
     let camera = orbit.camera(args.size.0, args.size.1);
     let settings = RenderSettings::default();
     if let Some((start, end)) = args.frames {

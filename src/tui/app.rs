@@ -48,6 +48,9 @@ pub struct EditOptions {
     pub graphics: GraphicsChoice,
     /// Renderer.
     pub renderer: Backend,
+    /// Commands run (and journalled) before the first key, e.g. the camera
+    /// the command line asked for.
+    pub initial: Vec<Command>,
 }
 
 /// Input within this long keeps the view "moving" (low resolution allowed).
@@ -301,6 +304,9 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
         last_exact: false,
         edit_time: None,
     };
+    for command in options.initial {
+        app.run(command);
+    }
     let result = app.event_loop(&stop);
     {
         let (lock, cv) = &*app.mailbox;

@@ -6,6 +6,7 @@ use std::fmt;
 
 use crate::compose::recipe::{AnimationMode, ColourCorrection, Smoothing};
 use crate::model::regions::Group;
+use crate::render::camera::CameraOverrides;
 
 /// A joint the animation panel can offset.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -108,6 +109,8 @@ pub enum Command {
     CameraReset,
     /// Toggle the thesis study limits (±45° yaw, ±15° pitch, radius 2.5).
     CameraStudy,
+    /// Set parts of the camera (target, radius, field of view, up axis, angles).
+    SetCamera(CameraOverrides),
     /// Multiply the debug Gaussian scale.
     DebugScale(f32),
     /// Toggle the mesh overlay.
@@ -194,6 +197,11 @@ pub const COMMANDS: &[(&str, &str, &str)] = &[
     ("zoom", "FACTOR", "multiply the camera distance"),
     ("camera-reset", "", "back to the default camera"),
     ("camera-study", "", "toggle the thesis study camera limits"),
+    (
+        "set-camera",
+        "yaw=D pitch=D radius=R fov=D target=X,Y,Z up=+y|-y|+z|-z",
+        "set parts of the camera",
+    ),
     (
         "debug-scale",
         "FACTOR",
@@ -369,6 +377,7 @@ impl Command {
             }
             "camera-reset" => Command::CameraReset,
             "camera-study" => Command::CameraStudy,
+            "set-camera" => Command::SetCamera(CameraOverrides::parse(it.by_ref())?),
             "debug-scale" => {
                 let f: f64 = finite(number(arg(), "scale factor")?, "the factor")?;
                 if f <= 0.0 {
@@ -467,6 +476,7 @@ impl fmt::Display for Command {
             Command::Zoom(z) => write!(f, "zoom {z}"),
             Command::CameraReset => write!(f, "camera-reset"),
             Command::CameraStudy => write!(f, "camera-study"),
+            Command::SetCamera(o) => write!(f, "set-camera {o}"),
             Command::DebugScale(s) => write!(f, "debug-scale {s}"),
             Command::ToggleMesh => write!(f, "toggle-mesh"),
             Command::ToggleHighlight => write!(f, "toggle-highlight"),
@@ -530,6 +540,7 @@ mod tests {
             "zoom 0.9",
             "camera-reset",
             "camera-study",
+            "set-camera target=0,0.1,-0.25 radius=3 fov=20 up=-y yaw=-30 pitch=5",
             "debug-scale 0.5",
             "toggle-mesh",
             "toggle-highlight",
@@ -563,6 +574,9 @@ mod tests {
             ("pose knee 0 0 0", "jaw, neck or eyes"),
             ("undo now", "unexpected argument"),
             ("shape-add NaN", "finite"),
+            ("set-camera", "no camera setting"),
+            ("set-camera radius=-1", "positive"),
+            ("set-camera up=sideways", "+y, -y"),
         ] {
             let e = Command::parse(line).unwrap_err();
             assert!(e.contains(needle), "{line}: {e}");

@@ -360,6 +360,10 @@ impl EditorState {
                     if self.study { "on" } else { "off" }
                 );
             }
+            Command::SetCamera(o) => {
+                self.recipe.camera = o.apply(self.recipe.camera);
+                self.clamp_study();
+            }
             Command::DebugScale(f) => self.debug.scale = (self.debug.scale * f).clamp(0.01, 10.0),
             Command::ToggleMesh => self.debug.mesh = !self.debug.mesh,
             Command::ToggleHighlight => self.debug.highlight = !self.debug.highlight,
