@@ -33,7 +33,7 @@ impl fmt::Display for Error {
             Error::Input(m) | Error::CheckFailed(m) => m,
         };
         // Always one line: messages may quote file contents.
-        f.write_str(&crate::io::printable(message).replace('\n', " "))
+        f.write_str(&crate::text::printable(message).replace('\n', " "))
     }
 }
 

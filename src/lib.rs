@@ -13,4 +13,6 @@ pub mod error;
 pub mod io;
 pub mod model;
 pub mod render;
+pub mod scene;
+pub mod text;
 pub mod tui;

@@ -5,7 +5,7 @@ use std::process::Command;
 use glam::{Quat, Vec3};
 use visage::io::ply::write_splat_ply;
 use visage::render::image::{psnr, RgbImage};
-use visage::render::scene::SplatScene;
+use visage::scene::splats::SplatScene;
 
 fn visage(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_visage"))

@@ -17,7 +17,7 @@ use visage::compose::state_hash;
 use visage::model::builtin::build_head;
 use visage::model::head::{Joint, Pose};
 use visage::model::regions::{Group, Region};
-use visage::model::synthetic::{builtin_database, SyntheticOptions};
+use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
 
 fn small_db() -> Database {
     builtin_database(

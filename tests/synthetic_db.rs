@@ -3,7 +3,7 @@
 use visage::avatar::binding::triangle_frames;
 use visage::avatar::database::Database;
 use visage::model::builtin::build_head;
-use visage::model::synthetic::{builtin_database, SyntheticOptions};
+use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
 
 fn db(seed: u64, per_avatar: usize, sources: usize) -> Database {
     builtin_database(

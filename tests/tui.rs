@@ -11,7 +11,7 @@ use ratatui::style::Color;
 use ratatui::Terminal;
 use visage::compose::engine::Engine;
 use visage::model::builtin::build_head;
-use visage::model::synthetic::{builtin_database, SyntheticOptions};
+use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
 use visage::render::image::{psnr, RgbImage};
 use visage::render::Backend;
 use visage::tui::command::Command;

@@ -16,7 +16,7 @@ use crate::compose::recipe::{
 };
 use crate::error::{Error, Result};
 use crate::model::regions::Group;
-use crate::render::camera::Orbit;
+use crate::scene::camera::Orbit;
 
 /// Arguments of `visage bench`.
 #[derive(Args, Debug, Clone)]

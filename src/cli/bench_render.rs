@@ -15,7 +15,7 @@ use super::DbArgs;
 use crate::compose::engine::PosedMesh;
 use crate::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
 use crate::error::{Error, Result};
-use crate::render::camera::Camera;
+use crate::scene::camera::Camera;
 use crate::render::gpu::StageTimings;
 use crate::render::image::{psnr_report, RgbImage};
 use crate::render::reference::{render_reference, RenderSettings};

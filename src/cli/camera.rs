@@ -4,7 +4,7 @@
 use clap::Args;
 
 use crate::error::{Error, Result};
-use crate::render::camera::CameraOverrides;
+use crate::scene::camera::CameraOverrides;
 
 /// `--yaw`, `--pitch`, `--target`, `--radius`, `--fov` and `--up`.
 #[derive(Args, Debug, Clone, Default)]

@@ -7,7 +7,7 @@ use clap::Args;
 use crate::avatar::database::Database;
 use crate::error::{Error, Result};
 use crate::model::builtin::build_head;
-use crate::model::synthetic::{builtin_database, SyntheticOptions, MAX_SOURCES};
+use crate::avatar::synthetic::{builtin_database, SyntheticOptions, MAX_SOURCES};
 
 /// Most Gaussians per built-in avatar accepted (bounds memory: ~240 bytes each).
 const MAX_GAUSSIANS_PER_AVATAR: usize = 2_000_000;

@@ -92,7 +92,7 @@ pub fn run_replay(args: &ReplayArgs) -> Result<()> {
             report.commands, report.ticks, report.state_hash
         );
         for f in &report.failures {
-            println!("  failed: {}", crate::io::printable(f));
+            println!("  failed: {}", crate::text::printable(f));
         }
         for c in &report.checks {
             println!(

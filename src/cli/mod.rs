@@ -101,7 +101,7 @@ fn usage_error(e: clap::Error) -> ExitCode {
         .trim_start_matches("error: ");
     eprintln!(
         "visage: {} (see visage --help)",
-        crate::io::printable(first)
+        crate::text::printable(first)
     );
     ExitCode::from(2)
 }

@@ -11,9 +11,9 @@ use super::DbArgs;
 use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
 use crate::io::ply::read_splat_ply;
-use crate::render::camera::{CameraOverrides, Orbit};
+use crate::scene::camera::{CameraOverrides, Orbit};
 use crate::render::reference::{render_reference, RenderSettings};
-use crate::render::scene::SplatScene;
+use crate::scene::splats::SplatScene;
 use crate::render::{Backend, SplatRenderer};
 
 /// Arguments of `visage render`.
@@ -88,7 +88,7 @@ pub fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
 fn render_sequence(
     args: &RenderArgs,
     subject: &Subject,
-    camera: &crate::render::camera::Camera,
+    camera: &crate::scene::camera::Camera,
     settings: &RenderSettings,
     start: usize,
     end: usize,

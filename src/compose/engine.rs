@@ -21,7 +21,7 @@ use crate::avatar::gaussians::{logit, sigmoid, GaussianSet};
 use crate::error::Result;
 use crate::model::head::{Joint, Pose};
 use crate::model::regions::Region;
-use crate::render::scene::SplatScene;
+use crate::scene::splats::SplatScene;
 
 /// Precomputed tables of one database.
 pub struct Engine {

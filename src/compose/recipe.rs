@@ -32,7 +32,7 @@ use serde::{Deserialize, Serialize};
 use crate::avatar::database::Database;
 use crate::error::{Error, Result};
 use crate::model::regions::Group;
-use crate::render::camera::Orbit;
+use crate::scene::camera::Orbit;
 
 /// Recipe file format version written by this build.
 pub const RECIPE_VERSION: u32 = 1;
@@ -260,7 +260,7 @@ impl Recipe {
             db.source_index(name).ok_or_else(|| {
                 Error::input(format!(
                     "unknown source '{}' in {what} (known: {})",
-                    crate::io::printable(name),
+                    crate::text::printable(name),
                     db.sources
                         .iter()
                         .map(|s| s.name.as_str())
@@ -281,7 +281,7 @@ impl Recipe {
             let group = Group::from_name(name).ok_or_else(|| {
                 Error::input(format!(
                     "unknown group '{}' (groups: {})",
-                    crate::io::printable(name),
+                    crate::text::printable(name),
                     Group::ALL.map(Group::name).join(", ")
                 ))
             })?;
@@ -296,7 +296,7 @@ impl Recipe {
                 if !w.is_finite() || w < 0.0 {
                     return Err(Error::input(format!(
                         "shape weight {w} for '{}' in group {name} must be a finite number ≥ 0",
-                        crate::io::printable(src)
+                        crate::text::printable(src)
                     )));
                 }
                 row[f] += w;
@@ -322,7 +322,7 @@ impl Recipe {
             name => Some(db.motion_index(name).ok_or_else(|| {
                 Error::input(format!(
                     "unknown motion '{}' (motions: rest, {})",
-                    crate::io::printable(name),
+                    crate::text::printable(name),
                     db.motions
                         .iter()
                         .map(|m| m.name.as_str())

@@ -68,7 +68,7 @@ pub fn parse_bound_ply(bytes: &[u8], triangles: usize) -> Result<GaussianSet, St
         if !(b >= 0.0 && b.fract() == 0.0 && (b as usize) < triangles) {
             return Err(format!(
                 "Gaussian {i} is bound to triangle {}, but the mesh has {triangles} triangles",
-                crate::io::id_text(b)
+                crate::text::id_text(b)
             ));
         }
         for ch in 0..3 {

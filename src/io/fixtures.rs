@@ -17,7 +17,7 @@ use crate::model::builtin::build_head;
 use crate::model::head::{HeadModel, JOINT_COUNT};
 use crate::model::motion::{builtin_motion, BUILTIN_MOTIONS};
 use crate::model::regions::Region;
-use crate::model::synthetic::{builtin_database, SyntheticOptions};
+use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
 
 /// Where the fixture files went.
 #[derive(Clone, Debug)]

@@ -88,7 +88,7 @@ fn index(x: f64, limit: usize, what: &str) -> Result<u32, String> {
     } else {
         Err(format!(
             "{what} refers to vertex {}, but there are {limit}",
-            crate::io::id_text(x)
+            crate::text::id_text(x)
         ))
     }
 }
@@ -108,7 +108,7 @@ pub fn read_masks(path: &Path, vertices: usize) -> Result<Masks, String> {
         let Value::Str(name) = k else { continue };
         let a = v
             .as_array()
-            .map_err(|e| format!("{file} mask '{}': {e}", crate::io::printable(&name)))?;
+            .map_err(|e| format!("{file} mask '{}': {e}", crate::text::printable(&name)))?;
         let ids = a
             .data
             .iter()
@@ -116,7 +116,7 @@ pub fn read_masks(path: &Path, vertices: usize) -> Result<Masks, String> {
                 index(
                     x,
                     vertices,
-                    &format!("{file} mask '{}'", crate::io::printable(&name)),
+                    &format!("{file} mask '{}'", crate::text::printable(&name)),
                 )
             })
             .collect::<Result<Vec<_>, _>>()?;

@@ -49,7 +49,7 @@ pub fn avatar_folders(dir: &Path) -> Result<Vec<(String, PathBuf)>, String> {
     let is_avatar =
         |p: &Path| p.join("point_cloud.ply").is_file() && p.join("flame_param.npz").is_file();
     let name_of = |p: &Path| {
-        crate::io::printable(
+        crate::text::printable(
             &p.file_name()
                 .map(|n| n.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "avatar".into()),

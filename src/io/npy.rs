@@ -57,7 +57,7 @@ fn parse_header(text: &str) -> Result<(Dtype, bool, bool, Vec<usize>), String> {
     let dtype = Dtype::parse(code).ok_or_else(|| {
         format!(
             "npy dtype '{}' is not supported",
-            crate::io::printable(descr)
+            crate::text::printable(descr)
         )
     })?;
     let fortran = value_of("fortran_order")?.starts_with("True");
@@ -75,7 +75,7 @@ fn parse_header(text: &str) -> Result<(Dtype, bool, bool, Vec<usize>), String> {
             s.parse::<usize>().map_err(|_| {
                 format!(
                     "npy shape entry '{}' is not a size",
-                    crate::io::printable(s)
+                    crate::text::printable(s)
                 )
             })
         })
@@ -185,7 +185,7 @@ fn parse_npz_within(bytes: &[u8], floor: u64) -> Result<BTreeMap<String, NdArray
             .map_err(|e| {
                 format!(
                     "cannot inflate .npz member '{}': {e}",
-                    crate::io::printable(&name)
+                    crate::text::printable(&name)
                 )
             })?;
         used += data.len() as u64;
@@ -196,7 +196,7 @@ fn parse_npz_within(bytes: &[u8], floor: u64) -> Result<BTreeMap<String, NdArray
             ));
         }
         let array =
-            parse_npy(&data).map_err(|e| format!("'{}': {e}", crate::io::printable(&name)))?;
+            parse_npy(&data).map_err(|e| format!("'{}': {e}", crate::text::printable(&name)))?;
         out.insert(name, array);
     }
     Ok(out)

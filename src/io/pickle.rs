@@ -571,8 +571,8 @@ fn allowed(module: &str, name: &str) -> Result<Value, String> {
         .ok_or_else(|| {
             format!(
                 "pickle refers to '{}.{}', which visage does not load (only numpy arrays, scipy sparse matrices, chumpy arrays and plain data)",
-                crate::io::printable(module),
-                crate::io::printable(name)
+                crate::text::printable(module),
+                crate::text::printable(name)
             )
         })
 }
@@ -619,7 +619,7 @@ fn call(callable: Value, args: Vec<Value>) -> Result<Value, String> {
             let dtype = Dtype::parse(bare).ok_or_else(|| {
                 format!(
                     "numpy dtype '{}' is not supported",
-                    crate::io::printable(&code)
+                    crate::text::printable(&code)
                 )
             })?;
             Ok(Value::Dtype(dtype, big))

@@ -11,7 +11,7 @@ use std::path::Path;
 use glam::{Quat, Vec3};
 
 use crate::avatar::gaussians::{logit, sh_coefficients, sh_degree_for, sigmoid};
-use crate::render::scene::SplatScene;
+use crate::scene::splats::SplatScene;
 
 /// Storage format of a PLY body.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -245,7 +245,7 @@ pub fn read_element(bytes: &[u8], wanted: &str) -> Result<Columns, String> {
             return Err(format!(
                 "PLY header claims {} {} rows, more than the file's {} bytes can hold",
                 element.count,
-                crate::io::printable(&element.name),
+                crate::text::printable(&element.name),
                 bytes.len()
             ));
         }
@@ -271,7 +271,7 @@ pub fn read_element(bytes: &[u8], wanted: &str) -> Result<Columns, String> {
                 let truncated = || {
                     format!(
                         "PLY body ends inside {} row {row}",
-                        crate::io::printable(&element.name)
+                        crate::text::printable(&element.name)
                     )
                 };
                 let items = match (p.list_count, &mut text_tokens) {
@@ -313,7 +313,7 @@ pub fn read_element(bytes: &[u8], wanted: &str) -> Result<Columns, String> {
                         t.parse::<f64>().map_err(|_| {
                             format!(
                                 "PLY value '{}' of '{}' is not a number",
-                                crate::io::printable(t),
+                                crate::text::printable(t),
                                 p.name
                             )
                         })?
@@ -334,7 +334,7 @@ pub fn read_element(bytes: &[u8], wanted: &str) -> Result<Columns, String> {
                 if p.list_count.is_none() {
                     out.columns.insert(p.name.clone(), c);
                 } else {
-                    out.lists.push(crate::io::printable(&p.name));
+                    out.lists.push(crate::text::printable(&p.name));
                 }
             }
             return Ok(out);

@@ -1,10 +1,9 @@
 //! The head model: regions, the morphable model and its forward pass, the
-//! built-in procedural head, motions and the synthetic source database.
+//! built-in procedural head and its motions.
 
 pub mod builtin;
 pub mod geometry;
 pub mod head;
 pub mod motion;
 pub mod regions;
-pub mod synthetic;
 pub mod topology;

@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::camera::Camera;
+use crate::scene::camera::Camera;
 use super::gpu::StageTimings;
 use super::image::{quantize, RgbImage};
 use super::projection::{ProjectionCamera, MAX_ALPHA, MIN_ALPHA};

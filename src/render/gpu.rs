@@ -12,7 +12,7 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
-use super::camera::Camera;
+use crate::scene::camera::Camera;
 use super::gpu_binning::GpuBinning;
 use super::image::RgbImage;
 use super::reference::RenderSettings;

@@ -1,7 +1,6 @@
 //! Rendering: cameras, projection conventions, the CPU reference splat renderer
 //! (the accuracy oracle), and the CPU mesh preview.
 
-pub mod camera;
 pub mod cpu;
 pub mod gpu;
 mod gpu_binning;
@@ -9,7 +8,6 @@ pub mod image;
 pub mod mesh_preview;
 pub mod projection;
 pub mod reference;
-pub mod scene;
 pub mod sh;
 pub mod tiles;
 
@@ -73,7 +71,7 @@ impl SplatRenderer {
     }
 
     /// Uploads a world-space scene (render it with the identity frame).
-    pub fn set_world_scene(&mut self, scene: &scene::SplatScene) -> Result<()> {
+    pub fn set_world_scene(&mut self, scene: &crate::scene::splats::SplatScene) -> Result<()> {
         self.set_gaussians(&scene.as_bound_to_identity())
     }
 
@@ -81,7 +79,7 @@ impl SplatRenderer {
     pub fn render(
         &mut self,
         frames: &[TriangleFrame],
-        camera: &camera::Camera,
+        camera: &crate::scene::camera::Camera,
         settings: &reference::RenderSettings,
     ) -> Result<image::RgbImage> {
         match self {
@@ -93,10 +91,10 @@ impl SplatRenderer {
     /// Renders a world-space scene uploaded with [`SplatRenderer::set_world_scene`].
     pub fn render_world(
         &mut self,
-        camera: &camera::Camera,
+        camera: &crate::scene::camera::Camera,
         settings: &reference::RenderSettings,
     ) -> Result<image::RgbImage> {
-        self.render(&[scene::IDENTITY_FRAME], camera, settings)
+        self.render(&[crate::scene::splats::IDENTITY_FRAME], camera, settings)
     }
 
     /// Makes the GPU renderer wait after each stage so its stage timings are

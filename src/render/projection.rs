@@ -10,7 +10,7 @@
 
 use glam::{DMat3, DVec3, Quat, Vec3};
 
-use super::camera::Camera;
+use crate::scene::camera::Camera;
 
 /// Dilation added to the 2D covariance (pixels²).
 pub const COVARIANCE_DILATION: f64 = 0.3;

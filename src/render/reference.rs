@@ -3,10 +3,10 @@
 
 use rayon::prelude::*;
 
-use super::camera::Camera;
+use crate::scene::camera::Camera;
 use super::image::RgbImage;
 use super::projection::{ProjectionCamera, Splat2D, MIN_TRANSMITTANCE};
-use super::scene::SplatScene;
+use crate::scene::splats::SplatScene;
 use super::sh::eval_rgb;
 
 /// Settings shared by the renderers.

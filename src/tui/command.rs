@@ -6,7 +6,7 @@ use std::fmt;
 
 use crate::compose::recipe::{AnimationMode, ColourCorrection, Smoothing};
 use crate::model::regions::Group;
-use crate::render::camera::CameraOverrides;
+use crate::scene::camera::CameraOverrides;
 
 /// A joint the animation panel can offset.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -225,7 +225,7 @@ pub const COMMANDS: &[(&str, &str, &str)] = &[
 fn number<T: std::str::FromStr>(s: Option<&str>, what: &str) -> Result<T, String> {
     let s = s.ok_or_else(|| format!("missing {what}"))?;
     s.parse()
-        .map_err(|_| format!("'{}' is not a valid {what}", crate::io::printable(s)))
+        .map_err(|_| format!("'{}' is not a valid {what}", crate::text::printable(s)))
 }
 
 fn finite(x: f64, what: &str) -> Result<f64, String> {
@@ -241,7 +241,7 @@ fn group(s: Option<&str>) -> Result<Group, String> {
     Group::from_name(s).ok_or_else(|| {
         format!(
             "unknown group '{}' (groups: {})",
-            crate::io::printable(s),
+            crate::text::printable(s),
             Group::ALL.map(Group::name).join(", ")
         )
     })
@@ -280,7 +280,7 @@ impl Command {
                 let mut weights = Vec::new();
                 for pair in it.by_ref() {
                     let (src, w) = pair.split_once('=').ok_or_else(|| {
-                        format!("'{}' is not SOURCE=WEIGHT", crate::io::printable(pair))
+                        format!("'{}' is not SOURCE=WEIGHT", crate::text::printable(pair))
                     })?;
                     weights.push((
                         src.to_string(),
@@ -305,7 +305,7 @@ impl Command {
                 Some(o) => {
                     return Err(format!(
                         "smoothing is off, thesis or crossfade, not '{}'",
-                        crate::io::printable(o)
+                        crate::text::printable(o)
                     ))
                 }
             }),
@@ -317,7 +317,7 @@ impl Command {
                 Some(o) => {
                     return Err(format!(
                         "colour is off, thesis or skin, not '{}'",
-                        crate::io::printable(o)
+                        crate::text::printable(o)
                     ))
                 }
             }),
@@ -335,7 +335,7 @@ impl Command {
                 Some(o) => {
                     return Err(format!(
                         "mode is fast or exact, not '{}'",
-                        crate::io::printable(o)
+                        crate::text::printable(o)
                     ))
                 }
             }),
@@ -344,7 +344,7 @@ impl Command {
                 let joint = PoseJoint::parse(j).ok_or_else(|| {
                     format!(
                         "pose takes jaw, neck or eyes, not '{}'",
-                        crate::io::printable(j)
+                        crate::text::printable(j)
                     )
                 })?;
                 let mut v = [0.0f32; 3];
@@ -393,14 +393,14 @@ impl Command {
             other => {
                 return Err(format!(
                     "unknown command '{}' (type ? for help)",
-                    crate::io::printable(other)
+                    crate::text::printable(other)
                 ))
             }
         };
         if let Some(extra) = it.next() {
             return Err(format!(
                 "{name}: unexpected argument '{}'",
-                crate::io::printable(extra)
+                crate::text::printable(extra)
             ));
         }
         Ok(cmd)

@@ -258,7 +258,7 @@ impl Keymap {
             let combo = KeyCombo::parse(key.get_ref()).ok_or_else(|| {
                 Error::input(format!(
                     "keymap {name}:{line}: unknown key '{}' (examples: q, J, ctrl-c, shift-left, f5, space)",
-                    crate::io::printable(key.get_ref())
+                    crate::text::printable(key.get_ref())
                 ))
             })?;
             let line_text = command.get_ref().trim();

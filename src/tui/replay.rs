@@ -29,7 +29,7 @@ pub fn catalog_of(engine: &Engine) -> Catalog {
         sources: db
             .sources
             .iter()
-            .map(|s| crate::io::printable(&s.name))
+            .map(|s| crate::text::printable(&s.name))
             .collect(),
         motions: db
             .motions

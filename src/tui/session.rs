@@ -168,7 +168,7 @@ fn size(text: &str, what: &str, line: usize, name: &str) -> Result<(u32, u32)> {
     let bad = || {
         Error::input(format!(
             "{name}:{line}: {what} must be WxH, not '{}'",
-            crate::io::printable(text)
+            crate::text::printable(text)
         ))
     };
     let (w, h) = text.split_once('x').ok_or_else(bad)?;
@@ -199,7 +199,7 @@ impl Session {
                     n,
                     format!(
                     "session version '{}' is not supported (this build reads {SESSION_VERSION})",
-                    crate::io::printable(&l[15..])
+                    crate::text::printable(&l[15..])
                 ),
                 ))
             }
@@ -214,7 +214,7 @@ impl Session {
             db: "builtin".into(),
             seed: 1,
             gaussians_per_avatar: 50_000,
-            sources: crate::model::synthetic::MAX_SOURCES,
+            sources: crate::avatar::synthetic::MAX_SOURCES,
             flame: None,
             terminal: (120, 40),
             graphics: Protocol::Halfblocks,
@@ -243,13 +243,13 @@ impl Session {
                             let (k, v) = kv.split_once('=').ok_or_else(|| {
                                 err(
                                     n,
-                                    format!("'{}' is not key=value", crate::io::printable(kv)),
+                                    format!("'{}' is not key=value", crate::text::printable(kv)),
                                 )
                             })?;
                             let bad = || {
                                 err(
                                     n,
-                                    format!("bad value '{}' for {k}", crate::io::printable(v)),
+                                    format!("bad value '{}' for {k}", crate::text::printable(v)),
                                 )
                             };
                             match k {
@@ -263,7 +263,7 @@ impl Session {
                                 _ => {
                                     return Err(err(
                                         n,
-                                        format!("unknown db option '{}'", crate::io::printable(k)),
+                                        format!("unknown db option '{}'", crate::text::printable(k)),
                                     ))
                                 }
                             }
@@ -290,7 +290,7 @@ impl Session {
                                 n,
                                 format!(
                                     "unknown graphics protocol '{}'",
-                                    crate::io::printable(rest)
+                                    crate::text::printable(rest)
                                 ),
                             )
                         })?
@@ -299,7 +299,7 @@ impl Session {
                     _ => {
                         return Err(err(
                             n,
-                            format!("unknown header line '{}'", crate::io::printable(l)),
+                            format!("unknown header line '{}'", crate::text::printable(l)),
                         ))
                     }
                 }
@@ -311,7 +311,7 @@ impl Session {
             let tick: u64 = tick.parse().map_err(|_| {
                 err(
                     n,
-                    format!("'{}' is not a tick number", crate::io::printable(tick)),
+                    format!("'{}' is not a tick number", crate::text::printable(tick)),
                 )
             })?;
             if tick < last_tick {
@@ -357,11 +357,11 @@ fn parse_expectation(text: &str) -> std::result::Result<Expectation, String> {
             let mut min_psnr = 40.0;
             for w in words {
                 let v = w.strip_prefix("psnr>=").ok_or_else(|| {
-                    format!("unknown option '{}' (psnr>=DB)", crate::io::printable(w))
+                    format!("unknown option '{}' (psnr>=DB)", crate::text::printable(w))
                 })?;
                 min_psnr = v
                     .parse()
-                    .map_err(|_| format!("'{}' is not a PSNR", crate::io::printable(v)))?;
+                    .map_err(|_| format!("'{}' is not a PSNR", crate::text::printable(v)))?;
             }
             Ok(Expectation::Image { path, min_psnr })
         }

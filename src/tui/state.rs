@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use crate::compose::recipe::{AnimationMode, ColourCorrection, GroupEdit, Recipe, Smoothing};
 use crate::model::regions::Group;
-use crate::render::camera::Orbit;
+use crate::scene::camera::Orbit;
 
 use super::command::{Command, PoseJoint};
 
@@ -23,7 +23,7 @@ impl Catalog {
         self.sources.iter().position(|s| s == name).ok_or_else(|| {
             format!(
                 "unknown source '{}' (sources: {})",
-                crate::io::printable(name),
+                crate::text::printable(name),
                 self.sources.join(", ")
             )
         })
@@ -288,7 +288,7 @@ impl EditorState {
             }
             Command::Motion(m) => {
                 if m != "rest" && !catalog.motions.iter().any(|(n, _)| n == m) {
-                    return Err(format!("unknown motion '{}'", crate::io::printable(m)));
+                    return Err(format!("unknown motion '{}'", crate::text::printable(m)));
                 }
                 self.recipe.animation.motion = m.clone();
                 self.recipe.animation.frame %= catalog.frames(m);

@@ -280,7 +280,7 @@ fn draw_status(frame: &mut Frame, area: Rect, vm: &ViewModel) {
                 vm.keymap.key_for("prompt").unwrap_or_else(|| ":".into()),
                 vm.keymap.key_for("quit").unwrap_or_else(|| "q".into())
             );
-            let status = crate::io::printable(&vm.state.status);
+            let status = crate::text::printable(&vm.state.status);
             let room = (area.width as usize).saturating_sub(hint.len() + 2);
             let status: String = status.chars().take(room).collect();
             Line::from(vec![

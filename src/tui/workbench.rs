@@ -169,7 +169,7 @@ impl Workbench {
 
     fn mesh_view(
         &self,
-        camera: &crate::render::camera::Camera,
+        camera: &crate::scene::camera::Camera,
         request: &FrameRequest,
     ) -> RgbImage {
         let model = &self.engine.database().model;

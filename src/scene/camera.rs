@@ -294,7 +294,7 @@ impl CameraOverrides {
 
     /// Sets one part from its key and text, checking it.
     pub fn set(&mut self, key: &str, value: &str) -> Result<(), String> {
-        let shown = crate::io::printable(value);
+        let shown = crate::text::printable(value);
         let number = |what: &str| -> Result<f32, String> {
             value
                 .trim()
@@ -351,7 +351,7 @@ impl CameraOverrides {
             other => {
                 return Err(format!(
                     "unknown camera setting '{}' (settings: {})",
-                    crate::io::printable(other),
+                    crate::text::printable(other),
                     Self::KEYS.join(", ")
                 ))
             }
@@ -365,7 +365,7 @@ impl CameraOverrides {
         for word in words {
             let (k, v) = word
                 .split_once('=')
-                .ok_or_else(|| format!("'{}' is not KEY=VALUE", crate::io::printable(word)))?;
+                .ok_or_else(|| format!("'{}' is not KEY=VALUE", crate::text::printable(word)))?;
             out.set(k, v)?;
         }
         if out.is_empty() {

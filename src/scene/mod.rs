@@ -1,0 +1,6 @@
+//! What is looked at and from where, as data: world-space Gaussian scenes
+//! (what every renderer draws) and cameras (part of every recipe). Below the
+//! method and the renderers, beside the head model and the formats.
+
+pub mod camera;
+pub mod splats;
