@@ -9,9 +9,11 @@
 pub mod avatar;
 pub mod cli;
 pub mod compose;
+pub mod editor;
 pub mod error;
 pub mod io;
 pub mod model;
+pub mod pipeline;
 pub mod render;
 pub mod scene;
 pub mod text;

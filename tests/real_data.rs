@@ -495,11 +495,11 @@ fn hostile_and_broken_files_fail_cleanly() {
 #[test]
 fn editing_sessions_on_real_avatars_replay() {
     use visage::tui::graphics::Protocol;
-    use visage::tui::session::SessionHeader;
+    use visage::editor::session::SessionHeader;
     let f = fixtures();
     let dir = temp("session");
     std::fs::create_dir_all(&dir).unwrap();
-    let db = visage::cli::DbArgs {
+    let db = visage::pipeline::DatabaseSpec {
         db: f.avatars.display().to_string(),
         flame: Some(f.model.clone()),
         masks: Some(f.masks.clone()),
@@ -508,7 +508,7 @@ fn editing_sessions_on_real_avatars_replay() {
     let mut header = SessionHeader::new(&db, (100, 30), Protocol::Halfblocks);
     header.render = (96, 72);
     let session = dir.join("edit.vsg");
-    let mut recorder = visage::tui::session::Recorder::open(&session, &header).unwrap();
+    let mut recorder = visage::editor::session::Recorder::open(&session, &header).unwrap();
     let script = [
         (0, "select-group nose"),
         (0, "select-source bram"),
@@ -521,7 +521,7 @@ fn editing_sessions_on_real_avatars_replay() {
         (6, "save-recipe edit.toml"),
     ];
     for (tick, line) in script {
-        let command = visage::tui::command::Command::parse(line).unwrap();
+        let command = visage::editor::command::Command::parse(line).unwrap();
         recorder.record(tick, &command).unwrap();
     }
     drop(recorder);

@@ -14,13 +14,13 @@ use visage::model::builtin::build_head;
 use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
 use visage::render::image::{psnr, RgbImage};
 use visage::render::Backend;
-use visage::tui::command::Command;
+use visage::editor::command::Command;
 use visage::tui::graphics::{encode_kitty, encode_sixel, KittyTransport, Protocol};
 use visage::tui::keymap::Keymap;
-use visage::tui::replay::{catalog_of, initial_state, replay};
-use visage::tui::state::{Catalog, EditorState};
+use visage::editor::replay::{catalog_of, initial_state, replay};
+use visage::editor::state::{Catalog, EditorState};
 use visage::tui::view::{draw, layout, InfoPanel, ViewModel};
-use visage::tui::workbench::{source_swatches, FrameRequest, Workbench};
+use visage::pipeline::workbench::{source_swatches, FrameRequest, Workbench};
 
 struct Fixture {
     bench: Workbench,

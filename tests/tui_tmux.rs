@@ -152,7 +152,7 @@ fn edit_undo_and_quit_in_a_real_terminal() {
     ] {
         assert!(journal.contains(c), "{c} not journaled:\n{journal}");
     }
-    let session = visage::tui::session::Session::load(&record).unwrap();
+    let session = visage::editor::session::Session::load(&record).unwrap();
     assert!(session.lines.windows(2).all(|w| w[0].tick <= w[1].tick));
     std::fs::remove_file(&record).ok();
     std::fs::remove_file(&status).ok();

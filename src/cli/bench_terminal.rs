@@ -24,10 +24,10 @@ use crate::tui::app::Collector;
 use crate::tui::graphics::{
     draw_halfblocks, encode_iterm2, encode_kitty, encode_sixel, KittyTransport, Protocol,
 };
-use crate::tui::pacing::next_scale;
-use crate::tui::state::DebugView;
+use crate::editor::pacing::next_scale;
+use crate::pipeline::workbench::DebugView;
 use crate::tui::view::layout;
-use crate::tui::workbench::{FrameRequest, Workbench};
+use crate::pipeline::workbench::{FrameRequest, Workbench};
 
 /// Arguments of `visage bench terminal`.
 #[derive(Args, Debug, Clone)]

@@ -1,16 +1,13 @@
 //! The database options shared by every command that reads a database.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use clap::Args;
 
 use crate::avatar::database::Database;
-use crate::error::{Error, Result};
-use crate::model::builtin::build_head;
-use crate::avatar::synthetic::{builtin_database, SyntheticOptions, MAX_SOURCES};
-
-/// Most Gaussians per built-in avatar accepted (bounds memory: ~240 bytes each).
-const MAX_GAUSSIANS_PER_AVATAR: usize = 2_000_000;
+use crate::avatar::synthetic::MAX_SOURCES;
+use crate::error::Result;
+use crate::pipeline::DatabaseSpec;
 
 /// Which database to open and, for the built-in one, how to generate it.
 #[derive(Args, Debug, Clone)]
@@ -37,51 +34,38 @@ pub struct DbArgs {
 
 impl Default for DbArgs {
     fn default() -> Self {
+        DbArgs::from(&DatabaseSpec::default())
+    }
+}
+
+impl From<&DatabaseSpec> for DbArgs {
+    fn from(spec: &DatabaseSpec) -> Self {
         Self {
-            db: "builtin".into(),
-            seed: 1,
-            gaussians_per_avatar: 50_000,
-            source_count: MAX_SOURCES,
-            flame: None,
-            masks: None,
+            db: spec.db.clone(),
+            seed: spec.seed,
+            gaussians_per_avatar: spec.gaussians_per_avatar,
+            source_count: spec.source_count,
+            flame: spec.flame.clone(),
+            masks: spec.masks.clone(),
         }
     }
 }
 
 impl DbArgs {
+    /// The database these arguments name.
+    pub fn spec(&self) -> DatabaseSpec {
+        DatabaseSpec {
+            db: self.db.clone(),
+            seed: self.seed,
+            gaussians_per_avatar: self.gaussians_per_avatar,
+            source_count: self.source_count,
+            flame: self.flame.clone(),
+            masks: self.masks.clone(),
+        }
+    }
+
     /// Opens the database and reports how long that took.
     pub fn load(&self) -> Result<(Database, Duration)> {
-        if self.db != "builtin" {
-            let start = Instant::now();
-            let config = crate::io::folder::read_config().map_err(Error::Input)?;
-            let flame = self.flame.clone().or(config.flame);
-            let masks = self.masks.clone().or(config.masks);
-            let files = match (&flame, &masks) {
-                (Some(f), Some(m)) => Some((f.as_path(), m.as_path())),
-                (None, None) => None,
-                _ => {
-                    return Err(Error::input(
-                        "--flame and --masks go together (or set both in the config file)",
-                    ))
-                }
-            };
-            let db = crate::io::folder::load_folder(std::path::Path::new(&self.db), files)
-                .map_err(Error::Input)?;
-            return Ok((db, start.elapsed()));
-        }
-        if !(1..=MAX_GAUSSIANS_PER_AVATAR).contains(&self.gaussians_per_avatar) {
-            return Err(Error::input(format!(
-                "--gaussians-per-avatar must be between 1 and {MAX_GAUSSIANS_PER_AVATAR}, not {}",
-                self.gaussians_per_avatar
-            )));
-        }
-        let start = Instant::now();
-        let options = SyntheticOptions {
-            seed: self.seed,
-            sources: self.source_count,
-            gaussians_per_avatar: self.gaussians_per_avatar,
-        };
-        let db = builtin_database(build_head(), options).map_err(Error::Input)?;
-        Ok((db, start.elapsed()))
+        self.spec().load()
     }
 }

@@ -9,9 +9,9 @@ use super::DbArgs;
 use crate::error::{Error, Result};
 use crate::render::Backend;
 use crate::tui::app::{run_editor, EditOptions};
-use crate::tui::command::Command;
+use crate::editor::command::Command;
 use crate::tui::graphics::GraphicsChoice;
-use crate::tui::replay::replay;
+use crate::editor::replay::replay;
 
 /// Arguments of the editor.
 #[derive(Args, Debug, Clone, Default)]
@@ -48,7 +48,7 @@ pub fn run_edit(args: &EditArgs) -> Result<()> {
         ));
     }
     run_editor(EditOptions {
-        db: args.db.clone(),
+        db: args.db.spec(),
         session: args.session.clone(),
         record: args.record.clone(),
         keymap: args.keymap.clone(),

@@ -15,19 +15,19 @@ use crossterm::{cursor, execute, terminal};
 use ratatui::backend::CrosstermBackend;
 use ratatui::Terminal;
 
-use super::command::{complete, Command};
+use crate::editor::command::{complete, Command};
 use super::graphics::{
     detect, encode_iterm2, encode_kitty, encode_sixel, kitty_delete, tmux_wrap, GraphicsChoice,
     KittyTransport, Protocol, TerminalGraphics, SYNC_BEGIN, SYNC_END,
 };
 use super::keymap::Keymap;
-use super::pacing::next_scale;
-use super::replay::{catalog_of, initial_state, replay_commands};
-use super::session::{Recorder, Session, SessionHeader};
-use super::state::{Catalog, EditorState, Effect};
+use crate::editor::pacing::next_scale;
+use crate::editor::replay::{catalog_of, initial_state, replay_commands};
+use crate::editor::session::{Recorder, Session, SessionHeader};
+use crate::editor::state::{Catalog, EditorState, Effect};
 use super::view::{draw, layout, InfoPanel, ViewModel};
-use super::workbench::{check_parent, source_swatches, FrameRequest, FrameResult, Workbench};
-use crate::cli::DbArgs;
+use crate::pipeline::workbench::{check_parent, source_swatches, FrameRequest, FrameResult, Workbench};
+use crate::pipeline::DatabaseSpec;
 use crate::compose::engine::Engine;
 use crate::error::{Error, Result};
 use crate::render::image::RgbImage;
@@ -37,7 +37,7 @@ use crate::render::Backend;
 #[derive(Clone, Debug)]
 pub struct EditOptions {
     /// Database.
-    pub db: DbArgs,
+    pub db: DatabaseSpec,
     /// Session to resume.
     pub session: Option<PathBuf>,
     /// Journal to record to.
@@ -218,7 +218,7 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
     }
     let resume = options.session.as_deref().map(Session::load).transpose()?;
     let db_args = match &resume {
-        Some(s) => s.header.db_args(),
+        Some(s) => s.header.database(),
         None => options.db.clone(),
     };
     eprintln!("visage: opening the {} database…", db_args.db);
@@ -385,7 +385,7 @@ impl App {
         let collector = Collector::default();
         let mut term = Terminal::new(CrosstermBackend::new(collector.clone()))
             .map_err(|e| Error::input(format!("cannot use this terminal: {e}")))?;
-        let tick_len = Duration::from_millis(1000 / super::session::TICKS_PER_SECOND);
+        let tick_len = Duration::from_millis(1000 / crate::editor::session::TICKS_PER_SECOND);
         let mut next_tick = Instant::now() + tick_len;
         let mut viewport = None;
         let input = spawn_input_reader();

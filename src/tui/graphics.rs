@@ -20,43 +20,7 @@ use ratatui::style::Color;
 
 use crate::render::image::RgbImage;
 
-/// A terminal graphics protocol.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Protocol {
-    /// kitty graphics protocol.
-    Kitty,
-    /// DEC sixel.
-    Sixel,
-    /// iTerm2 inline images.
-    Iterm2,
-    /// Unicode half blocks in ordinary cells.
-    Halfblocks,
-}
-
-impl Protocol {
-    /// Name used in session headers and the info panel.
-    pub fn name(self) -> &'static str {
-        match self {
-            Protocol::Kitty => "kitty",
-            Protocol::Sixel => "sixel",
-            Protocol::Iterm2 => "iterm2",
-            Protocol::Halfblocks => "halfblocks",
-        }
-    }
-
-    /// Parses a name as written by [`Protocol::name`].
-    pub fn from_name(s: &str) -> Option<Protocol> {
-        [
-            Protocol::Kitty,
-            Protocol::Sixel,
-            Protocol::Iterm2,
-            Protocol::Halfblocks,
-        ]
-        .into_iter()
-        .find(|p| p.name() == s)
-    }
-}
+pub use crate::editor::session::Protocol;
 
 /// The `--graphics` choice.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]

@@ -11,7 +11,7 @@ use crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
 use serde::Deserialize;
 use toml::Spanned;
 
-use super::command::Command;
+use crate::editor::command::Command;
 use crate::error::{Error, Result};
 
 /// The built-in keymap.

@@ -1,16 +1,9 @@
-//! The terminal editor, in The Elm Architecture: `state` (the editor state and
-//! its update function) ← `command` (named commands, bound by `keymap`) →
-//! `view` (cells) and `graphics` (image protocols); `workbench` turns state into
-//! pictures, `session` records and `replay` re-runs commands on logical ticks,
-//! `app` is the interactive runtime.
+//! The terminal front end of the editor: the interactive runtime (`app`), the
+//! screen (`view`), terminal graphics protocols (`graphics`) and key bindings
+//! (`keymap`). Everything that is not about the terminal — commands, state,
+//! sessions, replay — lives in [`crate::editor`].
 
 pub mod app;
-pub mod command;
 pub mod graphics;
 pub mod keymap;
-pub mod pacing;
-pub mod replay;
-pub mod session;
-pub mod state;
 pub mod view;
-pub mod workbench;

@@ -11,8 +11,8 @@ use ratatui::Frame;
 
 use super::graphics::{draw_halfblocks, reserve_cells, Protocol};
 use super::keymap::Keymap;
-use super::state::{Catalog, EditorState};
-use super::workbench::FrameTimings;
+use crate::editor::state::{Catalog, EditorState};
+use crate::pipeline::workbench::FrameTimings;
 use crate::model::regions::Group;
 use crate::render::image::RgbImage;
 

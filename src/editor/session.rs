@@ -24,11 +24,48 @@ use std::fs::{File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::cli::DbArgs;
+use crate::pipeline::DatabaseSpec;
 use crate::error::{Error, Result};
 
 use super::command::Command;
-use super::graphics::Protocol;
+
+/// A terminal graphics protocol (by name: the encoders live in `crate::tui::graphics`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Protocol {
+    /// kitty graphics protocol.
+    Kitty,
+    /// DEC sixel.
+    Sixel,
+    /// iTerm2 inline images.
+    Iterm2,
+    /// Unicode half blocks in ordinary cells.
+    Halfblocks,
+}
+
+impl Protocol {
+    /// Name used in session headers and the info panel.
+    pub fn name(self) -> &'static str {
+        match self {
+            Protocol::Kitty => "kitty",
+            Protocol::Sixel => "sixel",
+            Protocol::Iterm2 => "iterm2",
+            Protocol::Halfblocks => "halfblocks",
+        }
+    }
+
+    /// Parses a name as written by [`Protocol::name`].
+    pub fn from_name(s: &str) -> Option<Protocol> {
+        [
+            Protocol::Kitty,
+            Protocol::Sixel,
+            Protocol::Iterm2,
+            Protocol::Halfblocks,
+        ]
+        .into_iter()
+        .find(|p| p.name() == s)
+    }
+}
 
 /// Version written in the first line.
 pub const SESSION_VERSION: u32 = 1;
@@ -60,7 +97,7 @@ pub struct SessionHeader {
 impl SessionHeader {
     /// A header for a database. Folder and FLAME paths are made absolute so the
     /// session replays from any working directory.
-    pub fn new(db: &DbArgs, terminal: (u16, u16), graphics: Protocol) -> Self {
+    pub fn new(db: &DatabaseSpec, terminal: (u16, u16), graphics: Protocol) -> Self {
         let absolute = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
         let folder = if db.db == "builtin" {
             db.db.clone()
@@ -83,9 +120,9 @@ impl SessionHeader {
         }
     }
 
-    /// The database options this header names.
-    pub fn db_args(&self) -> DbArgs {
-        DbArgs {
+    /// The database this header names.
+    pub fn database(&self) -> DatabaseSpec {
+        DatabaseSpec {
             db: self.db.clone(),
             seed: self.seed,
             gaussians_per_avatar: self.gaussians_per_avatar,
@@ -464,7 +501,7 @@ mod tests {
     fn recorded_sessions_parse_back() {
         let path = std::env::temp_dir().join(format!("visage-session-{}.vsg", std::process::id()));
         std::fs::remove_file(&path).ok();
-        let header = SessionHeader::new(&DbArgs::default(), (100, 30), Protocol::Kitty);
+        let header = SessionHeader::new(&DatabaseSpec::default(), (100, 30), Protocol::Kitty);
         let mut r = Recorder::open(&path, &header).unwrap();
         r.record(0, &Command::parse("set-gaussians nose bram").unwrap())
             .unwrap();
@@ -483,11 +520,11 @@ mod tests {
 
     #[test]
     fn folder_databases_with_flame_files_and_odd_paths_parse_back() {
-        let db = DbArgs {
+        let db = DatabaseSpec {
             db: "/data/my avatars".into(),
             flame: Some("/models/flame \"2023\".pkl".into()),
             masks: Some("relative/FLAME_masks.pkl".into()),
-            ..DbArgs::default()
+            ..DatabaseSpec::default()
         };
         let header = SessionHeader::new(&db, (80, 24), Protocol::Sixel);
         let mut text = Vec::new();

@@ -1,13 +1,14 @@
-//! The workbench turns an editor state into pictures: it keeps the engine, the
-//! current composite and a renderer, updates the composite incrementally from the
-//! recipe, poses the frame and renders it (or the mesh, in the debug view).
+//! The workbench turns recipes into pictures: it keeps the engine, the current
+//! composite and a renderer, updates the composite incrementally from the
+//! recipe (only what a change touches), poses the frame and renders it (or the
+//! mesh, in the debug view). The editor, replay and `bench terminal` draw
+//! through it.
 
 use std::path::Path;
 use std::time::Instant;
 
 use glam::Vec3;
 
-use super::state::DebugView;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
 use crate::compose::recipe::{Recipe, ResolvedRecipe};
 use crate::compose::state_hash;
@@ -19,6 +20,27 @@ use crate::render::image::RgbImage;
 use crate::render::mesh_preview::render_mesh;
 use crate::render::reference::RenderSettings;
 use crate::render::{Backend, SplatRenderer};
+
+/// Debug view toggles.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DebugView {
+    /// Multiplier on every Gaussian's scale.
+    pub scale: f32,
+    /// Draw the mesh instead of the Gaussians.
+    pub mesh: bool,
+    /// Tint the selected group's regions in the mesh view.
+    pub highlight: bool,
+}
+
+impl Default for DebugView {
+    fn default() -> Self {
+        Self {
+            scale: 1.0,
+            mesh: false,
+            highlight: false,
+        }
+    }
+}
 
 /// What to draw.
 #[derive(Clone, Debug, PartialEq)]

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use crate::compose::recipe::{AnimationMode, ColourCorrection, GroupEdit, Recipe, Smoothing};
 use crate::model::regions::Group;
+use crate::pipeline::workbench::DebugView;
 use crate::scene::camera::Orbit;
 
 use super::command::{Command, PoseJoint};
@@ -35,27 +36,6 @@ impl Catalog {
             .iter()
             .find(|(m, _)| m == motion)
             .map_or(1, |(_, n)| (*n).max(1))
-    }
-}
-
-/// Debug view toggles.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DebugView {
-    /// Multiplier on every Gaussian's scale.
-    pub scale: f32,
-    /// Draw the mesh instead of the Gaussians.
-    pub mesh: bool,
-    /// Tint the selected group's regions in the mesh view.
-    pub highlight: bool,
-}
-
-impl Default for DebugView {
-    fn default() -> Self {
-        Self {
-            scale: 1.0,
-            mesh: false,
-            highlight: false,
-        }
     }
 }
 

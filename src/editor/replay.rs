@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use super::session::{Action, Expectation, Session};
 use super::state::{Catalog, EditorState, Effect};
-use super::workbench::{FrameRequest, Workbench};
+use crate::pipeline::workbench::{FrameRequest, Workbench};
 use crate::compose::engine::Engine;
 use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
@@ -110,7 +110,7 @@ impl ReplayReport {
 /// Replays a session file. `out` receives snapshots and exports (skipped without it).
 pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
     let session = Session::load(path)?;
-    let (db, _) = session.header.db_args().load()?;
+    let (db, _) = session.header.database().load()?;
     let engine = Engine::new(db)?;
     let catalog = catalog_of(&engine);
     let mut bench = Workbench::new(engine, Backend::Cpu)?;

@@ -1,0 +1,10 @@
+//! The terminal-free path from a database and a recipe to a posed composite
+//! and an image: opening a database from a clap-free [`DatabaseSpec`], one-shot
+//! builds for the command line, and the [`Workbench`] that keeps a composite up
+//! to date for the editor (rebuilding only what a recipe change touches).
+
+pub mod database;
+pub mod workbench;
+
+pub use database::DatabaseSpec;
+pub use workbench::Workbench;
