@@ -1,5 +1,5 @@
 // bind: triangle-local Gaussians -> world space, GaussianAvatars convention
-// (DESIGN §3.1): mu = k R mu_local + c, scale = exp(s) k, q = q(R) (x) normalize(q_local).
+// (docs/method.md §3): mu = k R mu_local + c, scale = exp(s) k, q = q(R) (x) normalize(q_local).
 // Per animation frame only `frames` changes.
 
 @group(0) @binding(0) var<uniform> camera: Camera;

@@ -7,6 +7,7 @@ use std::sync::OnceLock;
 use glam::Vec3;
 use visage::avatar::database::Database;
 use visage::avatar::gaussians::{dc_to_rgb, rgb_to_dc, sigmoid};
+use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
 use visage::compose::blend::Blender;
 use visage::compose::colour::{weighted_mean_colour, GAIN_RANGE};
 use visage::compose::engine::{Engine, PosedMesh};
@@ -17,7 +18,6 @@ use visage::compose::state_hash;
 use visage::model::builtin::build_head;
 use visage::model::head::{Joint, Pose};
 use visage::model::regions::{Group, Region};
-use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
 
 fn small_db() -> Database {
     builtin_database(

@@ -494,8 +494,8 @@ fn hostile_and_broken_files_fail_cleanly() {
 /// the same state, and its snapshot shows a head.
 #[test]
 fn editing_sessions_on_real_avatars_replay() {
-    use visage::tui::graphics::Protocol;
     use visage::editor::session::SessionHeader;
+    use visage::tui::graphics::Protocol;
     let f = fixtures();
     let dir = temp("session");
     std::fs::create_dir_all(&dir).unwrap();

@@ -4,15 +4,15 @@
 use std::sync::{Mutex, OnceLock};
 
 use glam::{Quat, Vec3};
+use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
 use visage::compose::engine::{Engine, PosedMesh};
 use visage::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
 use visage::model::builtin::build_head;
-use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
-use visage::scene::camera::{Camera, Orbit};
 use visage::render::image::{psnr, RgbImage};
 use visage::render::reference::{render_reference, render_reference_f32, RenderSettings};
-use visage::scene::splats::SplatScene;
 use visage::render::{Backend, SplatRenderer};
+use visage::scene::camera::{Camera, Orbit};
+use visage::scene::splats::SplatScene;
 
 /// One wgpu renderer for the whole test binary (shader compilation is slow on lavapipe).
 fn gpu() -> &'static Mutex<SplatRenderer> {

@@ -2,8 +2,8 @@
 
 use visage::avatar::binding::triangle_frames;
 use visage::avatar::database::Database;
-use visage::model::builtin::build_head;
 use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
+use visage::model::builtin::build_head;
 
 fn db(seed: u64, per_avatar: usize, sources: usize) -> Database {
     builtin_database(

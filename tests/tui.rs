@@ -9,18 +9,19 @@ use base64::Engine as _;
 use ratatui::backend::TestBackend;
 use ratatui::style::Color;
 use ratatui::Terminal;
-use visage::compose::engine::Engine;
-use visage::model::builtin::build_head;
 use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
+use visage::compose::engine::Engine;
+use visage::editor::command::Command;
+use visage::editor::replay::replay;
+use visage::editor::state::{Catalog, EditorState};
+use visage::editor::Editor;
+use visage::model::builtin::build_head;
+use visage::pipeline::workbench::{source_swatches, FrameRequest, Workbench};
 use visage::render::image::{psnr, RgbImage};
 use visage::render::Backend;
-use visage::editor::command::Command;
 use visage::tui::graphics::{encode_kitty, encode_sixel, KittyTransport, Protocol};
 use visage::tui::keymap::Keymap;
-use visage::editor::replay::{catalog_of, initial_state, replay};
-use visage::editor::state::{Catalog, EditorState};
 use visage::tui::view::{draw, layout, InfoPanel, ViewModel};
-use visage::pipeline::workbench::{source_swatches, FrameRequest, Workbench};
 
 struct Fixture {
     bench: Workbench,
@@ -41,7 +42,7 @@ fn fixture() -> &'static Mutex<Fixture> {
         )
         .unwrap();
         let engine = Engine::new(db).unwrap();
-        let catalog = catalog_of(&engine);
+        let catalog = Catalog::of(&engine);
         let swatches = source_swatches(&engine);
         Mutex::new(Fixture {
             bench: Workbench::new(engine, Backend::Cpu).unwrap(),
@@ -112,7 +113,7 @@ fn run(state: &mut EditorState, lines: &[&str]) {
 #[test]
 fn editor_view_shows_panels_and_the_composite_in_half_blocks() {
     let catalog = fixture().lock().unwrap().catalog.clone();
-    let mut state = initial_state(&catalog);
+    let mut state = Editor::new(catalog.clone()).state;
     run(
         &mut state,
         &[
@@ -163,7 +164,7 @@ fn editor_view_shows_panels_and_the_composite_in_half_blocks() {
 #[test]
 fn help_overlay_lists_the_keymap_and_tiny_terminals_degrade() {
     let catalog = fixture().lock().unwrap().catalog.clone();
-    let mut state = initial_state(&catalog);
+    let mut state = Editor::new(catalog.clone()).state;
     run(&mut state, &["help"]);
     let t = text(&screen(&state, 110, 36));
     assert!(t.contains("keys (from the keymap"));
@@ -171,14 +172,14 @@ fn help_overlay_lists_the_keymap_and_tiny_terminals_degrade() {
         t.contains("quit") && t.contains("toggle-play") && t.contains("shift-left"),
         "{t}"
     );
-    let tiny = text(&screen(&initial_state(&catalog), 30, 8));
+    let tiny = text(&screen(&Editor::new(catalog.clone()).state, 30, 8));
     assert!(tiny.contains("visage needs at least"), "{tiny}");
 }
 
 #[test]
 fn control_characters_never_reach_the_screen() {
     let catalog = fixture().lock().unwrap().catalog.clone();
-    let mut state = initial_state(&catalog);
+    let mut state = Editor::new(catalog.clone()).state;
     state.status = "evil\u{1b}[2Jname\u{7}".into();
     let t = text(&screen(&state, 110, 36));
     assert!(t.contains("evil[2Jname") && !t.contains('\u{1b}') && !t.contains('\u{7}'));
@@ -265,7 +266,7 @@ fn replay_cli_checks_and_reports() {
 
 fn test_frame() -> RgbImage {
     let catalog = fixture().lock().unwrap().catalog.clone();
-    let state = initial_state(&catalog);
+    let state = Editor::new(catalog.clone()).state;
     let mut f = fixture().lock().unwrap();
     let request = FrameRequest {
         recipe: state.recipe.clone(),

@@ -1,4 +1,4 @@
-//! Gaussians bound to triangles, GaussianAvatars convention (DESIGN §3.1).
+//! Gaussians bound to triangles, GaussianAvatars convention (docs/method.md §3).
 //!
 //! For triangle (v0, v1, v2): c = centroid; a0 = n(v1−v0); a1 = n(a0 × (v2−v0));
 //! a2 = −n(a1 × a0); R = [a0 a1 a2]; k = (|v1−v0| + |a2·(v2−v0)|)/2 with

@@ -8,14 +8,14 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
+use super::binding::{triangle_frames, world_to_local, WorldGaussian};
+use super::database::{Database, SourceAvatar};
+use super::gaussians::{logit, rgb_to_dc, sh_coefficients, GaussianSet};
 use crate::model::builtin::layout::{Side, EYE_CENTER, EYE_OPENING, MOUTH_Y};
 use crate::model::geometry::{fractal_noise, lerp, smoothstep, value_noise};
 use crate::model::head::HeadModel;
 use crate::model::motion::{builtin_motion, builtin_motions, BUILTIN_MOTIONS};
 use crate::model::regions::Region;
-use super::binding::{triangle_frames, world_to_local, WorldGaussian};
-use super::database::{Database, SourceAvatar};
-use super::gaussians::{logit, rgb_to_dc, sh_coefficients, GaussianSet};
 
 /// How the built-in database is generated.
 #[derive(Clone, Copy, Debug, PartialEq)]

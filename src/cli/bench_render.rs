@@ -15,11 +15,11 @@ use super::DbArgs;
 use crate::compose::engine::PosedMesh;
 use crate::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
 use crate::error::{Error, Result};
-use crate::scene::camera::Camera;
 use crate::render::gpu::StageTimings;
 use crate::render::image::{psnr_report, RgbImage};
 use crate::render::reference::{render_reference, RenderSettings};
 use crate::render::{Backend, SplatRenderer};
+use crate::scene::camera::Camera;
 
 /// Arguments of `visage bench render`.
 #[derive(Args, Debug, Clone)]
@@ -43,7 +43,7 @@ pub struct RenderBenchArgs {
     warmup: usize,
     /// Renderer(s) to measure, comma-separated: gpu (wgpu on any adapter,
     /// lavapipe included), cpu, auto.
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Backend::Gpu, Backend::Cpu])]
+    #[arg(long, value_parser = Backend::parse, value_delimiter = ',', default_value = "gpu,cpu")]
     renderers: Vec<Backend>,
     /// Skip the knob table.
     #[arg(long)]

@@ -16,18 +16,18 @@ use super::bench::summarize;
 use super::bench_render::bench_recipe_for;
 use super::DbArgs;
 use crate::compose::engine::Engine;
+use crate::editor::pacing::next_scale;
 use crate::error::{Error, Result};
 use crate::model::regions::Group;
+use crate::pipeline::workbench::DebugView;
+use crate::pipeline::workbench::{FrameRequest, Workbench};
 use crate::render::image::{psnr_report, RgbImage};
 use crate::render::Backend;
 use crate::tui::app::Collector;
 use crate::tui::graphics::{
     draw_halfblocks, encode_iterm2, encode_kitty, encode_sixel, KittyTransport, Protocol,
 };
-use crate::editor::pacing::next_scale;
-use crate::pipeline::workbench::DebugView;
 use crate::tui::view::layout;
-use crate::pipeline::workbench::{FrameRequest, Workbench};
 
 /// Arguments of `visage bench terminal`.
 #[derive(Args, Debug, Clone)]
@@ -44,7 +44,7 @@ pub struct TerminalBenchArgs {
     #[arg(long, default_value_t = 60)]
     frames: usize,
     /// Renderer.
-    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    #[arg(long, value_parser = Backend::parse, default_value = "auto")]
     renderer: Backend,
     /// Print one JSON document.
     #[arg(long)]

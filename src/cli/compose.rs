@@ -13,8 +13,8 @@ use crate::compose::{canonical_order, composite_hash, reordered, state_hash};
 use crate::error::{Error, Result};
 use crate::io::avatar::{neutral_offset, write_avatar, AvatarParams, FrameParams};
 use crate::io::ply::write_splat_ply;
-use crate::text::printable;
 use crate::model::regions::{Group, Region};
+use crate::text::printable;
 
 /// Arguments of `visage compose`.
 #[derive(Args, Debug, Clone)]

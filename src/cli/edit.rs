@@ -6,12 +6,12 @@ use clap::Args;
 
 use super::camera::CameraArgs;
 use super::DbArgs;
+use crate::editor::command::Command;
+use crate::editor::replay::replay;
 use crate::error::{Error, Result};
 use crate::render::Backend;
 use crate::tui::app::{run_editor, EditOptions};
-use crate::editor::command::Command;
 use crate::tui::graphics::GraphicsChoice;
-use crate::editor::replay::replay;
 
 /// Arguments of the editor.
 #[derive(Args, Debug, Clone, Default)]
@@ -31,7 +31,7 @@ pub struct EditArgs {
     #[arg(long, value_enum, default_value_t = GraphicsChoice::Auto)]
     graphics: GraphicsChoice,
     /// Renderer: auto (hardware GPU, else CPU), gpu (wgpu on any adapter) or cpu.
-    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    #[arg(long, value_parser = Backend::parse, default_value = "auto")]
     renderer: Backend,
     /// Starting camera (run as a `set-camera` command, so sessions record it).
     #[command(flatten)]

@@ -10,10 +10,10 @@ use super::DbArgs;
 use crate::avatar::database::Database;
 use crate::error::{Error, Result};
 use crate::io::obj::write_obj;
-use crate::text::printable;
 use crate::model::head::JOINT_NAMES;
 use crate::model::regions::{Group, Region};
 use crate::model::topology::connected_components;
+use crate::text::printable;
 
 /// Arguments of `visage info`.
 #[derive(Args, Debug, Clone, Default)]

@@ -11,10 +11,10 @@ use super::DbArgs;
 use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
 use crate::io::ply::read_splat_ply;
-use crate::scene::camera::{CameraOverrides, Orbit};
 use crate::render::reference::{render_reference, RenderSettings};
-use crate::scene::splats::SplatScene;
 use crate::render::{Backend, SplatRenderer};
+use crate::scene::camera::{CameraOverrides, Orbit};
+use crate::scene::splats::SplatScene;
 
 /// Arguments of `visage render`.
 #[derive(Args, Debug, Clone)]
@@ -42,7 +42,7 @@ pub struct RenderArgs {
     reference: bool,
     /// Renderer: auto (a hardware GPU if present, else the CPU renderer), gpu
     /// (wgpu on any adapter, lavapipe included) or cpu.
-    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    #[arg(long, value_parser = Backend::parse, default_value = "auto")]
     renderer: Backend,
     /// Render a frame sequence START..END (END excluded) of the recipe's motion;
     /// the output path must contain `{frame}` (replaced by the zero-padded index).

@@ -1,4 +1,4 @@
-//! Shape blending by a mesh Laplacian solve (thesis 4.1.2, DESIGN §3.3).
+//! Shape blending by a mesh Laplacian solve (thesis 4.1.2, docs/method.md §6).
 //!
 //! Every directed triangle edge e = (i, j) of region r gets the target
 //! d_e = Σ_f w_r^f (v_j^f − v_i^f); disjoint parts (eyeballs, teeth) are tied to

@@ -1,5 +1,5 @@
 //! Colour correction of regions whose Gaussians come from another source than the
-//! colour reference (the base avatar), thesis 4.2.2 and DESIGN §3.4.
+//! colour reference (the base avatar), thesis 4.2.2 and docs/method.md §7.
 //!
 //! Gaussian colour is rgb = 0.5 + C0·f_dc + (view-dependent terms). An affine map
 //! A·rgb + b applies to SH as f_dc' = (A·(C0·f_dc + 0.5) + b − 0.5)/C0 and

@@ -1,4 +1,4 @@
-//! Lookup tables for selecting Gaussians (thesis ch. 5, DESIGN §3.2): per source
+//! Lookup tables for selecting Gaussians (thesis ch. 5, docs/method.md §5): per source
 //! and region, the indices of the Gaussians bound to that region's triangles, and
 //! per source and triangle (for border smoothing). Built once per database.
 

@@ -1,5 +1,5 @@
 //! Border smoothing between regions whose Gaussians come from different sources
-//! (thesis 4.2.2, DESIGN §3.4).
+//! (thesis 4.2.2, docs/method.md §7).
 //!
 //! A triangle t borders region r iff t ∉ r and t shares a vertex with a triangle
 //! of r; b(r, p) are the triangles of p that border r.

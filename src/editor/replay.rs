@@ -2,66 +2,34 @@
 //! logical ticks, with snapshots and expectation checks. Deterministic: the CPU
 //! renderer draws the images and nothing depends on wall-clock time.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::Serialize;
 
 use super::session::{Action, Expectation, Session};
-use super::state::{Catalog, EditorState, Effect};
-use crate::pipeline::workbench::{FrameRequest, Workbench};
+use super::state::Effect;
+use super::{inside, perform, Editor};
 use crate::compose::engine::Engine;
-use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
+use crate::pipeline::workbench::Workbench;
 use crate::render::image::{psnr_report, RgbImage};
 use crate::render::Backend;
 
-/// The state an editor starts in: the first source, unedited.
-pub fn initial_state(catalog: &Catalog) -> EditorState {
-    EditorState::new(Recipe::unedited(
-        catalog.sources.first().map_or("", String::as_str),
-    ))
-}
-
-/// The names a database offers the editor.
-pub fn catalog_of(engine: &Engine) -> Catalog {
-    let db = engine.database();
-    Catalog {
-        sources: db
-            .sources
-            .iter()
-            .map(|s| crate::text::printable(&s.name))
-            .collect(),
-        motions: db
-            .motions
-            .iter()
-            .map(|m| (m.name.clone(), m.frames()))
-            .collect(),
-    }
-}
-
-/// Applies a session's commands to a state without rendering (to resume editing).
-/// Returns the last tick and the number of commands that failed.
-pub fn replay_commands(
-    session: &Session,
-    catalog: &Catalog,
-    state: &mut EditorState,
-) -> (u64, usize) {
-    let mut tick = 0;
+/// Applies a session's commands to an editor without rendering (to resume
+/// editing). Returns the number of commands that failed.
+pub fn replay_commands(session: &Session, editor: &mut Editor) -> usize {
     let mut failed = 0;
     for line in &session.lines {
-        while tick < line.tick {
-            state.tick(catalog);
-            tick += 1;
-        }
+        editor.advance_to(line.tick);
         if let Action::Command(c) = &line.action {
-            if state.apply(catalog, c).is_err() {
+            if editor.step(c).is_err() {
                 failed += 1;
             }
         }
     }
-    state.quit = false;
-    state.prompt = None;
-    (tick, failed)
+    editor.state.quit = false;
+    editor.state.prompt = None;
+    failed
 }
 
 /// One checked expectation.
@@ -112,9 +80,8 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
     let session = Session::load(path)?;
     let (db, _) = session.header.database().load()?;
     let engine = Engine::new(db)?;
-    let catalog = catalog_of(&engine);
+    let mut editor = Editor::for_engine(&engine);
     let mut bench = Workbench::new(engine, Backend::Cpu)?;
-    let mut state = initial_state(&catalog);
     if let Some(dir) = out {
         std::fs::create_dir_all(dir)
             .map_err(|e| Error::input(format!("cannot create {}: {e}", dir.display())))?;
@@ -130,37 +97,30 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
         snapshots: Vec::new(),
         state_hash: String::new(),
     };
-    let request = |state: &EditorState| FrameRequest {
-        recipe: state.recipe.clone(),
-        debug: state.debug,
-        group: state.selected_group(),
-        width: w,
-        height: h,
-        exact: true,
-    };
-    let mut tick = 0u64;
     for line in &session.lines {
-        while tick < line.tick {
-            state.tick(&catalog);
-            tick += 1;
-        }
+        editor.advance_to(line.tick);
+        let tick = editor.tick();
         match &line.action {
             Action::Command(c) => {
                 report.commands += 1;
-                match state.apply(&catalog, c) {
+                match editor.step(c) {
                     Ok(effects) => {
+                        let Some(dir) = out else { continue };
                         for effect in effects {
-                            run_effect(
-                                &mut bench,
-                                &state,
+                            let view = editor.frame_request(w, h, true);
+                            let done = perform(
                                 &effect,
-                                out,
-                                &request(&state),
-                                &mut report,
+                                &editor.state.recipe,
+                                &view,
+                                &mut bench,
+                                &inside(dir),
                             )
                             .map_err(|e| {
                                 Error::input(format!("{}:{}: {e}", path.display(), line.line))
                             })?;
+                            if matches!(effect, Effect::Snapshot(_)) {
+                                report.snapshots.push(done.path.display().to_string());
+                            }
                         }
                     }
                     Err(e) => report
@@ -169,7 +129,7 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
                 }
             }
             Action::Expect(Expectation::StateHash(expected)) => {
-                let actual = bench.state_hash(&request(&state).recipe)?;
+                let actual = bench.state_hash(&editor.state.recipe)?;
                 report.checks.push(CheckResult {
                     line: line.line,
                     tick,
@@ -184,11 +144,8 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
                 min_psnr,
             }) => {
                 let stored = RgbImage::load_png(&base_dir.join(image))?;
-                let frame = bench.render(&FrameRequest {
-                    width: stored.width,
-                    height: stored.height,
-                    ..request(&state)
-                })?;
+                let frame =
+                    bench.render(&editor.frame_request(stored.width, stored.height, true))?;
                 let p = psnr_report(&frame.image, &stored).unwrap_or(0.0);
                 report.checks.push(CheckResult {
                     line: line.line,
@@ -201,37 +158,7 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
             }
         }
     }
-    report.ticks = tick;
-    report.state_hash = bench.state_hash(&request(&state).recipe)?;
+    report.ticks = editor.tick();
+    report.state_hash = bench.state_hash(&editor.state.recipe)?;
     Ok(report)
-}
-
-fn run_effect(
-    bench: &mut Workbench,
-    state: &EditorState,
-    effect: &Effect,
-    out: Option<&Path>,
-    request: &FrameRequest,
-    report: &mut ReplayReport,
-) -> Result<()> {
-    let Some(dir) = out else {
-        return Ok(());
-    };
-    let target = |p: &str| -> PathBuf { dir.join(Path::new(p).file_name().unwrap_or_default()) };
-    match effect {
-        Effect::SaveRecipe(p) => {
-            let path = target(p);
-            std::fs::write(&path, state.recipe.to_toml())
-                .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))?;
-        }
-        Effect::ExportPly(p) => {
-            bench.export_ply(&state.recipe, &target(p))?;
-        }
-        Effect::Snapshot(p) => {
-            let path = target(p);
-            bench.snapshot(request, &path)?;
-            report.snapshots.push(path.display().to_string());
-        }
-    }
-    Ok(())
 }

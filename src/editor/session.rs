@@ -24,8 +24,8 @@ use std::fs::{File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::pipeline::DatabaseSpec;
 use crate::error::{Error, Result};
+use crate::pipeline::DatabaseSpec;
 
 use super::command::Command;
 
@@ -300,7 +300,10 @@ impl Session {
                                 _ => {
                                     return Err(err(
                                         n,
-                                        format!("unknown db option '{}'", crate::text::printable(k)),
+                                        format!(
+                                            "unknown db option '{}'",
+                                            crate::text::printable(k)
+                                        ),
                                     ))
                                 }
                             }

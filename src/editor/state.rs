@@ -20,6 +20,23 @@ pub struct Catalog {
 }
 
 impl Catalog {
+    /// The names a database offers the editor.
+    pub fn of(engine: &crate::compose::engine::Engine) -> Self {
+        let db = engine.database();
+        Self {
+            sources: db
+                .sources
+                .iter()
+                .map(|s| crate::text::printable(&s.name))
+                .collect(),
+            motions: db
+                .motions
+                .iter()
+                .map(|m| (m.name.clone(), m.frames()))
+                .collect(),
+        }
+    }
+
     fn source(&self, name: &str) -> Result<usize, String> {
         self.sources.iter().position(|s| s == name).ok_or_else(|| {
             format!(

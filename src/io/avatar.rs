@@ -8,7 +8,7 @@
 //! (T,3), eyes_pose (T,6), static_offset (1,V,3) and dynamic_offset (T,V,3),
 //! V counting the teeth. Its loader moves every array to torch as it is and
 //! indexes `dynamic_offset[[t]]` when it poses frame t, so the key set, dtypes
-//! and shapes are the contract (docs/method.md, "Avatar folders").
+//! and shapes are the contract (docs/method.md §9.4).
 
 use std::path::Path;
 

@@ -13,11 +13,11 @@ use glam::Vec3;
 use super::avatar::{write_avatar, AvatarParams, FrameParams, SHAPE_PARAMS};
 use super::flame::{load_flame, FLAME_SHAPE_COMPONENTS};
 use super::pickle_write::{to_pickle, PyObj};
+use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
 use crate::model::builtin::build_head;
 use crate::model::head::{HeadModel, JOINT_COUNT};
 use crate::model::motion::{builtin_motion, BUILTIN_MOTIONS};
 use crate::model::regions::Region;
-use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
 
 /// Where the fixture files went.
 #[derive(Clone, Debug)]

@@ -189,11 +189,7 @@ impl Workbench {
         })
     }
 
-    fn mesh_view(
-        &self,
-        camera: &crate::scene::camera::Camera,
-        request: &FrameRequest,
-    ) -> RgbImage {
+    fn mesh_view(&self, camera: &crate::scene::camera::Camera, request: &FrameRequest) -> RgbImage {
         let model = &self.engine.database().model;
         let colours: Vec<[u8; 3]> = model
             .triangle_regions

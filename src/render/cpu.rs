@@ -13,7 +13,6 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::scene::camera::Camera;
 use super::gpu::StageTimings;
 use super::image::{quantize, RgbImage};
 use super::projection::{ProjectionCamera, MAX_ALPHA, MIN_ALPHA};
@@ -23,6 +22,7 @@ use super::tiles::{pack_tile, TileBins, TileKey};
 use crate::avatar::binding::{local_to_world, TriangleFrame};
 use crate::avatar::gaussians::{sigmoid, GaussianSet};
 use crate::error::{Error, Result};
+use crate::scene::camera::Camera;
 
 /// Tile edge of the CPU rasteriser.
 pub const CPU_TILE: u32 = 16;

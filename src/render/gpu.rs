@@ -1,4 +1,4 @@
-//! The offscreen splat renderer on wgpu compute (DESIGN §5), running on any Vulkan,
+//! The offscreen splat renderer on wgpu compute (docs/method.md §8), running on any Vulkan,
 //! Metal or DX12 device and on Mesa's lavapipe where there is no GPU.
 //!
 //! Stages per frame: upload the triangle frames (the Gaussians only when the
@@ -12,13 +12,13 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
-use crate::scene::camera::Camera;
 use super::gpu_binning::GpuBinning;
 use super::image::RgbImage;
 use super::reference::RenderSettings;
 use crate::avatar::binding::TriangleFrame;
 use crate::avatar::gaussians::GaussianSet;
 use crate::error::{Error, Result};
+use crate::scene::camera::Camera;
 
 /// Tile edge in pixels (must match `TILE` in shaders/common.wgsl).
 pub const TILE: u32 = 16;

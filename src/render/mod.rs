@@ -16,17 +16,7 @@ use crate::avatar::gaussians::GaussianSet;
 use crate::error::Result;
 
 /// Which renderer draws frames.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    clap::ValueEnum,
-    serde::Serialize,
-    serde::Deserialize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Backend {
     /// A hardware GPU through wgpu when there is one, otherwise the CPU renderer.
@@ -36,6 +26,29 @@ pub enum Backend {
     Gpu,
     /// The fast CPU renderer.
     Cpu,
+}
+
+impl Backend {
+    /// Every backend with its name.
+    pub const ALL: [(Backend, &'static str); 3] = [
+        (Backend::Auto, "auto"),
+        (Backend::Gpu, "gpu"),
+        (Backend::Cpu, "cpu"),
+    ];
+
+    /// Parses `auto`, `gpu` or `cpu`.
+    pub fn parse(name: &str) -> std::result::Result<Backend, String> {
+        Self::ALL
+            .iter()
+            .find(|(_, n)| *n == name)
+            .map(|(b, _)| *b)
+            .ok_or_else(|| {
+                format!(
+                    "renderer '{}' is not auto, gpu or cpu",
+                    crate::text::printable(name)
+                )
+            })
+    }
 }
 
 /// A splat renderer: the wgpu one or the CPU one, behind one interface.

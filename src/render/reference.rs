@@ -3,11 +3,11 @@
 
 use rayon::prelude::*;
 
-use crate::scene::camera::Camera;
 use super::image::RgbImage;
 use super::projection::{ProjectionCamera, Splat2D, MIN_TRANSMITTANCE};
-use crate::scene::splats::SplatScene;
 use super::sh::eval_rgb;
+use crate::scene::camera::Camera;
+use crate::scene::splats::SplatScene;
 
 /// Settings shared by the renderers.
 #[derive(Clone, Copy, Debug, PartialEq)]

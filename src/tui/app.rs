@@ -15,21 +15,24 @@ use crossterm::{cursor, execute, terminal};
 use ratatui::backend::CrosstermBackend;
 use ratatui::Terminal;
 
-use crate::editor::command::{complete, Command};
 use super::graphics::{
     detect, encode_iterm2, encode_kitty, encode_sixel, kitty_delete, tmux_wrap, GraphicsChoice,
     KittyTransport, Protocol, TerminalGraphics, SYNC_BEGIN, SYNC_END,
 };
 use super::keymap::Keymap;
-use crate::editor::pacing::next_scale;
-use crate::editor::replay::{catalog_of, initial_state, replay_commands};
-use crate::editor::session::{Recorder, Session, SessionHeader};
-use crate::editor::state::{Catalog, EditorState, Effect};
 use super::view::{draw, layout, InfoPanel, ViewModel};
-use crate::pipeline::workbench::{check_parent, source_swatches, FrameRequest, FrameResult, Workbench};
-use crate::pipeline::DatabaseSpec;
 use crate::compose::engine::Engine;
+use crate::editor::command::{complete, Command};
+use crate::editor::pacing::next_scale;
+use crate::editor::replay::replay_commands;
+use crate::editor::session::{Recorder, Session, SessionHeader};
+use crate::editor::state::Effect;
+use crate::editor::{perform, Editor};
 use crate::error::{Error, Result};
+use crate::pipeline::workbench::{
+    check_parent, source_swatches, FrameRequest, FrameResult, Workbench,
+};
+use crate::pipeline::DatabaseSpec;
 use crate::render::image::RgbImage;
 use crate::render::Backend;
 
@@ -59,8 +62,8 @@ const SETTLE: Duration = Duration::from_millis(300);
 /// A job for the render worker.
 enum Job {
     Frame(FrameJob),
-    Export(crate::compose::recipe::Recipe, PathBuf),
-    Snapshot(FrameRequest, PathBuf),
+    /// A command's effect, with the recipe and the view it was asked in.
+    Effect(Effect, crate::compose::recipe::Recipe, FrameRequest),
 }
 
 struct FrameJob {
@@ -126,23 +129,25 @@ fn worker(mut bench: Workbench, mailbox: Arc<(Mutex<Mailbox>, Condvar)>, replies
                 }
                 Err(e) => Reply::Message(format!("render failed: {e}")),
             },
-            Job::Export(recipe, path) => match bench.export_ply(&recipe, &path) {
-                Ok(n) => Reply::Message(format!("wrote {n} Gaussians to {}", path.display())),
-                Err(e) => Reply::Message(format!("export failed: {e}")),
-            },
-            Job::Snapshot(request, path) => match bench.snapshot(&request, &path) {
-                Ok(img) => Reply::Message(format!(
-                    "wrote {}x{} snapshot {}",
-                    img.width,
-                    img.height,
-                    path.display()
-                )),
-                Err(e) => Reply::Message(format!("snapshot failed: {e}")),
-            },
+            Job::Effect(effect, recipe, view) => {
+                match perform(&effect, &recipe, &view, &mut bench, &|p| PathBuf::from(p)) {
+                    Ok(done) => Reply::Message(done.message),
+                    Err(e) => Reply::Message(format!("{}: {e}", effect_name(&effect))),
+                }
+            }
         };
         if replies.send(reply).is_err() {
             return;
         }
+    }
+}
+
+/// What failed, for the status line.
+fn effect_name(effect: &Effect) -> &'static str {
+    match effect {
+        Effect::SaveRecipe(_) => "saving the recipe failed",
+        Effect::ExportPly(_) => "export failed",
+        Effect::Snapshot(_) => "snapshot failed",
     }
 }
 
@@ -224,16 +229,14 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
     eprintln!("visage: opening the {} database…", db_args.db);
     let (db, _) = db_args.load()?;
     let engine = Engine::new(db)?;
-    let catalog = catalog_of(&engine);
     let swatches = source_swatches(&engine);
-    let mut state = initial_state(&catalog);
-    let mut tick = 0u64;
+    let mut editor = Editor::for_engine(&engine);
     if let Some(session) = &resume {
-        let (last, failed) = replay_commands(session, &catalog, &mut state);
-        tick = last;
-        state.status = format!(
-            "resumed {} commands at tick {last} ({failed} failed)",
-            session.lines.len()
+        let failed = replay_commands(session, &mut editor);
+        editor.state.status = format!(
+            "resumed {} commands at tick {} ({failed} failed)",
+            session.lines.len(),
+            editor.tick()
         );
     }
     let bench = Workbench::new(engine, options.renderer)?;
@@ -280,14 +283,12 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
         std::thread::spawn(move || worker(bench, mailbox, reply_tx))
     };
     let mut app = App {
-        state,
-        catalog,
+        editor,
         swatches,
         keymap,
         graphics,
         renderer_name,
         recorder,
-        tick,
         mailbox,
         replies,
         version: 1,
@@ -354,14 +355,12 @@ fn terminal_hung_up() -> bool {
 }
 
 struct App {
-    state: EditorState,
-    catalog: Catalog,
+    editor: Editor,
     swatches: Vec<[u8; 3]>,
     keymap: Keymap,
     graphics: TerminalGraphics,
     renderer_name: String,
     recorder: Option<Recorder>,
-    tick: u64,
     mailbox: Arc<(Mutex<Mailbox>, Condvar)>,
     replies: Receiver<Reply>,
     /// Bumped on every change that affects the picture.
@@ -389,7 +388,7 @@ impl App {
         let mut next_tick = Instant::now() + tick_len;
         let mut viewport = None;
         let input = spawn_input_reader();
-        while !self.state.quit {
+        while !self.editor.state.quit {
             // A closed terminal (SSH dropped, emulator killed) ends the editor even
             // if SIGHUP never arrives; the journal already holds every command.
             if stop.load(Ordering::Relaxed) || terminal_hung_up() {
@@ -410,9 +409,9 @@ impl App {
             }
             while Instant::now() >= next_tick {
                 next_tick += tick_len;
-                self.tick += 1;
-                if self.state.playing {
-                    self.state.tick(&self.catalog);
+                let next = self.editor.tick() + 1;
+                self.editor.advance_to(next);
+                if self.editor.state.playing {
                     self.version += 1;
                 }
             }
@@ -436,14 +435,14 @@ impl App {
     }
 
     fn moving(&self) -> bool {
-        self.state.playing || self.last_input.elapsed() < SETTLE
+        self.editor.state.playing || self.last_input.elapsed() < SETTLE
     }
 
     fn on_key(&mut self, key: crossterm::event::KeyEvent) {
         self.last_input = Instant::now();
-        if let Some(text) = self.state.prompt.as_mut() {
+        if let Some(text) = self.editor.state.prompt.as_mut() {
             match key.code {
-                KeyCode::Esc => self.state.prompt = None,
+                KeyCode::Esc => self.editor.state.prompt = None,
                 KeyCode::Backspace => {
                     text.pop();
                 }
@@ -452,15 +451,15 @@ impl App {
                     if matches.len() == 1 {
                         *text = format!("{} ", matches[0]);
                     } else if !matches.is_empty() {
-                        self.state.status = matches.join(" ");
+                        self.editor.state.status = matches.join(" ");
                     }
                 }
                 KeyCode::Enter => {
                     let line = text.clone();
-                    self.state.prompt = None;
+                    self.editor.state.prompt = None;
                     match Command::parse(&line) {
                         Ok(c) => self.run(c),
-                        Err(e) => self.state.status = e,
+                        Err(e) => self.editor.state.status = e,
                     }
                 }
                 KeyCode::Char(c) if !c.is_control() => text.push(c),
@@ -468,8 +467,8 @@ impl App {
             }
             return;
         }
-        if self.state.help && key.code == KeyCode::Esc {
-            self.state.help = false;
+        if self.editor.state.help && key.code == KeyCode::Esc {
+            self.editor.state.help = false;
             // The image under the overlay was removed: draw a fresh one.
             self.version += 1;
             return;
@@ -480,12 +479,12 @@ impl App {
     }
 
     fn run(&mut self, command: Command) {
-        match self.state.apply(&self.catalog, &command) {
+        match self.editor.step(&command) {
             Ok(effects) => {
-                if !matches!(command, Command::Quit | Command::Help | Command::Prompt) {
+                if command.journalled() {
                     if let Some(r) = &mut self.recorder {
-                        if let Err(e) = r.record(self.tick, &command) {
-                            self.state.status = format!("cannot journal the session: {e}");
+                        if let Err(e) = r.record(self.editor.tick(), &command) {
+                            self.editor.state.status = format!("cannot journal the session: {e}");
                         }
                     }
                 }
@@ -493,49 +492,25 @@ impl App {
                 if command.is_edit() {
                     self.edit_time = Some((self.version, Instant::now()));
                 }
-                for e in effects {
-                    self.effect(e);
+                for effect in effects {
+                    self.effect(effect);
                 }
             }
-            Err(e) => self.state.status = e,
+            Err(e) => self.editor.state.status = e,
         }
     }
 
+    /// Hands an effect to the render thread with the recipe and view of now.
     fn effect(&mut self, effect: Effect) {
-        let job = match effect {
-            Effect::SaveRecipe(p) => {
-                self.state.status = match std::fs::write(&p, self.state.recipe.to_toml()) {
-                    Ok(()) => format!("saved recipe {p}"),
-                    Err(e) => format!("cannot write {p}: {e}"),
-                };
-                return;
-            }
-            Effect::ExportPly(p) => Job::Export(self.state.recipe.clone(), PathBuf::from(p)),
-            Effect::Snapshot(p) => {
-                let (w, h) = self.info.image_size;
-                Job::Snapshot(
-                    self.frame_request(w.max(64), h.max(48), true),
-                    PathBuf::from(p),
-                )
-            }
-        };
+        let (w, h) = self.info.image_size;
+        let view = self.editor.frame_request(w.max(64), h.max(48), true);
+        let job = Job::Effect(effect, self.editor.state.recipe.clone(), view);
         let (lock, cv) = &*self.mailbox;
         lock.lock()
             .unwrap_or_else(|e| e.into_inner())
             .effects
             .push(job);
         cv.notify_one();
-    }
-
-    fn frame_request(&self, width: u32, height: u32, exact: bool) -> FrameRequest {
-        FrameRequest {
-            recipe: self.state.recipe.clone(),
-            debug: self.state.debug,
-            group: self.state.selected_group(),
-            width,
-            height,
-            exact,
-        }
     }
 
     /// Asks for a new frame when the picture is out of date, or for a full-quality
@@ -560,7 +535,7 @@ impl App {
             ((full.1 as f64 * scale).round() as u32).max(8),
         );
         let job = FrameJob {
-            request: self.frame_request(w, h, !moving),
+            request: self.editor.frame_request(w, h, !moving),
             version: self.version,
             protocol: self.graphics.protocol,
             cells,
@@ -584,7 +559,7 @@ impl App {
     fn receive(&mut self) {
         while let Ok(reply) = self.replies.try_recv() {
             match reply {
-                Reply::Message(m) => self.state.status = m,
+                Reply::Message(m) => self.editor.state.status = m,
                 Reply::Frame {
                     version,
                     result,
@@ -601,7 +576,7 @@ impl App {
                     }
                     if let Some((v, at)) = self.edit_time {
                         if version >= v {
-                            self.state.status =
+                            self.editor.state.status =
                                 format!("edit shown in {:.0} ms", at.elapsed().as_secs_f64() * 1e3);
                             self.edit_time = None;
                         }
@@ -639,8 +614,8 @@ impl App {
         viewport: Option<ratatui::layout::Rect>,
     ) -> Result<()> {
         let vm = ViewModel {
-            state: &self.state,
-            catalog: &self.catalog,
+            state: &self.editor.state,
+            catalog: &self.editor.catalog,
             swatches: &self.swatches,
             keymap: &self.keymap,
             info: &self.info,
@@ -653,7 +628,7 @@ impl App {
         out.extend(collector.take());
         if self.image_dirty && self.graphics.protocol != Protocol::Halfblocks {
             if let Some(v) = viewport {
-                if self.state.help {
+                if self.editor.state.help {
                     if self.graphics.protocol == Protocol::Kitty {
                         out.extend_from_slice(&kitty_delete());
                     }

@@ -12,8 +12,8 @@ use ratatui::Frame;
 use super::graphics::{draw_halfblocks, reserve_cells, Protocol};
 use super::keymap::Keymap;
 use crate::editor::state::{Catalog, EditorState};
-use crate::pipeline::workbench::FrameTimings;
 use crate::model::regions::Group;
+use crate::pipeline::workbench::FrameTimings;
 use crate::render::image::RgbImage;
 
 /// Smallest terminal the full layout needs.
