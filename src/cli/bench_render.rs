@@ -9,16 +9,16 @@ use clap::Args;
 use serde_json::{json, Value};
 
 use super::bench::summarize;
-use super::compose::{build, build_from, Built};
+use super::compose::{build, build_from};
 use super::render::parse_size;
 use super::DbArgs;
-use crate::compose::engine::PosedMesh;
 use crate::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
 use crate::error::{Error, Result};
+use crate::pipeline::composer::{reference_image, Composer, Painter};
 use crate::render::gpu::StageTimings;
 use crate::render::image::{psnr_report, RgbImage};
-use crate::render::reference::{render_reference, RenderSettings};
-use crate::render::{Backend, SplatRenderer};
+use crate::render::reference::RenderSettings;
+use crate::render::Backend;
 use crate::scene::camera::Camera;
 
 /// Arguments of `visage bench render`.
@@ -99,14 +99,13 @@ struct Case {
 /// Times `frames` animated renders; returns the per-frame totals and, with
 /// `stages`, the stage medians of a second, profiled pass.
 fn time_frames(
-    gpu: &mut SplatRenderer,
-    built: &Built,
+    painter: &mut Painter,
+    composer: &mut Composer,
     camera: &Camera,
     case: &Case,
     (warmup, iterations): (usize, usize),
     stages_too: bool,
 ) -> Result<(Vec<f64>, StageTimings)> {
-    let mut posed = PosedMesh::default();
     let mut totals = Vec::new();
     let mut stages: Vec<StageTimings> = Vec::new();
     let scaled = scaled_camera(camera, case.scale);
@@ -116,11 +115,11 @@ fn time_frames(
         if profiled && !stages_too {
             break;
         }
-        gpu.set_stage_profiling(profiled);
+        painter.renderer_mut().set_stage_profiling(profiled);
         for it in 0..warmup + iterations {
-            built.engine.pose(&built.composite, it, &mut posed);
+            composer.pose(it);
             let t = Instant::now();
-            let image = gpu.render(&posed.frames, &scaled, &case.settings)?;
+            let image = painter.render(composer, &scaled, &case.settings)?;
             if case.scale != 1.0 {
                 let _ = image.resized(camera.width, camera.height);
             }
@@ -129,13 +128,13 @@ fn time_frames(
                 continue;
             }
             if profiled {
-                stages.push(gpu.timings());
+                stages.push(painter.renderer_mut().timings());
             } else {
                 totals.push(total);
             }
         }
     }
-    gpu.set_stage_profiling(false);
+    painter.renderer_mut().set_stage_profiling(false);
     if stages.is_empty() {
         return Ok((totals, StageTimings::default()));
     }
@@ -158,19 +157,16 @@ fn scaled_camera(camera: &Camera, scale: f32) -> Camera {
     }
 }
 
-/// PSNR of the GPU frame (rendered with `case`) against the reference at full size.
+/// PSNR of frame 0 (rendered with `case`) against the reference at full size.
 fn accuracy(
-    gpu: &mut SplatRenderer,
-    built: &Built,
+    painter: &mut Painter,
+    composer: &mut Composer,
     camera: &Camera,
     case: &Case,
     reference: &RgbImage,
 ) -> Result<f64> {
-    let image = gpu.render(
-        &built.posed.frames,
-        &scaled_camera(camera, case.scale),
-        &case.settings,
-    )?;
+    composer.pose(0);
+    let image = painter.render(composer, &scaled_camera(camera, case.scale), &case.settings)?;
     let image = if case.scale != 1.0 {
         image.resized(camera.width, camera.height)
     } else {
@@ -184,12 +180,11 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
     if args.iterations == 0 {
         return Err(Error::input("--iterations must be at least 1"));
     }
-    let built = match &args.recipe {
+    let (mut composer, _) = match &args.recipe {
         Some(path) => build(&args.db, path, Some(0))?,
         None => build_from(&args.db, Some(0), bench_recipe_for)?,
     };
-    let scene = built.engine.scene(&built.composite, &built.posed);
-    let orbit = built.composite.recipe.camera;
+    let orbit = composer.composite().recipe.camera;
     let exact = Case {
         settings: RenderSettings::default(),
         scale: 1.0,
@@ -198,23 +193,23 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
     for &(w, h) in &args.sizes {
         let camera = orbit.camera(w, h);
         let t = Instant::now();
-        let image = render_reference(&scene, &camera, &RenderSettings::default());
+        let image = reference_image(&composer, &camera, &RenderSettings::default());
         references.push((camera, image, t.elapsed().as_secs_f64() * 1e3));
     }
     let mut renderers = Vec::new();
     for &backend in &args.renderers {
         let t = Instant::now();
-        let mut gpu = SplatRenderer::open(backend)?;
+        let mut painter = Painter::open(backend)?;
         let setup_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
-        gpu.set_gaussians(&built.composite.gaussians)?;
+        painter.upload(&composer)?;
         let upload_ms = t.elapsed().as_secs_f64() * 1e3;
         let mut rows = Vec::new();
         for (camera, reference, reference_ms) in &references {
-            let psnr_db = accuracy(&mut gpu, &built, camera, &exact, reference)?;
+            let psnr_db = accuracy(&mut painter, &mut composer, camera, &exact, reference)?;
             let (totals, stages) = time_frames(
-                &mut gpu,
-                &built,
+                &mut painter,
+                &mut composer,
                 camera,
                 &exact,
                 (args.warmup, args.iterations),
@@ -230,12 +225,13 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
         if !args.no_knobs {
             let (w, h) = args.knob_size;
             let camera = orbit.camera(w, h);
-            let reference = render_reference(&scene, &camera, &RenderSettings::default());
+            composer.pose(0);
+            let reference = reference_image(&composer, &camera, &RenderSettings::default());
             for (knob, value, case) in knob_cases() {
-                let psnr_db = accuracy(&mut gpu, &built, &camera, &case, &reference)?;
+                let psnr_db = accuracy(&mut painter, &mut composer, &camera, &case, &reference)?;
                 let (totals, _) = time_frames(
-                    &mut gpu,
-                    &built,
+                    &mut painter,
+                    &mut composer,
                     &camera,
                     &case,
                     (args.warmup, args.iterations),
@@ -250,7 +246,7 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
         }
         renderers.push(json!({
             "renderer": backend,
-            "device": gpu.description(),
+            "device": painter.description(),
             "setup_ms": setup_ms,
             "gaussian_upload_ms": upload_ms,
             "rows": rows,
@@ -259,7 +255,7 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
     }
     let doc = json!({
         "bench": "render",
-        "gaussians": built.composite.gaussians.len(),
+        "gaussians": composer.composite().gaussians.len(),
         "renderers": renderers,
     });
     if args.json {

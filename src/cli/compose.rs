@@ -1,19 +1,18 @@
 //! `visage compose` (describe a composite) and `visage export` (write one frame).
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use clap::{Args, ValueEnum};
 use serde_json::json;
 
 use super::DbArgs;
-use crate::compose::engine::{Composite, Engine, PosedMesh};
 use crate::compose::recipe::Recipe;
 use crate::compose::{canonical_order, composite_hash, reordered, state_hash};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::io::avatar::{neutral_offset, write_avatar, AvatarParams, FrameParams};
 use crate::io::ply::write_splat_ply;
 use crate::model::regions::{Group, Region};
+use crate::pipeline::composer::{BuildTimings, Composer};
 use crate::text::printable;
 
 /// Arguments of `visage compose`.
@@ -61,72 +60,30 @@ pub struct ExportArgs {
     output: PathBuf,
 }
 
-/// A composite built from a recipe file, posed at one frame.
-pub struct Built {
-    /// The engine (database and tables).
-    pub engine: Engine,
-    /// The composite.
-    pub composite: Composite,
-    /// The posed frame.
-    pub posed: PosedMesh,
-    /// Timings in milliseconds: database, engine set-up, compose, pose.
-    pub timings: [f64; 4],
-}
-
 /// Loads the database and a recipe file, builds the composite and poses `frame`.
 pub fn build(
     db_args: &DbArgs,
     recipe_path: &std::path::Path,
     frame: Option<usize>,
-) -> Result<Built> {
+) -> Result<(Composer, BuildTimings)> {
     let recipe = Recipe::load(recipe_path)?;
-    build_with(db_args, |_| recipe, frame, Some(recipe_path))
+    Composer::build(&db_args.spec(), |_| recipe, frame, Some(recipe_path))
 }
 
-/// Loads the database, builds the composite of the recipe `make` chooses for
+/// Loads the database, builds the composite of the recipe `choose` picks for
 /// it (defaults that depend on the database's sources) and poses `frame`.
 pub fn build_from(
     db_args: &DbArgs,
     frame: Option<usize>,
-    make: impl FnOnce(&crate::avatar::database::Database) -> Recipe,
-) -> Result<Built> {
-    build_with(db_args, make, frame, None)
-}
-
-fn build_with(
-    db_args: &DbArgs,
-    make: impl FnOnce(&crate::avatar::database::Database) -> Recipe,
-    frame: Option<usize>,
-    file: Option<&std::path::Path>,
-) -> Result<Built> {
-    let (db, db_time) = db_args.load()?;
-    let recipe = make(&db);
-    let resolved = recipe.resolve(&db).map_err(|e| match file {
-        Some(path) => Error::input(format!("{}: {e}", path.display())),
-        None => e,
-    })?;
-    let t = Instant::now();
-    let engine = Engine::new(db)?;
-    let setup = t.elapsed();
-    let t = Instant::now();
-    let composite = engine.compose(&resolved);
-    let compose = t.elapsed();
-    let t = Instant::now();
-    let mut posed = PosedMesh::default();
-    engine.pose(&composite, frame.unwrap_or(resolved.frame), &mut posed);
-    let pose = t.elapsed();
-    Ok(Built {
-        engine,
-        composite,
-        posed,
-        timings: [db_time, setup, compose, pose].map(|d| d.as_secs_f64() * 1e3),
-    })
+    choose: impl FnOnce(&crate::avatar::database::Database) -> Recipe,
+) -> Result<(Composer, BuildTimings)> {
+    Composer::build(&db_args.spec(), choose, frame, None)
 }
 
 /// Runs `visage compose`.
 pub fn run_compose(args: &ComposeArgs) -> Result<()> {
-    let built = build(&args.db, &args.recipe, args.frame)?;
-    let report = report(&built, args.frame);
+    let (composer, timings) = build(&args.db, &args.recipe, args.frame)?;
+    let report = report(&composer, &timings, args.frame);
     if args.json {
         println!("{report}");
     } else {
@@ -137,10 +94,10 @@ pub fn run_compose(args: &ComposeArgs) -> Result<()> {
 
 /// Runs `visage export`.
 pub fn run_export(args: &ExportArgs) -> Result<()> {
-    let built = build(&args.db, &args.recipe, args.frame)?;
+    let (composer, _) = build(&args.db, &args.recipe, args.frame)?;
     match args.format {
         ExportFormat::Ply => {
-            let scene = built.engine.scene(&built.composite, &built.posed);
+            let scene = composer.scene();
             write_splat_ply(&args.output, &scene)?;
             eprintln!(
                 "visage: wrote {} Gaussians (SH degree {}) to {}",
@@ -150,8 +107,8 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
             );
         }
         ExportFormat::GaussianAvatars => {
-            let engine = &built.engine;
-            let c = &built.composite;
+            let engine = composer.engine();
+            let c = composer.composite();
             let count = c
                 .recipe
                 .motion
@@ -186,9 +143,10 @@ fn round(x: f64, digits: i32) -> f64 {
     (x * p).round() / p
 }
 
-fn report(built: &Built, frame: Option<usize>) -> serde_json::Value {
-    let db = built.engine.database();
-    let c = &built.composite;
+fn report(composer: &Composer, timings: &BuildTimings, frame: Option<usize>) -> serde_json::Value {
+    let db = composer.engine().database();
+    let c = composer.composite();
+    let posed = composer.posed();
     let r = &c.recipe;
     let name = |f: usize| printable(&db.sources[f].name);
     let groups: Vec<_> = Group::ALL
@@ -232,10 +190,10 @@ fn report(built: &Built, frame: Option<usize>) -> serde_json::Value {
         .filter(|b| b.extra_from.is_some())
         .map(|b| b.end - b.start)
         .sum();
-    let nan = built.posed.vertices.iter().any(|v| !v.is_finite());
+    let nan = posed.vertices.iter().any(|v| !v.is_finite());
     json!({
         "state_hash": state_hash(db, r),
-        "composite_hash": composite_hash(&built.engine, c, frame.unwrap_or(r.frame)),
+        "composite_hash": composite_hash(composer.engine(), c, frame.unwrap_or(r.frame)),
         "database": printable(&db.fingerprint),
         "base": name(r.base),
         "groups": groups,
@@ -250,15 +208,15 @@ fn report(built: &Built, frame: Option<usize>) -> serde_json::Value {
             "motion": r.motion.map(|m| printable(&db.motions[m].name)).unwrap_or_else(|| "rest".into()),
             "index": frame.unwrap_or(r.frame),
             "mode": format!("{:?}", r.mode).to_lowercase(),
-            "residual": built.posed.residual,
-            "vertices": built.posed.vertices.len(),
+            "residual": posed.residual,
+            "vertices": posed.vertices.len(),
             "finite": !nan,
         },
         "timings_ms": {
-            "database": round(built.timings[0], 3),
-            "engine_setup": round(built.timings[1], 3),
-            "compose": round(built.timings[2], 3),
-            "pose": round(built.timings[3], 3),
+            "database": round(timings.database, 3),
+            "engine_setup": round(timings.setup, 3),
+            "compose": round(timings.compose, 3),
+            "pose": round(timings.pose, 3),
         },
     })
 }

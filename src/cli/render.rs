@@ -6,11 +6,12 @@ use std::time::Instant;
 use clap::Args;
 
 use super::camera::CameraArgs;
-use super::compose::{build, build_from, Built};
+use super::compose::{build, build_from};
 use super::DbArgs;
 use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
 use crate::io::ply::read_splat_ply;
+use crate::pipeline::composer::{reference_image, Composer, Painter};
 use crate::render::reference::{render_reference, RenderSettings};
 use crate::render::{Backend, SplatRenderer};
 use crate::scene::camera::{CameraOverrides, Orbit};
@@ -87,13 +88,13 @@ pub fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
 /// Renders frames `start..end` of a composite's motion to numbered PNGs.
 fn render_sequence(
     args: &RenderArgs,
-    subject: &Subject,
+    subject: &mut Subject,
     camera: &crate::scene::camera::Camera,
     settings: &RenderSettings,
     start: usize,
     end: usize,
 ) -> Result<()> {
-    let Subject::Composite(b) = subject else {
+    let Subject::Composite(composer) = subject else {
         return Err(Error::input(
             "--frames renders a recipe's motion; a PLY has one frame",
         ));
@@ -104,19 +105,15 @@ fn render_sequence(
             "with --frames the output path must contain {frame}, e.g. -o shots/frame-{frame}.png",
         ));
     }
-    let mut renderer = (!args.reference)
-        .then(|| SplatRenderer::open(args.renderer))
+    let mut painter = (!args.reference)
+        .then(|| Painter::open(args.renderer))
         .transpose()?;
-    if let Some(r) = &mut renderer {
-        r.set_gaussians(&b.composite.gaussians)?;
-    }
-    let mut posed = crate::compose::engine::PosedMesh::default();
     let t = Instant::now();
     for k in start..end {
-        b.engine.pose(&b.composite, k, &mut posed);
-        let image = match &mut renderer {
-            Some(r) => r.render(&posed.frames, camera, settings)?,
-            None => render_reference(&b.engine.scene(&b.composite, &posed), camera, settings),
+        composer.pose(k);
+        let image = match &mut painter {
+            Some(p) => p.render(composer, camera, settings)?,
+            None => reference_image(composer, camera, settings),
         };
         image.save_png(std::path::Path::new(
             &pattern.replace("{frame}", &format!("{k:04}")),
@@ -143,41 +140,36 @@ pub fn frame_scene(scene: &SplatScene, overrides: &CameraOverrides) -> Option<Or
     Some(start.framing(lo, hi))
 }
 
-/// The database's first source as it is, in the rest pose (what `render`
-/// shows without a recipe).
-fn build_first_source(db: &super::DbArgs, frame: Option<usize>) -> Result<Built> {
-    build_from(db, frame, |database| {
-        Recipe::unedited(&database.sources[0].name)
-    })
-}
-
 /// What a still shows: a world-space PLY scene, or a posed composite.
 enum Subject {
     Ply(SplatScene),
-    Composite(Box<Built>),
+    Composite(Box<Composer>),
 }
 
 /// Runs `visage render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let overrides = args.camera.overrides()?;
-    let (subject, orbit) = if let Some(ply) = &args.ply {
+    let (mut subject, orbit) = if let Some(ply) = &args.ply {
         let scene = read_splat_ply(ply)?;
         let orbit = frame_scene(&scene, &overrides)
             .ok_or_else(|| Error::input(format!("{} holds no Gaussians", ply.display())))?;
         (Subject::Ply(scene), orbit)
     } else {
-        let built = match &args.recipe {
+        // Without a recipe: the database's first source as it is, in the rest pose.
+        let (composer, _) = match &args.recipe {
             Some(path) => build(&args.db, path, args.frame)?,
-            None => build_first_source(&args.db, args.frame)?,
+            None => build_from(&args.db, args.frame, |database| {
+                Recipe::unedited(&database.sources[0].name)
+            })?,
         };
-        let orbit = built.composite.recipe.camera;
-        (Subject::Composite(Box::new(built)), orbit)
+        let orbit = composer.composite().recipe.camera;
+        (Subject::Composite(Box::new(composer)), orbit)
     };
     let orbit = overrides.apply(orbit);
     let camera = orbit.camera(args.size.0, args.size.1);
     let settings = RenderSettings::default();
     if let Some((start, end)) = args.frames {
-        return render_sequence(args, &subject, &camera, &settings, start, end);
+        return render_sequence(args, &mut subject, &camera, &settings, start, end);
     }
     let t = Instant::now();
     let (image, count, device) = match (&subject, args.reference) {
@@ -186,14 +178,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             scene.len(),
             "CPU reference".to_string(),
         ),
-        (Subject::Composite(b), true) => {
-            let scene = b.engine.scene(&b.composite, &b.posed);
-            (
-                render_reference(&scene, &camera, &settings),
-                scene.len(),
-                "CPU reference".to_string(),
-            )
-        }
+        (Subject::Composite(c), true) => (
+            reference_image(c, &camera, &settings),
+            c.composite().gaussians.len(),
+            "CPU reference".to_string(),
+        ),
         (Subject::Ply(scene), false) => {
             let mut r = SplatRenderer::open(args.renderer)?;
             r.set_world_scene(scene)?;
@@ -203,11 +192,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 r.description(),
             )
         }
-        (Subject::Composite(b), false) => {
-            let mut r = SplatRenderer::open(args.renderer)?;
-            r.set_gaussians(&b.composite.gaussians)?;
-            let image = r.render(&b.posed.frames, &camera, &settings)?;
-            (image, b.composite.gaussians.len(), r.description())
+        (Subject::Composite(c), false) => {
+            let mut painter = Painter::open(args.renderer)?;
+            let image = painter.render(c, &camera, &settings)?;
+            (image, c.composite().gaussians.len(), painter.description())
         }
     };
     eprintln!(

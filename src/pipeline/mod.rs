@@ -3,8 +3,10 @@
 //! builds for the command line, and the [`Workbench`] that keeps a composite up
 //! to date for the editor (rebuilding only what a recipe change touches).
 
+pub mod composer;
 pub mod database;
 pub mod workbench;
 
+pub use composer::{Composer, Painter};
 pub use database::DatabaseSpec;
 pub use workbench::Workbench;

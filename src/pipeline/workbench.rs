@@ -9,8 +9,9 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use crate::compose::engine::{Composite, Engine, PosedMesh};
-use crate::compose::recipe::{Recipe, ResolvedRecipe};
+use super::composer::{Composer, Painter};
+use crate::compose::engine::Engine;
+use crate::compose::recipe::Recipe;
 use crate::compose::state_hash;
 use crate::error::{Error, Result};
 use crate::io::obj::region_colour;
@@ -19,7 +20,7 @@ use crate::model::regions::Group;
 use crate::render::image::RgbImage;
 use crate::render::mesh_preview::render_mesh;
 use crate::render::reference::RenderSettings;
-use crate::render::{Backend, SplatRenderer};
+use crate::render::Backend;
 
 /// Debug view toggles.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -85,70 +86,41 @@ pub struct FrameResult {
     pub state_hash: String,
 }
 
-/// The engine, the current composite and a renderer.
+/// The editor's composer and painter: a composite kept up to date with the
+/// recipe and drawn with one renderer.
 pub struct Workbench {
-    engine: Engine,
-    renderer: SplatRenderer,
-    composite: Option<Composite>,
-    posed: PosedMesh,
-    uploaded: bool,
+    composer: Composer,
+    painter: Painter,
 }
 
 impl Workbench {
     /// A workbench on an engine with a renderer of the given kind.
     pub fn new(engine: Engine, backend: Backend) -> Result<Self> {
         Ok(Self {
-            engine,
-            renderer: SplatRenderer::open(backend)?,
-            composite: None,
-            posed: PosedMesh::default(),
-            uploaded: false,
+            composer: Composer::new(engine),
+            painter: Painter::open(backend)?,
         })
     }
 
     /// The engine.
     pub fn engine(&self) -> &Engine {
-        &self.engine
+        self.composer.engine()
     }
 
     /// What renders.
     pub fn renderer_description(&self) -> String {
-        self.renderer.description()
-    }
-
-    /// Brings the composite up to date with `recipe` and poses its frame.
-    pub fn update(&mut self, recipe: &Recipe) -> Result<(ResolvedRecipe, f64, f64)> {
-        let resolved = recipe.resolve(self.engine.database())?;
-        let t = Instant::now();
-        match &mut self.composite {
-            Some(c) => {
-                let changes = self.engine.update(c, &resolved);
-                if changes.gaussians {
-                    self.uploaded = false;
-                }
-            }
-            None => {
-                self.composite = Some(self.engine.compose(&resolved));
-                self.uploaded = false;
-            }
-        }
-        let compose = t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let composite = self.composite.as_ref().expect("composed above");
-        self.engine.pose(composite, resolved.frame, &mut self.posed);
-        Ok((resolved, compose, t.elapsed().as_secs_f64() * 1e3))
+        self.painter.description()
     }
 
     /// The state hash of `recipe` on this database (nothing is composed or rendered).
     pub fn state_hash(&self, recipe: &Recipe) -> Result<String> {
-        let resolved = recipe.resolve(self.engine.database())?;
-        Ok(state_hash(self.engine.database(), &resolved))
+        let db = self.composer.engine().database();
+        Ok(state_hash(db, &recipe.resolve(db)?))
     }
 
     /// Renders a request.
     pub fn render(&mut self, request: &FrameRequest) -> Result<FrameResult> {
-        let (resolved, compose, pose) = self.update(&request.recipe)?;
-        let composite = self.composite.as_ref().expect("composed");
+        let (resolved, timings) = self.composer.update(&request.recipe)?;
         let camera = resolved
             .camera
             .camera(request.width.max(1), request.height.max(1));
@@ -156,20 +128,16 @@ impl Workbench {
         let image = if request.debug.mesh {
             self.mesh_view(&camera, request)
         } else {
-            if !self.uploaded {
-                self.renderer.set_gaussians(&composite.gaussians)?;
-                self.uploaded = true;
-            }
             let mut settings = if request.exact {
                 RenderSettings::default()
             } else {
                 RenderSettings::interactive()
             };
             settings.scale_modifier = request.debug.scale;
-            self.renderer
-                .render(&self.posed.frames, &camera, &settings)?
+            self.painter.render(&self.composer, &camera, &settings)?
         };
         let render = t.elapsed().as_secs_f64() * 1e3;
+        let composite = self.composer.composite();
         let extras = composite
             .blocks
             .iter()
@@ -179,18 +147,18 @@ impl Workbench {
         Ok(FrameResult {
             image,
             timings: FrameTimings {
-                compose,
-                pose,
+                compose: timings.compose,
+                pose: timings.pose,
                 render,
             },
             gaussians: composite.gaussians.len(),
             extras,
-            state_hash: state_hash(self.engine.database(), &resolved),
+            state_hash: state_hash(self.composer.engine().database(), &resolved),
         })
     }
 
     fn mesh_view(&self, camera: &crate::scene::camera::Camera, request: &FrameRequest) -> RgbImage {
-        let model = &self.engine.database().model;
+        let model = &self.composer.engine().database().model;
         let colours: Vec<[u8; 3]> = model
             .triangle_regions
             .iter()
@@ -205,7 +173,7 @@ impl Workbench {
             })
             .collect();
         render_mesh(
-            &self.posed.vertices,
+            &self.composer.posed().vertices,
             &model.triangles,
             &colours,
             camera.view_projection(),
@@ -217,9 +185,8 @@ impl Workbench {
 
     /// Writes the current frame as a standard 3DGS PLY.
     pub fn export_ply(&mut self, recipe: &Recipe, path: &Path) -> Result<usize> {
-        self.update(recipe)?;
-        let composite = self.composite.as_ref().expect("composed");
-        let scene = self.engine.scene(composite, &self.posed);
+        self.composer.update(recipe)?;
+        let scene = self.composer.scene();
         write_splat_ply(path, &scene)?;
         Ok(scene.len())
     }

@@ -1,0 +1,208 @@
+//! The one path from a database and a recipe to a posed composite and an
+//! image. A [`Composer`] keeps a composite up to date with a recipe (only what
+//! a change touches is rebuilt) and posed at a frame; a [`Painter`] draws a
+//! composer's posed composite with one renderer, uploading the Gaussians only
+//! when they changed. The editor's workbench, `compose`, `export`, `render`
+//! and every benchmark go through these two.
+
+use std::time::Instant;
+
+use crate::compose::engine::{Composite, Engine, PosedMesh};
+use crate::compose::recipe::{Recipe, ResolvedRecipe};
+use crate::error::{Error, Result};
+use crate::render::image::RgbImage;
+use crate::render::reference::{render_reference, RenderSettings};
+use crate::render::{Backend, SplatRenderer};
+use crate::scene::camera::Camera;
+use crate::scene::splats::SplatScene;
+
+use super::DatabaseSpec;
+
+/// Milliseconds spent building a composite from nothing.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BuildTimings {
+    /// Opening (or generating) the database.
+    pub database: f64,
+    /// Engine set-up (lookup tables, Laplacian factorisation).
+    pub setup: f64,
+    /// Composing the recipe.
+    pub compose: f64,
+    /// Posing the frame.
+    pub pose: f64,
+}
+
+/// A composite on its engine, kept up to date with a recipe and posed.
+pub struct Composer {
+    engine: Engine,
+    composite: Option<Composite>,
+    posed: PosedMesh,
+    /// Bumped whenever the composite's Gaussians change (renderers re-upload).
+    generation: u64,
+}
+
+/// How long the last [`Composer::update`] spent, in milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct UpdateTimings {
+    /// Recipe → composite (blend and/or selection).
+    pub compose: f64,
+    /// Posing the recipe's frame.
+    pub pose: f64,
+}
+
+impl Composer {
+    /// A composer on an engine (nothing composed yet).
+    pub fn new(engine: Engine) -> Self {
+        Self {
+            engine,
+            composite: None,
+            posed: PosedMesh::default(),
+            generation: 0,
+        }
+    }
+
+    /// Opens a database, composes the recipe `choose` picks for it and poses
+    /// `frame` (default: the recipe's). `file` names the recipe's file in errors.
+    pub fn build(
+        spec: &DatabaseSpec,
+        choose: impl FnOnce(&crate::avatar::database::Database) -> Recipe,
+        frame: Option<usize>,
+        file: Option<&std::path::Path>,
+    ) -> Result<(Composer, BuildTimings)> {
+        let (db, db_time) = spec.load()?;
+        let recipe = choose(&db);
+        recipe.resolve(&db).map_err(|e| match file {
+            Some(path) => Error::input(format!("{}: {e}", path.display())),
+            None => e,
+        })?;
+        let t = Instant::now();
+        let mut composer = Composer::new(Engine::new(db)?);
+        let setup = t.elapsed().as_secs_f64() * 1e3;
+        let (resolved, mut timings) = composer.update(&recipe)?;
+        if let Some(k) = frame.filter(|&k| k != resolved.frame) {
+            timings.pose = composer.pose(k);
+        }
+        Ok((
+            composer,
+            BuildTimings {
+                database: db_time.as_secs_f64() * 1e3,
+                setup,
+                compose: timings.compose,
+                pose: timings.pose,
+            },
+        ))
+    }
+
+    /// Brings the composite up to date with `recipe` and poses its frame.
+    pub fn update(&mut self, recipe: &Recipe) -> Result<(ResolvedRecipe, UpdateTimings)> {
+        let resolved = recipe.resolve(self.engine.database())?;
+        let t = Instant::now();
+        match &mut self.composite {
+            Some(c) => {
+                if self.engine.update(c, &resolved).gaussians {
+                    self.generation += 1;
+                }
+            }
+            None => {
+                self.composite = Some(self.engine.compose(&resolved));
+                self.generation += 1;
+            }
+        }
+        let compose = t.elapsed().as_secs_f64() * 1e3;
+        let pose = self.pose(resolved.frame);
+        Ok((resolved, UpdateTimings { compose, pose }))
+    }
+
+    /// Poses another frame of the composite's motion; returns milliseconds spent.
+    pub fn pose(&mut self, frame: usize) -> f64 {
+        let t = Instant::now();
+        if let Some(c) = &self.composite {
+            self.engine.pose(c, frame, &mut self.posed);
+        }
+        t.elapsed().as_secs_f64() * 1e3
+    }
+
+    /// The engine (database, tables, blender).
+    pub fn engine(&self) -> &Engine {
+        &self.engine
+    }
+
+    /// The composite (after the first update).
+    pub fn composite(&self) -> &Composite {
+        self.composite
+            .as_ref()
+            .expect("a composer is updated before it is read")
+    }
+
+    /// The posed frame.
+    pub fn posed(&self) -> &PosedMesh {
+        &self.posed
+    }
+
+    /// The posed composite as world-space Gaussians (for PLY export and the
+    /// reference renderer).
+    pub fn scene(&self) -> SplatScene {
+        self.engine.scene(self.composite(), &self.posed)
+    }
+
+    /// Changes whenever the composite's Gaussians do.
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+}
+
+/// One renderer drawing composers' posed composites.
+pub struct Painter {
+    renderer: SplatRenderer,
+    uploaded: Option<u64>,
+}
+
+impl Painter {
+    /// A painter with a renderer of the given kind.
+    pub fn open(backend: Backend) -> Result<Self> {
+        Ok(Self {
+            renderer: SplatRenderer::open(backend)?,
+            uploaded: None,
+        })
+    }
+
+    /// What renders.
+    pub fn description(&self) -> String {
+        self.renderer.description()
+    }
+
+    /// The renderer (stage profiling and timings in benchmarks).
+    pub fn renderer_mut(&mut self) -> &mut SplatRenderer {
+        &mut self.renderer
+    }
+
+    /// Uploads the composer's Gaussians unless this painter has them already.
+    pub fn upload(&mut self, composer: &Composer) -> Result<()> {
+        if self.uploaded != Some(composer.generation()) {
+            self.renderer
+                .set_gaussians(&composer.composite().gaussians)?;
+            self.uploaded = Some(composer.generation());
+        }
+        Ok(())
+    }
+
+    /// Draws the composer's posed composite.
+    pub fn render(
+        &mut self,
+        composer: &Composer,
+        camera: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<RgbImage> {
+        self.upload(composer)?;
+        self.renderer
+            .render(&composer.posed().frames, camera, settings)
+    }
+}
+
+/// The f64 reference image of a composer's posed composite (the oracle).
+pub fn reference_image(
+    composer: &Composer,
+    camera: &Camera,
+    settings: &RenderSettings,
+) -> RgbImage {
+    render_reference(&composer.scene(), camera, settings)
+}
