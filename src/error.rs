@@ -1,16 +1,27 @@
 //! The error type that reaches the command line, with the exit-code contract:
-//! 0 success, 1 a check did not hold, 2 bad input or usage.
-
-use std::fmt;
+//! 0 success, 1 a check did not hold, 2 bad input or usage, 3 the graphics
+//! device or the terminal failed (nothing the user typed was wrong). Every
+//! message prints as one line.
 
 /// What went wrong, and therefore which exit code the process returns.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum Error {
     /// Bad input: unreadable or invalid files, bad arguments, impossible requests (exit 2).
+    #[error("{}", one_line(.0))]
     Input(String),
     /// A requested check (e.g. `replay --check`) did not hold (exit 1).
+    #[error("{}", one_line(.0))]
     CheckFailed(String),
+    /// The graphics device is missing or failed (exit 3).
+    #[error("{}", one_line(.0))]
+    Device(String),
+    /// The terminal cannot be used or went away (exit 3).
+    #[error("{}", one_line(.0))]
+    Terminal(String),
 }
+
+/// Exit code of [`Error::Device`] and [`Error::Terminal`].
+pub const EXIT_ENVIRONMENT: u8 = 3;
 
 impl Error {
     /// Builds an input error from anything printable.
@@ -18,26 +29,30 @@ impl Error {
         Error::Input(message.into())
     }
 
+    /// Builds a device error.
+    pub fn device(message: impl Into<String>) -> Self {
+        Error::Device(message.into())
+    }
+
+    /// Builds a terminal error.
+    pub fn terminal(message: impl Into<String>) -> Self {
+        Error::Terminal(message.into())
+    }
+
     /// The process exit code for this error.
     pub fn exit_code(&self) -> u8 {
         match self {
             Error::Input(_) => 2,
             Error::CheckFailed(_) => 1,
+            Error::Device(_) | Error::Terminal(_) => EXIT_ENVIRONMENT,
         }
     }
 }
 
-impl fmt::Display for Error {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let message = match self {
-            Error::Input(m) | Error::CheckFailed(m) => m,
-        };
-        // Always one line: messages may quote file contents.
-        f.write_str(&crate::text::printable(message).replace('\n', " "))
-    }
+/// Messages may quote file contents: control characters go, lines join.
+fn one_line(message: &str) -> String {
+    crate::text::printable(message).replace('\n', " ")
 }
-
-impl std::error::Error for Error {}
 
 impl From<String> for Error {
     fn from(message: String) -> Self {
@@ -47,3 +62,17 @@ impl From<String> for Error {
 
 /// Result with the command-line error type.
 pub type Result<T> = std::result::Result<T, Error>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exit_codes_and_one_line_messages() {
+        assert_eq!(Error::input("x").exit_code(), 2);
+        assert_eq!(Error::CheckFailed("x".into()).exit_code(), 1);
+        assert_eq!(Error::device("x").exit_code(), 3);
+        assert_eq!(Error::terminal("x").exit_code(), 3);
+        assert_eq!(Error::input("two\nlines\u{1b}[2J").to_string(), "two lines[2J");
+    }
+}

@@ -214,7 +214,7 @@ impl GpuRenderer {
     /// otherwise) and compiles the kernels.
     pub fn new() -> Result<Self> {
         pollster::block_on(Self::open(true))?
-            .ok_or_else(|| Error::input("no graphics adapter found"))
+            .ok_or_else(|| Error::device("no graphics adapter found"))
     }
 
     /// Opens a hardware adapter only: `Ok(None)` when the best adapter is a
@@ -235,7 +235,7 @@ impl GpuRenderer {
             })
             .await
             .map_err(|e| {
-                Error::input(format!(
+                Error::device(format!(
                     "no graphics adapter found ({e}); install Mesa's software Vulkan driver with \
                      'apt-get install mesa-vulkan-drivers libvulkan1', or use --reference for the CPU renderer"
                 ))
@@ -261,7 +261,7 @@ impl GpuRenderer {
                 trace: wgpu::Trace::Off,
             })
             .await
-            .map_err(|e| Error::input(format!("cannot open the graphics device: {e}")))?;
+            .map_err(|e| Error::device(format!("cannot open the graphics device: {e}")))?;
         let bind_pipeline = compute_pipeline(
             &device,
             "bind",
@@ -646,7 +646,7 @@ fn wait(device: &wgpu::Device) -> Result<()> {
     device
         .poll(wgpu::PollType::wait_indefinitely())
         .map(|_| ())
-        .map_err(|e| Error::input(format!("the graphics device failed: {e}")))
+        .map_err(|e| Error::device(format!("the graphics device failed: {e}")))
 }
 
 /// Maps a read-back buffer, copies `bytes` out as `T`, and unmaps it.
@@ -676,14 +676,14 @@ fn map_and_read(
     });
     device
         .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| Error::input(format!("the graphics device failed: {e}")))?;
+        .map_err(|e| Error::device(format!("the graphics device failed: {e}")))?;
     rx.recv()
-        .map_err(|_| Error::input("the graphics device dropped a read-back"))?
-        .map_err(|e| Error::input(format!("cannot read back from the graphics device: {e}")))?;
+        .map_err(|_| Error::device("the graphics device dropped a read-back"))?
+        .map_err(|e| Error::device(format!("cannot read back from the graphics device: {e}")))?;
     {
         let view = slice
             .get_mapped_range()
-            .map_err(|e| Error::input(format!("cannot read back from the graphics device: {e}")))?;
+            .map_err(|e| Error::device(format!("cannot read back from the graphics device: {e}")))?;
         read(&view);
     }
     buffer.unmap();

@@ -258,7 +258,7 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
         signal_hook::consts::SIGHUP,
     ] {
         signal_hook::flag::register(signal, Arc::clone(&stop))
-            .map_err(|e| Error::input(format!("cannot install signal handler: {e}")))?;
+            .map_err(|e| Error::terminal(format!("cannot install signal handler: {e}")))?;
     }
     let kitty = graphics.protocol == Protocol::Kitty;
     let default_hook = std::panic::take_hook();
@@ -267,14 +267,14 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
         default_hook(info);
     }));
     terminal::enable_raw_mode()
-        .map_err(|e| Error::input(format!("cannot use this terminal: {e}")))?;
+        .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
     let _guard = TerminalGuard { kitty };
     execute!(
         std::io::stdout(),
         terminal::EnterAlternateScreen,
         cursor::Hide
     )
-    .map_err(|e| Error::input(format!("cannot use this terminal: {e}")))?;
+    .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
 
     let mailbox = Arc::new((Mutex::new(Mailbox::default()), Condvar::new()));
     let (reply_tx, replies) = channel();
@@ -383,7 +383,7 @@ impl App {
     fn event_loop(&mut self, stop: &AtomicBool) -> Result<()> {
         let collector = Collector::default();
         let mut term = Terminal::new(CrosstermBackend::new(collector.clone()))
-            .map_err(|e| Error::input(format!("cannot use this terminal: {e}")))?;
+            .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
         let tick_len = Duration::from_millis(1000 / crate::editor::session::TICKS_PER_SECOND);
         let mut next_tick = Instant::now() + tick_len;
         let mut viewport = None;
@@ -623,7 +623,7 @@ impl App {
             image: self.image.as_ref(),
         };
         term.draw(|f| draw(f, &vm))
-            .map_err(|e| Error::input(format!("cannot draw: {e}")))?;
+            .map_err(|e| Error::terminal(format!("cannot draw: {e}")))?;
         let mut out = SYNC_BEGIN.to_vec();
         out.extend(collector.take());
         if self.image_dirty && self.graphics.protocol != Protocol::Halfblocks {
@@ -648,6 +648,6 @@ impl App {
         stdout
             .write_all(&out)
             .and_then(|_| stdout.flush())
-            .map_err(|e| Error::input(format!("cannot write to the terminal: {e}")))
+            .map_err(|e| Error::terminal(format!("cannot write to the terminal: {e}")))
     }
 }
