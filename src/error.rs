@@ -73,6 +73,9 @@ mod tests {
         assert_eq!(Error::CheckFailed("x".into()).exit_code(), 1);
         assert_eq!(Error::device("x").exit_code(), 3);
         assert_eq!(Error::terminal("x").exit_code(), 3);
-        assert_eq!(Error::input("two\nlines\u{1b}[2J").to_string(), "two lines[2J");
+        assert_eq!(
+            Error::input("two\nlines\u{1b}[2J").to_string(),
+            "two lines[2J"
+        );
     }
 }

@@ -1,13 +1,7 @@
 //! `visage compose`, `visage export` and `visage bench engine` as a user runs them.
 
-use std::process::Command;
-
-fn visage(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_visage"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+mod common;
+use common::visage;
 
 const SMALL: [&str; 2] = ["--gaussians-per-avatar", "11000"];
 

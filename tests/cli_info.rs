@@ -1,13 +1,7 @@
 //! `visage info` as a user runs it.
 
-use std::process::Command;
-
-fn visage(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_visage"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+mod common;
+use common::visage;
 
 #[test]
 fn info_json_describes_model_sources_and_motions() {

@@ -1,22 +1,15 @@
 //! `visage render` and `visage bench render` as a user runs them.
 
-use std::process::Command;
+mod common;
+use common::visage;
 
 use glam::{Quat, Vec3};
 use visage::io::ply::write_splat_ply;
 use visage::render::image::{psnr, RgbImage};
 use visage::scene::splats::SplatScene;
 
-fn visage(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_visage"))
-        .env("NODEVICE_SELECT", "1")
-        .args(args)
-        .output()
-        .unwrap()
-}
-
 fn temp(name: &str) -> std::path::PathBuf {
-    std::env::temp_dir().join(format!("visage-cli-render-{}-{name}", std::process::id()))
+    common::temp_path("cli-render", name)
 }
 
 fn ring_scene(degree: u8) -> SplatScene {

@@ -2,6 +2,9 @@
 //! pickles, GaussianAvatars folders) load, compose, render and export; exports
 //! load back with the same composite hash; bad files fail with one line and exit 2.
 
+mod common;
+use common::visage;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -14,13 +17,6 @@ fn fixtures() -> &'static FixturePaths {
         let dir = std::env::temp_dir().join(format!("visage-fixtures-{}", std::process::id()));
         write_fixtures(&dir, 3, 11_000, 4).expect("fixtures")
     })
-}
-
-fn visage(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_visage"))
-        .args(args)
-        .output()
-        .unwrap()
 }
 
 fn db_args(f: &FixturePaths) -> Vec<String> {
@@ -60,8 +56,8 @@ fn ok_json(args: Vec<String>) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
-fn temp(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("visage-real-{}-{name}", std::process::id()))
+fn temp(name: &str) -> std::path::PathBuf {
+    common::temp_path("real", name)
 }
 
 #[test]

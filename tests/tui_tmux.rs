@@ -1,7 +1,9 @@
 //! The real editor in a real terminal: tmux runs the binary, send-keys types,
 //! capture-pane reads the screen. Needs tmux (installed by .ci/setup).
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -78,8 +80,8 @@ impl Drop for Tmux {
     }
 }
 
-fn temp(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("visage-tmux-{}-{name}", std::process::id()))
+fn temp(name: &str) -> std::path::PathBuf {
+    common::temp_path("tmux", name)
 }
 
 fn wait_file(path: &Path, limit: Duration) -> String {

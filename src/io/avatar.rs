@@ -12,13 +12,13 @@
 
 use std::path::Path;
 
-use glam::{DVec3, Quat, Vec3};
+use glam::{DVec3, Vec3};
 
 use super::npy::{read_npz, write_npy, write_npz, NpyData};
 use super::pickle::NdArray;
-use super::ply::{encode_inria_ply, read_element, Columns, InriaRecord};
+use super::ply::{encode_inria_ply, read_element, InriaRecord, InriaRows};
 use crate::avatar::database::SourceAvatar;
-use crate::avatar::gaussians::{sh_coefficients, sh_degree_for, GaussianSet};
+use crate::avatar::gaussians::{sh_coefficients, GaussianSet};
 use crate::model::head::{HeadModel, Pose, JOINT_COUNT};
 use crate::model::motion::Motion;
 
@@ -33,77 +33,34 @@ pub fn read_bound_ply(path: &Path, triangles: usize) -> Result<GaussianSet, Stri
     parse_bound_ply(&bytes, triangles).map_err(|e| format!("{}: {e}", path.display()))
 }
 
-fn columns<'a>(c: &'a Columns, names: &[&str]) -> Result<Vec<&'a [f64]>, String> {
-    names.iter().map(|n| c.require(n)).collect()
-}
-
 /// Parses GaussianAvatars `point_cloud.ply` bytes.
 pub fn parse_bound_ply(bytes: &[u8], triangles: usize) -> Result<GaussianSet, String> {
     let c = read_element(bytes, "vertex")?;
-    let rest = (0..)
-        .take_while(|k| c.get(&format!("f_rest_{k}")).is_some())
-        .count();
-    if rest % 3 != 0 {
-        return Err(format!("{rest} f_rest properties is not a multiple of 3"));
-    }
-    let degree = sh_degree_for(1 + rest / 3)
-        .ok_or_else(|| format!("{rest} f_rest properties is no SH degree 0-3"))?;
-    let pos = columns(&c, &["x", "y", "z"])?;
-    let dc = columns(&c, &["f_dc_0", "f_dc_1", "f_dc_2"])?;
-    let scale = columns(&c, &["scale_0", "scale_1", "scale_2"])?;
-    let rot = columns(&c, &["rot_0", "rot_1", "rot_2", "rot_3"])?;
-    let opacity = c.require("opacity")?;
-    let binding = c
-        .require("binding_0")
-        .map_err(|_| "no binding_0 property: this is not a GaussianAvatars point cloud (use --ply for world-space 3DGS files)".to_string())?;
-    let rest_cols: Vec<&[f64]> = (0..rest)
-        .map(|k| c.get(&format!("f_rest_{k}")).unwrap())
-        .collect();
-    let per_channel = rest / 3;
-    let mut set = GaussianSet::with_degree(degree);
+    let rows = InriaRows::new(
+        &c,
+        Some((
+            "binding_0",
+            "no binding_0 property: this is not a GaussianAvatars point cloud (use --ply for world-space 3DGS files)",
+        )),
+    )?;
+    let mut set = GaussianSet::with_degree(rows.degree);
     set.reserve(c.rows);
-    let mut sh = vec![0.0f32; 3 * sh_coefficients(degree)];
+    let mut sh = vec![0.0f32; 3 * sh_coefficients(rows.degree)];
     for i in 0..c.rows {
-        let b = binding[i];
+        let b = rows.extra_value(i).expect("binding_0 is required");
         if !(b >= 0.0 && b.fract() == 0.0 && (b as usize) < triangles) {
             return Err(format!(
                 "Gaussian {i} is bound to triangle {}, but the mesh has {triangles} triangles",
                 crate::text::id_text(b)
             ));
         }
-        for ch in 0..3 {
-            sh[ch] = dc[ch][i] as f32;
-            for k in 0..per_channel {
-                sh[(k + 1) * 3 + ch] = rest_cols[ch * per_channel + k][i] as f32;
-            }
-        }
-        let values = [
-            pos[0][i],
-            pos[1][i],
-            pos[2][i],
-            scale[0][i],
-            scale[1][i],
-            scale[2][i],
-            rot[0][i],
-            rot[1][i],
-            rot[2][i],
-            rot[3][i],
-            opacity[i],
-        ];
-        if values.iter().any(|v| !v.is_finite()) || sh.iter().any(|v| !v.is_finite()) {
-            return Err(format!("Gaussian {i} has a NaN or infinite value"));
-        }
+        let r = rows.decode(i, &mut sh)?;
         set.push(
             b as u32,
-            Vec3::new(pos[0][i] as f32, pos[1][i] as f32, pos[2][i] as f32),
-            Quat::from_xyzw(
-                rot[1][i] as f32,
-                rot[2][i] as f32,
-                rot[3][i] as f32,
-                rot[0][i] as f32,
-            ),
-            Vec3::new(scale[0][i] as f32, scale[1][i] as f32, scale[2][i] as f32),
-            opacity[i] as f32,
+            r.position,
+            r.rotation,
+            r.log_scale,
+            r.opacity_logit,
             &sh,
         );
     }

@@ -369,58 +369,110 @@ pub fn read_splat_ply(path: &Path) -> Result<SplatScene, String> {
 /// Parses standard 3DGS PLY bytes into a scene.
 pub fn parse_splat_ply(bytes: &[u8]) -> Result<SplatScene, String> {
     let c = read_element(bytes, "vertex")?;
-    let (rest, degree) = sh_layout(&c)?;
-    let col = |n: &str| c.require(n);
-    let (x, y, z) = (col("x")?, col("y")?, col("z")?);
-    let dc = [col("f_dc_0")?, col("f_dc_1")?, col("f_dc_2")?];
-    let rest_cols: Vec<&[f64]> = (0..rest)
-        .map(|k| c.get(&format!("f_rest_{k}")).unwrap())
-        .collect();
-    let opacity = col("opacity")?;
-    let scale = [col("scale_0")?, col("scale_1")?, col("scale_2")?];
-    let rot = [col("rot_0")?, col("rot_1")?, col("rot_2")?, col("rot_3")?];
-    let per_channel = rest / 3;
-    let mut scene = SplatScene::with_degree(degree);
-    let mut sh = vec![0.0f32; 3 * sh_coefficients(degree)];
+    let rows = InriaRows::new(&c, None)?;
+    let mut scene = SplatScene::with_degree(rows.degree);
+    let mut sh = vec![0.0f32; 3 * sh_coefficients(rows.degree)];
     for i in 0..c.rows {
-        for ch in 0..3 {
-            sh[ch] = dc[ch][i] as f32;
-            for k in 0..per_channel {
-                sh[(k + 1) * 3 + ch] = rest_cols[ch * per_channel + k][i] as f32;
-            }
-        }
-        let values = [
-            x[i],
-            y[i],
-            z[i],
-            opacity[i],
-            scale[0][i],
-            scale[1][i],
-            scale[2][i],
-            rot[0][i],
-            rot[1][i],
-            rot[2][i],
-            rot[3][i],
-        ];
-        if values.iter().any(|v| !v.is_finite()) || sh.iter().any(|v| !v.is_finite()) {
-            return Err(format!("Gaussian {i} has a NaN or infinite value"));
-        }
-        let s = Vec3::new(scale[0][i] as f32, scale[1][i] as f32, scale[2][i] as f32).exp();
-        let q = Quat::from_xyzw(
-            rot[1][i] as f32,
-            rot[2][i] as f32,
-            rot[3][i] as f32,
-            rot[0][i] as f32,
-        );
+        let r = rows.decode(i, &mut sh)?;
         scene.push(
-            Vec3::new(x[i] as f32, y[i] as f32, z[i] as f32),
-            q,
-            s,
-            sigmoid(opacity[i] as f32),
+            r.position,
+            r.rotation,
+            r.log_scale.exp(),
+            sigmoid(r.opacity_logit),
             &sh,
         );
     }
     Ok(scene)
+}
+
+/// The INRIA-layout columns of a vertex element, decoded row by row — the one
+/// decoder of 3DGS rows that world-space scenes and GaussianAvatars point
+/// clouds share.
+pub struct InriaRows<'a> {
+    /// SH degree, from the count of `f_rest_*` properties.
+    pub degree: u8,
+    position: [&'a [f64]; 3],
+    dc: [&'a [f64]; 3],
+    rest: Vec<&'a [f64]>,
+    opacity: &'a [f64],
+    scale: [&'a [f64]; 3],
+    rotation: [&'a [f64]; 4],
+    extra: Option<&'a [f64]>,
+}
+
+impl<'a> InriaRows<'a> {
+    /// Finds the columns; `extra` names one more required property (e.g.
+    /// `binding_0`), with the error to give when it is missing.
+    pub fn new(c: &'a Columns, extra: Option<(&str, &str)>) -> Result<Self, String> {
+        let (rest, degree) = sh_layout(c)?;
+        let col = |n: &str| c.require(n);
+        let extra = match extra {
+            Some((name, missing)) => Some(c.require(name).map_err(|_| missing.to_string())?),
+            None => None,
+        };
+        Ok(Self {
+            degree,
+            position: [col("x")?, col("y")?, col("z")?],
+            dc: [col("f_dc_0")?, col("f_dc_1")?, col("f_dc_2")?],
+            rest: (0..rest)
+                .map(|k| c.get(&format!("f_rest_{k}")).expect("counted by sh_layout"))
+                .collect(),
+            opacity: col("opacity")?,
+            scale: [col("scale_0")?, col("scale_1")?, col("scale_2")?],
+            rotation: [col("rot_0")?, col("rot_1")?, col("rot_2")?, col("rot_3")?],
+            extra,
+        })
+    }
+
+    /// Row `i`. Its SH coefficients (coefficient-major) go into `sh`, so the
+    /// record's own `sh` is empty; NaN or infinite values are an error naming
+    /// the row.
+    pub fn decode(&self, i: usize, sh: &mut [f32]) -> Result<InriaRecord<'static>, String> {
+        let per_channel = self.rest.len() / 3;
+        for ch in 0..3 {
+            sh[ch] = self.dc[ch][i] as f32;
+            for k in 0..per_channel {
+                sh[(k + 1) * 3 + ch] = self.rest[ch * per_channel + k][i] as f32;
+            }
+        }
+        let f = |col: &[f64]| col[i];
+        let values = [
+            f(self.position[0]),
+            f(self.position[1]),
+            f(self.position[2]),
+            f(self.opacity),
+            f(self.scale[0]),
+            f(self.scale[1]),
+            f(self.scale[2]),
+            f(self.rotation[0]),
+            f(self.rotation[1]),
+            f(self.rotation[2]),
+            f(self.rotation[3]),
+        ];
+        if values.iter().any(|v| !v.is_finite()) || sh.iter().any(|v| !v.is_finite()) {
+            return Err(format!("Gaussian {i} has a NaN or infinite value"));
+        }
+        let v3 = |c: [&[f64]; 3]| Vec3::new(c[0][i] as f32, c[1][i] as f32, c[2][i] as f32);
+        Ok(InriaRecord {
+            position: v3(self.position),
+            sh: &[],
+            opacity_logit: self.opacity[i] as f32,
+            log_scale: v3(self.scale),
+            // Files store w x y z.
+            rotation: Quat::from_xyzw(
+                self.rotation[1][i] as f32,
+                self.rotation[2][i] as f32,
+                self.rotation[3][i] as f32,
+                self.rotation[0][i] as f32,
+            ),
+            extra: self.extra.map(|e| e[i] as f32),
+        })
+    }
+
+    /// The extra column's value in row `i` as read (f64, before any rounding).
+    pub fn extra_value(&self, i: usize) -> Option<f64> {
+        self.extra.map(|e| e[i])
+    }
 }
 
 /// One Gaussian in the units of the INRIA layout.

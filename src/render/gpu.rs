@@ -681,9 +681,9 @@ fn map_and_read(
         .map_err(|_| Error::device("the graphics device dropped a read-back"))?
         .map_err(|e| Error::device(format!("cannot read back from the graphics device: {e}")))?;
     {
-        let view = slice
-            .get_mapped_range()
-            .map_err(|e| Error::device(format!("cannot read back from the graphics device: {e}")))?;
+        let view = slice.get_mapped_range().map_err(|e| {
+            Error::device(format!("cannot read back from the graphics device: {e}"))
+        })?;
         read(&view);
     }
     buffer.unmap();

@@ -1,0 +1,21 @@
+//! Helpers the integration tests share: running the real binary and naming
+//! temporary files per test process.
+
+#![allow(dead_code)] // each test binary uses its own subset
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+/// Runs the `visage` binary with `args` (no device-selection warnings).
+pub fn visage(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_visage"))
+        .env("NODEVICE_SELECT", "1")
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// A path in the temporary folder, unique to this test process and `tag`.
+pub fn temp_path(tag: &str, name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("visage-{tag}-{}-{name}", std::process::id()))
+}
