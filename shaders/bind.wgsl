@@ -11,7 +11,7 @@
 // Per Gaussian, 3 x vec4: (position, opacity), quat (w,x,y,z), (scale, 0).
 @group(0) @binding(3) var<storage, read_write> world: array<vec4<f32>>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(GROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if (i >= camera.counts.x) {

@@ -5,9 +5,9 @@
 @group(0) @binding(1) var<storage, read> image: array<u32>;
 @group(0) @binding(2) var<storage, read_write> packed: array<u32>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(GROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let word = id.x + id.y * groups.x * 256u;
+    let word = id.x + id.y * groups.x * GROUP;
     let bytes = camera.size.x * camera.size.y * 3u;
     if (4u * word >= bytes) {
         return;

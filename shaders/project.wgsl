@@ -49,7 +49,7 @@ fn cull(i: u32) {
     keys[i] = vec4<u32>(0u, 0u, 0u, 0u);
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(GROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if (i >= camera.counts.x) {

@@ -6,17 +6,17 @@
 @group(0) @binding(1) var<storage, read> keys: array<u32>;
 @group(0) @binding(2) var<storage, read_write> counts: array<u32>;
 
-var<workgroup> histogram: array<atomic<u32>, 256>;
+var<workgroup> histogram: array<atomic<u32>, DIGITS>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(GROUP)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     atomicStore(&histogram[t], 0u);
     workgroupBarrier();
     let base = group.x * SORT_BLOCK;
     for (var k = 0u; k < SORT_ITEMS; k++) {
-        let i = base + k * 256u + t;
+        let i = base + k * GROUP + t;
         if (i < params.count) {
-            atomicAdd(&histogram[(keys[i] >> params.shift) & 255u], 1u);
+            atomicAdd(&histogram[(keys[i] >> params.shift) & (DIGITS - 1u)], 1u);
         }
     }
     workgroupBarrier();

@@ -10,10 +10,10 @@
 @group(0) @binding(4) var<storage, read_write> keys_out: array<u32>;
 @group(0) @binding(5) var<storage, read_write> values_out: array<u32>;
 
-var<workgroup> masks: array<atomic<u32>, 2048>;  // 256 digits x 8 words
-var<workgroup> next_slot: array<u32, 256>;
+var<workgroup> masks: array<atomic<u32>, 2048>;  // DIGITS x 8 words of GROUP bits
+var<workgroup> next_slot: array<u32, DIGITS>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(GROUP)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     next_slot[t] = offsets[t * params.blocks + group.x];
     let word = t / 32u;
@@ -24,13 +24,13 @@ fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index
             atomicStore(&masks[t * 8u + w], 0u);
         }
         workgroupBarrier();
-        let i = base + k * 256u + t;
+        let i = base + k * GROUP + t;
         let valid = i < params.count;
         var key = 0u;
         var digit = 0u;
         if (valid) {
             key = keys_in[i];
-            digit = (key >> params.shift) & 255u;
+            digit = (key >> params.shift) & (DIGITS - 1u);
             atomicOr(&masks[digit * 8u + word], 1u << (t % 32u));
         }
         workgroupBarrier();

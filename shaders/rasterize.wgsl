@@ -16,7 +16,7 @@ fn pack(c: vec3<f32>) -> u32 {
     return q.x | (q.y << 8u) | (q.z << 16u) | (255u << 24u);
 }
 
-@compute @workgroup_size(16, 16)
+@compute @workgroup_size(TILE, TILE)
 fn main(@builtin(workgroup_id) tile: vec3<u32>, @builtin(local_invocation_id) local: vec3<u32>) {
     let x = tile.x * TILE + local.x;
     let y = tile.y * TILE + local.y;

@@ -5,9 +5,9 @@
 @group(0) @binding(1) var<storage, read> data: array<u32>;
 @group(0) @binding(2) var<storage, read_write> sums: array<u32>;
 
-var<workgroup> partial: array<u32, 256>;
+var<workgroup> partial: array<u32, GROUP>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(GROUP)
 fn main(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let base = group.x * SORT_BLOCK + t * SORT_ITEMS;
     var s = 0u;

@@ -5,12 +5,12 @@
 @group(0) @binding(0) var<uniform> params: SortParams;
 @group(0) @binding(1) var<storage, read_write> sums: array<u32>;
 
-var<workgroup> partial: array<u32, 256>;
+var<workgroup> partial: array<u32, GROUP>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(GROUP)
 fn main(@builtin(local_invocation_index) t: u32) {
     let n = params.count;
-    let chunk = (n + 255u) / 256u;
+    let chunk = (n + GROUP - 1u) / GROUP;
     let start = min(t * chunk, n);
     let end = min(start + chunk, n);
     var s = 0u;
@@ -21,7 +21,7 @@ fn main(@builtin(local_invocation_index) t: u32) {
     workgroupBarrier();
     if (t == 0u) {
         var running = 0u;
-        for (var k = 0u; k < 256u; k++) {
+        for (var k = 0u; k < GROUP; k++) {
             let v = partial[k];
             partial[k] = running;
             running += v;

@@ -8,7 +8,7 @@
 @group(0) @binding(4) var<storage, read_write> tile_keys: array<u32>;
 @group(0) @binding(5) var<storage, read_write> tile_values: array<u32>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(GROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let s = id.x;
     if (s >= params.count) {

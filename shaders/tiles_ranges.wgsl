@@ -5,7 +5,7 @@
 @group(0) @binding(1) var<storage, read> tile_keys: array<u32>;
 @group(0) @binding(2) var<storage, read_write> ranges: array<vec2<u32>>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(GROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let p = id.x;
     if (p >= params.count) {

@@ -15,9 +15,9 @@ use super::DbArgs;
 use crate::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
 use crate::error::{Error, Result};
 use crate::pipeline::composer::{reference_image, Composer, Painter};
-use crate::render::gpu::StageTimings;
 use crate::render::image::{psnr_report, RgbImage};
-use crate::render::reference::RenderSettings;
+use crate::render::settings::RenderSettings;
+use crate::render::settings::StageTimings;
 use crate::render::Backend;
 use crate::scene::camera::Camera;
 

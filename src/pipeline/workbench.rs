@@ -19,7 +19,7 @@ use crate::io::ply::write_splat_ply;
 use crate::model::regions::Group;
 use crate::render::image::RgbImage;
 use crate::render::mesh_preview::render_mesh;
-use crate::render::reference::RenderSettings;
+use crate::render::settings::RenderSettings;
 use crate::render::Backend;
 
 /// Debug view toggles.

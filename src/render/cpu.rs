@@ -13,10 +13,10 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::gpu::StageTimings;
 use super::image::{quantize, RgbImage};
 use super::projection::{ProjectionCamera, MAX_ALPHA, MIN_ALPHA};
-use super::reference::RenderSettings;
+use super::settings::RenderSettings;
+use super::settings::StageTimings;
 use super::sh::eval_rgb;
 use super::tiles::{pack_tile, TileBins, TileKey};
 use crate::avatar::binding::{local_to_world, TriangleFrame};

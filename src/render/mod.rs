@@ -3,11 +3,11 @@
 
 pub mod cpu;
 pub mod gpu;
-mod gpu_binning;
 pub mod image;
 pub mod mesh_preview;
 pub mod projection;
 pub mod reference;
+pub mod settings;
 pub mod sh;
 pub mod tiles;
 
@@ -93,7 +93,7 @@ impl SplatRenderer {
         &mut self,
         frames: &[TriangleFrame],
         camera: &crate::scene::camera::Camera,
-        settings: &reference::RenderSettings,
+        settings: &settings::RenderSettings,
     ) -> Result<image::RgbImage> {
         match self {
             SplatRenderer::Gpu(g) => g.render(frames, camera, settings),
@@ -105,7 +105,7 @@ impl SplatRenderer {
     pub fn render_world(
         &mut self,
         camera: &crate::scene::camera::Camera,
-        settings: &reference::RenderSettings,
+        settings: &settings::RenderSettings,
     ) -> Result<image::RgbImage> {
         self.render(&[crate::scene::splats::IDENTITY_FRAME], camera, settings)
     }
@@ -119,7 +119,7 @@ impl SplatRenderer {
     }
 
     /// Stage timings of the last frame.
-    pub fn timings(&self) -> gpu::StageTimings {
+    pub fn timings(&self) -> settings::StageTimings {
         match self {
             SplatRenderer::Gpu(g) => g.timings,
             SplatRenderer::Cpu(c) => c.timings,

@@ -13,23 +13,20 @@
 //! Every kernel is its own dispatch (no workgroup waits for another), so it runs
 //! on any driver, lavapipe included.
 
-use super::gpu::{compute_pipeline, read_buffer, uniform_and_storage, Growable, MAX_GROUPS};
+use super::constants::{DIGITS, GROUP, SORT_BLOCK as BLOCK};
+use super::device::{compute_pipeline, read_buffer, uniform_and_storage, Growable, MAX_GROUPS};
 use crate::error::{Error, Result};
 
-const SORT_KEYS: &str = include_str!("../../shaders/sort_keys.wgsl");
-const RADIX_HISTOGRAM: &str = include_str!("../../shaders/radix_histogram.wgsl");
-const RADIX_SCATTER: &str = include_str!("../../shaders/radix_scatter.wgsl");
-const SCAN_REDUCE: &str = include_str!("../../shaders/scan_reduce.wgsl");
-const SCAN_SUMS: &str = include_str!("../../shaders/scan_sums.wgsl");
-const SCAN_APPLY: &str = include_str!("../../shaders/scan_apply.wgsl");
-const TILES_COUNT: &str = include_str!("../../shaders/tiles_count.wgsl");
-const TILES_EMIT: &str = include_str!("../../shaders/tiles_emit.wgsl");
-const TILES_RANGES: &str = include_str!("../../shaders/tiles_ranges.wgsl");
+const SORT_KEYS: &str = include_str!("../../../shaders/sort_keys.wgsl");
+const RADIX_HISTOGRAM: &str = include_str!("../../../shaders/radix_histogram.wgsl");
+const RADIX_SCATTER: &str = include_str!("../../../shaders/radix_scatter.wgsl");
+const SCAN_REDUCE: &str = include_str!("../../../shaders/scan_reduce.wgsl");
+const SCAN_SUMS: &str = include_str!("../../../shaders/scan_sums.wgsl");
+const SCAN_APPLY: &str = include_str!("../../../shaders/scan_apply.wgsl");
+const TILES_COUNT: &str = include_str!("../../../shaders/tiles_count.wgsl");
+const TILES_EMIT: &str = include_str!("../../../shaders/tiles_emit.wgsl");
+const TILES_RANGES: &str = include_str!("../../../shaders/tiles_ranges.wgsl");
 
-/// Elements per workgroup of the radix and scan kernels (`SORT_BLOCK` in WGSL).
-const BLOCK: u32 = 1024;
-/// Invocations per workgroup of the per-element kernels.
-const GROUP: u32 = 256;
 /// Bytes between uniform slots (the largest offset alignment wgpu allows devices to ask).
 const SLOT: u64 = 256;
 /// Uniform slots per frame.
@@ -320,7 +317,7 @@ impl GpuBinning {
                 })
             })
             .collect();
-        let scan = self.scan_plan(256 * blocks);
+        let scan = self.scan_plan(DIGITS * blocks);
         RadixPlan {
             blocks,
             result: passes.len() % 2,
@@ -348,7 +345,7 @@ impl GpuBinning {
     /// scan and of `other`.
     fn ensure_scratch(&mut self, device: &wgpu::Device, sort: &RadixPlan, other: &ScanPlan) {
         self.histogram
-            .ensure(device, 256 * u64::from(sort.blocks) * 4);
+            .ensure(device, u64::from(DIGITS) * u64::from(sort.blocks) * 4);
         let sums = sort.scan.sums.max(other.sums);
         self.sums.ensure(device, (u64::from(sums) + 1) * 4);
     }

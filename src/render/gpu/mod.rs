@@ -4,7 +4,7 @@
 //! Stages per frame: upload the triangle frames (the Gaussians only when the
 //! selection changes) → `bind` (local → world) → `project` (cull, 2D covariance,
 //! SH colour, depth, touched tiles) → depth sort and tile binning on the GPU
-//! ([`super::gpu_binning`]: radix sorts, prefix sums; 4 bytes read back) →
+//! ([`binning`]: radix sorts, prefix sums; 4 bytes read back) →
 //! `rasterize` (per 16×16 tile, front to back, early termination) → read back RGBA8.
 
 use std::time::Instant;
@@ -12,24 +12,25 @@ use std::time::Instant;
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
-use super::gpu_binning::GpuBinning;
 use super::image::RgbImage;
-use super::reference::RenderSettings;
+use super::settings::{RenderSettings, StageTimings};
 use crate::avatar::binding::TriangleFrame;
 use crate::avatar::gaussians::GaussianSet;
 use crate::error::{Error, Result};
 use crate::scene::camera::Camera;
+use binning::GpuBinning;
+use device::{compute_pipeline, map_and_read, uniform_and_storage, wait, Growable, MAX_GROUPS};
 
-/// Tile edge in pixels (must match `TILE` in shaders/common.wgsl).
-pub const TILE: u32 = 16;
-/// Most workgroups in one dispatch dimension (wgpu's downlevel limit).
-pub(super) const MAX_GROUPS: u32 = 65_535;
+pub mod binning;
+pub mod constants;
+pub mod device;
 
-const COMMON: &str = include_str!("../../shaders/common.wgsl");
-const BIND: &str = include_str!("../../shaders/bind.wgsl");
-const PROJECT: &str = include_str!("../../shaders/project.wgsl");
-const RASTERIZE: &str = include_str!("../../shaders/rasterize.wgsl");
-const PACK_RGB: &str = include_str!("../../shaders/pack_rgb.wgsl");
+pub use constants::TILE;
+
+const BIND: &str = include_str!("../../../shaders/bind.wgsl");
+const PROJECT: &str = include_str!("../../../shaders/project.wgsl");
+const RASTERIZE: &str = include_str!("../../../shaders/rasterize.wgsl");
+const PACK_RGB: &str = include_str!("../../../shaders/pack_rgb.wgsl");
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -44,28 +45,6 @@ struct CameraUniform {
     tuning: [f32; 4],
 }
 
-/// Wall-clock milliseconds of each stage of the last frame.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
-pub struct StageTimings {
-    /// Frame upload.
-    pub upload: f64,
-    /// bind + project kernels.
-    pub project: f64,
-    /// Depth sort and tile binning kernels.
-    pub sort: f64,
-    /// rasterize kernel.
-    pub rasterize: f64,
-    /// Image read-back and conversion.
-    pub readback: f64,
-}
-
-impl StageTimings {
-    /// Sum of the stages.
-    pub fn total(&self) -> f64 {
-        self.upload + self.project + self.sort + self.rasterize + self.readback
-    }
-}
-
 struct SceneBuffers {
     count: u32,
     sh_degree: u8,
@@ -75,45 +54,6 @@ struct SceneBuffers {
     world: wgpu::Buffer,
     projected: wgpu::Buffer,
     keys: wgpu::Buffer,
-}
-
-/// A growable GPU buffer.
-pub(super) struct Growable {
-    /// The buffer (replaced when it grows).
-    pub buffer: wgpu::Buffer,
-    usage: wgpu::BufferUsages,
-    label: &'static str,
-}
-
-impl Growable {
-    /// A small buffer that grows on demand.
-    pub fn new(device: &wgpu::Device, label: &'static str, usage: wgpu::BufferUsages) -> Self {
-        Self {
-            buffer: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: 256,
-                usage,
-                mapped_at_creation: false,
-            }),
-            usage,
-            label,
-        }
-    }
-
-    /// Makes room for `bytes`; returns true when the buffer was replaced.
-    pub fn ensure(&mut self, device: &wgpu::Device, bytes: u64) -> bool {
-        if self.buffer.size() >= bytes {
-            return false;
-        }
-        let size = bytes.next_power_of_two().max(256);
-        self.buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(self.label),
-            size,
-            usage: self.usage,
-            mapped_at_creation: false,
-        });
-        true
-    }
 }
 
 /// The wgpu splat renderer. Create once; call [`GpuRenderer::set_gaussians`] when
@@ -139,74 +79,6 @@ pub struct GpuRenderer {
     /// Wait for the device after every stage so `timings` attribute GPU time to
     /// the right stage (costs a round trip per stage; off for normal frames).
     pub profile_stages: bool,
-}
-
-fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-fn uniform_entry() -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding: 0,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-/// Layout entries: a uniform at binding 0, then storage buffers (read-only or not).
-pub(super) fn uniform_and_storage(read_only: &[bool]) -> Vec<wgpu::BindGroupLayoutEntry> {
-    let mut entries = vec![uniform_entry()];
-    entries.extend(
-        read_only
-            .iter()
-            .enumerate()
-            .map(|(i, &r)| storage_entry(i as u32 + 1, r)),
-    );
-    entries
-}
-
-/// Compiles a kernel (shaders/common.wgsl prepended; entry point `main`).
-pub(super) fn compute_pipeline(
-    device: &wgpu::Device,
-    name: &str,
-    source: &str,
-    entries: &[wgpu::BindGroupLayoutEntry],
-) -> wgpu::ComputePipeline {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(name),
-        source: wgpu::ShaderSource::Wgsl(format!("{COMMON}\n{source}").into()),
-    });
-    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some(name),
-        entries,
-    });
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(name),
-        bind_group_layouts: &[Some(&layout)],
-        immediate_size: 0,
-    });
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(name),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    })
 }
 
 impl GpuRenderer {
@@ -639,53 +511,4 @@ fn camera_uniform(
         ],
         tuning: [settings.early_stop.clamp(0.0, 1.0), 0.0, 0.0, 0.0],
     }
-}
-
-/// Waits until the device has finished the work submitted so far.
-fn wait(device: &wgpu::Device) -> Result<()> {
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map(|_| ())
-        .map_err(|e| Error::device(format!("the graphics device failed: {e}")))
-}
-
-/// Maps a read-back buffer, copies `bytes` out as `T`, and unmaps it.
-pub(super) fn read_buffer<T: Pod>(
-    device: &wgpu::Device,
-    buffer: &wgpu::Buffer,
-    bytes: u64,
-) -> Result<Vec<T>> {
-    let mut out = Vec::new();
-    map_and_read(device, buffer, bytes, |b| {
-        out = bytemuck::cast_slice::<u8, T>(b).to_vec()
-    })?;
-    Ok(out)
-}
-
-/// Maps the first `bytes` of a read-back buffer, hands them to `read`, and unmaps it.
-fn map_and_read(
-    device: &wgpu::Device,
-    buffer: &wgpu::Buffer,
-    bytes: u64,
-    read: impl FnOnce(&[u8]),
-) -> Result<()> {
-    let slice = buffer.slice(..bytes);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| Error::device(format!("the graphics device failed: {e}")))?;
-    rx.recv()
-        .map_err(|_| Error::device("the graphics device dropped a read-back"))?
-        .map_err(|e| Error::device(format!("cannot read back from the graphics device: {e}")))?;
-    {
-        let view = slice.get_mapped_range().map_err(|e| {
-            Error::device(format!("cannot read back from the graphics device: {e}"))
-        })?;
-        read(&view);
-    }
-    buffer.unmap();
-    Ok(())
 }
