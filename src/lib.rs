@@ -1,10 +1,11 @@
 //! visage: compose photo-realistic, animatable Gaussian head avatars from a
 //! database of existing ones, in the terminal.
 //!
-//! Architecture (data flows one way): `model` (head model, synthetic database)
-//! → `avatar` / `io` (data and formats) → `compose` (selection, blending,
-//! post-processing) → `render` (splat renderers) → `tui` (the editor); `cli`
-//! wires commands to them.
+//! Architecture (docs/architecture.md; data flows one way, imports only point
+//! down): `text`, `error` → `model`, `avatar`, `scene`, `io` (data and formats)
+//! → `compose` (the method) → `render` → `pipeline` (recipe → image) →
+//! `editor` (commands, state, sessions, replay) → the front ends `tui` and
+//! `cli`. `tests/architecture.rs` checks the order.
 
 pub mod avatar;
 pub mod cli;

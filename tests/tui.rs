@@ -172,6 +172,12 @@ fn help_overlay_lists_the_keymap_and_tiny_terminals_degrade() {
         t.contains("quit") && t.contains("toggle-play") && t.contains("shift-left"),
         "{t}"
     );
+    // Commands without a key come from the command table, to type at `:`.
+    let wide = text(&screen(&state, 200, 60));
+    assert!(
+        wide.contains(":  set-camera") && wide.contains(":  set-base SOURCE"),
+        "{wide}"
+    );
     let tiny = text(&screen(&Editor::new(catalog.clone()).state, 30, 8));
     assert!(tiny.contains("visage needs at least"), "{tiny}");
 }

@@ -29,7 +29,7 @@ use crate::pipeline::DatabaseSpec;
 
 use super::command::Command;
 
-/// A terminal graphics protocol (by name: the encoders live in `crate::tui::graphics`).
+/// A terminal graphics protocol (by name: the encoders live in the terminal front end).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Protocol {

@@ -300,10 +300,21 @@ fn draw_help(frame: &mut Frame, area: Rect, keymap: &Keymap) {
         width: area.width.saturating_sub(4),
         height: area.height.saturating_sub(2),
     };
-    let entries: Vec<String> = keymap
+    let mut entries: Vec<String> = keymap
         .bindings()
         .map(|(k, c)| format!("{k:>11}  {c}"))
         .collect();
+    // Commands without a key, from the command table: typed at the `:` prompt.
+    let bound: Vec<&str> = keymap
+        .bindings()
+        .filter_map(|(_, line)| line.split_whitespace().next())
+        .collect();
+    entries.extend(
+        crate::editor::command::COMMANDS
+            .iter()
+            .filter(|c| !bound.contains(&c.name))
+            .map(|c| format!("{:>11}  {} {}", ":", c.name, c.synopsis)),
+    );
     let inner_h = popup.height.saturating_sub(2).max(1) as usize;
     let col_w = 36usize;
     let cols = ((popup.width.saturating_sub(2)) as usize / col_w).max(1);
