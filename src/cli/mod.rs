@@ -128,8 +128,7 @@ fn run_fixtures(args: &FixturesArgs) -> Result<()> {
         args.sources,
         args.gaussians_per_avatar,
         args.seed,
-    )
-    .map_err(crate::error::Error::Input)?;
+    )?;
     println!(
         "visage --db {} --flame {} --masks {}",
         p.avatars.display(),

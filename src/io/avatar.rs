@@ -28,13 +28,13 @@ pub const SHAPE_PARAMS: usize = 300;
 pub const EXPRESSION_PARAMS: usize = 100;
 
 /// Reads the triangle-bound Gaussians of a GaussianAvatars `point_cloud.ply`.
-pub fn read_bound_ply(path: &Path, triangles: usize) -> Result<GaussianSet, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    parse_bound_ply(&bytes, triangles).map_err(|e| format!("{}: {e}", path.display()))
+pub fn read_bound_ply(path: &Path, triangles: usize) -> super::Result<GaussianSet> {
+    let bytes = super::read_file(path)?;
+    parse_bound_ply(&bytes, triangles).map_err(|e| e.in_file(path))
 }
 
 /// Parses GaussianAvatars `point_cloud.ply` bytes.
-pub fn parse_bound_ply(bytes: &[u8], triangles: usize) -> Result<GaussianSet, String> {
+pub fn parse_bound_ply(bytes: &[u8], triangles: usize) -> super::Result<GaussianSet> {
     let c = read_element(bytes, "vertex")?;
     let rows = InriaRows::new(
         &c,
@@ -52,7 +52,8 @@ pub fn parse_bound_ply(bytes: &[u8], triangles: usize) -> Result<GaussianSet, St
             return Err(format!(
                 "Gaussian {i} is bound to triangle {}, but the mesh has {triangles} triangles",
                 crate::text::id_text(b)
-            ));
+            )
+            .into());
         }
         let r = rows.decode(i, &mut sh)?;
         set.push(
@@ -68,7 +69,7 @@ pub fn parse_bound_ply(bytes: &[u8], triangles: usize) -> Result<GaussianSet, St
 }
 
 /// Writes triangle-bound Gaussians as a GaussianAvatars `point_cloud.ply`.
-pub fn write_bound_ply(path: &Path, set: &GaussianSet) -> Result<(), String> {
+pub fn write_bound_ply(path: &Path, set: &GaussianSet) -> super::Result<()> {
     let out = encode_inria_ply(
         "GaussianAvatars layout, written by visage",
         set.len(),
@@ -83,7 +84,7 @@ pub fn write_bound_ply(path: &Path, set: &GaussianSet) -> Result<(), String> {
             extra: Some(set.binding[i] as f32),
         },
     );
-    std::fs::write(path, out).map_err(|e| format!("cannot write {}: {e}", path.display()))
+    super::write_file(path, &out)
 }
 
 fn field<'a>(
@@ -116,7 +117,7 @@ fn rows(a: &NdArray, name: &str, width: usize) -> Result<Vec<Vec<f32>>, String> 
 }
 
 /// Reads one avatar folder into a source avatar for `model`.
-pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAvatar, String> {
+pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> super::Result<SourceAvatar> {
     let ply = dir.join("point_cloud.ply");
     let gaussians = read_bound_ply(&ply, model.triangle_count())?;
     if gaussians.is_empty() {
@@ -124,7 +125,8 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAv
         return Err(format!(
             "{}: holds no Gaussians (an avatar needs at least one)",
             ply.display()
-        ));
+        )
+        .into());
     }
     let npz_path = dir.join("flame_param.npz");
     let arrays = read_npz(&npz_path)?;
@@ -137,7 +139,8 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAv
             "'shape' has {} coefficients, the model uses {}",
             shape.data.len(),
             model.shape_basis.len()
-        )));
+        ))
+        .into());
     }
     let shape_coeffs: Vec<f32> = shape
         .data
@@ -168,7 +171,8 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAv
         return Err(label(format!(
             "'eyes_pose' has {} frames, 'expr' has {frames}",
             eyes.len()
-        )));
+        ))
+        .into());
     }
     let v = model.vertex_count();
     if let Some(d) = arrays.get("dynamic_offset") {
@@ -178,7 +182,7 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAv
         None => vec![DVec3::ZERO; v],
         Some(a) => {
             if a.data.iter().any(|x| !x.is_finite()) {
-                return Err(label("'static_offset' has NaN or infinite values".into()));
+                return Err(label("'static_offset' has NaN or infinite values".into()).into());
             }
             let n = a.data.len() / 3;
             let fits = a.shape.len() == 3 && a.shape[0] == 1 && a.shape[2] == 3;
@@ -186,7 +190,8 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAv
                 return Err(label(format!(
                     "'static_offset' has shape {:?}, expected (1, {v}, 3)",
                     a.shape
-                )));
+                ))
+                .into());
             }
             let mut o: Vec<DVec3> = a
                 .data
@@ -224,7 +229,7 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> Result<SourceAv
         poses,
     };
     if motion.frames() == 0 {
-        return Err(label("'expr' has no frames".into()));
+        return Err(label("'expr' has no frames".into()).into());
     }
     Ok(SourceAvatar {
         name: name.to_string(),
@@ -337,9 +342,9 @@ pub fn write_avatar(
     dir: &Path,
     gaussians: &GaussianSet,
     params: &AvatarParams,
-) -> Result<(), String> {
+) -> super::Result<()> {
     let frames = params.frames;
-    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    std::fs::create_dir_all(dir).map_err(|e| super::FileError::access("create", dir, e))?;
     write_bound_ply(&dir.join("point_cloud.ply"), gaussians)?;
     let t = frames.len().max(1);
     let mut expr = vec![0.0f32; t * EXPRESSION_PARAMS];

@@ -179,7 +179,7 @@ fn masks_of(model: &HeadModel) -> BTreeMap<String, Vec<i64>> {
 
 /// Writes the FLAME-layout model pickle of `model` (shape components at 0..26,
 /// expressions from component 300 on, as FLAME lays them out).
-fn write_model(path: &Path, model: &HeadModel) -> Result<(), String> {
+fn write_model(path: &Path, model: &HeadModel) -> super::Result<()> {
     let v = model.vertex_count();
     let template: Vec<f64> = model
         .template
@@ -244,8 +244,7 @@ fn write_model(path: &Path, model: &HeadModel) -> Result<(), String> {
         ("bs_style", PyObj::Str("lbs")),
         ("bs_type", PyObj::Str("lrotmin")),
     ]);
-    std::fs::write(path, to_pickle(&dict))
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+    super::write_file(path, &to_pickle(&dict))
 }
 
 /// Writes the fixtures into `dir`: `flame/model.pkl`, `flame/masks.pkl` and
@@ -255,11 +254,11 @@ pub fn write_fixtures(
     sources: usize,
     gaussians_per_avatar: usize,
     seed: u64,
-) -> Result<FixturePaths, String> {
+) -> super::Result<FixturePaths> {
     let flame_dir = dir.join("flame");
     let avatars = dir.join("avatars");
     for d in [&flame_dir, &avatars] {
-        std::fs::create_dir_all(d).map_err(|e| format!("cannot create {}: {e}", d.display()))?;
+        std::fs::create_dir_all(d).map_err(|e| super::FileError::access("create", d, e))?;
     }
     let base = without_teeth(&build_head());
     let paths = FixturePaths {
@@ -277,7 +276,7 @@ pub fn write_fixtures(
             .collect(),
     );
     std::fs::write(&paths.masks, to_pickle(&dict))
-        .map_err(|e| format!("cannot write {}: {e}", paths.masks.display()))?;
+        .map_err(|e| super::FileError::access("write", &paths.masks, e))?;
     // Avatars on the model as visage loads it (with GaussianAvatars' teeth).
     let model = load_flame(&paths.model, &paths.masks)?;
     let db = builtin_database(

@@ -97,11 +97,11 @@ fn index(x: f64, limit: usize, what: &str) -> Result<u32, String> {
 pub type Masks = Vec<(String, Vec<u32>)>;
 
 /// Reads a masks pickle.
-pub fn read_masks(path: &Path, vertices: usize) -> Result<Masks, String> {
+pub fn read_masks(path: &Path, vertices: usize) -> super::Result<Masks> {
     let file = path.display().to_string();
     let value = pickle::read(path)?;
     let Value::Dict(items) = value else {
-        return Err(format!("{file} is not a dict of vertex masks"));
+        return Err(format!("{file} is not a dict of vertex masks").into());
     };
     let mut out = Vec::new();
     for (k, v) in items {
@@ -133,7 +133,7 @@ fn mask<'a>(masks: &'a Masks, name: &str) -> Option<&'a [u32]> {
 }
 
 /// Loads a FLAME model and masks and builds the head model (teeth appended).
-pub fn load_flame(model_path: &Path, masks_path: &Path) -> Result<HeadModel, String> {
+pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadModel> {
     let file = model_path.display().to_string();
     let dict = pickle::read(model_path)?;
     let template = array(&dict, "v_template", &file)?;
@@ -163,7 +163,8 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> Result<HeadModel, Str
     if kintree.shape != [2, JOINT_COUNT] || kintree.data[1..JOINT_COUNT] != [0.0, 1.0, 1.0, 1.0] {
         return Err(format!(
             "{file} 'kintree_table' is not FLAME's skeleton (global, neck, jaw, eyes)"
-        ));
+        )
+        .into());
     }
     let posedirs = match dict.get("posedirs") {
         Some(v) => {
@@ -548,7 +549,7 @@ mod tests {
             panic!("the model must be refused")
         };
         std::fs::remove_dir_all(&dir).ok();
-        e
+        e.to_string()
     }
 
     #[test]

@@ -32,19 +32,19 @@ pub fn config_path() -> Option<PathBuf> {
 }
 
 /// Reads the config file if there is one.
-pub fn read_config() -> Result<Config, String> {
+pub fn read_config() -> super::Result<Config> {
     let Some(path) = config_path().filter(|p| p.exists()) else {
         return Ok(Config::default());
     };
-    let text = std::fs::read_to_string(&path)
-        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    toml::from_str(&text).map_err(|e| format!("{}: {}", path.display(), e.message().trim()))
+    let text =
+        std::fs::read_to_string(&path).map_err(|e| super::FileError::access("read", &path, e))?;
+    toml::from_str(&text).map_err(|e| format!("{}: {}", path.display(), e.message().trim()).into())
 }
 
 /// Avatar folders in `dir` (sorted by name), or `dir` itself when it is one.
-pub fn avatar_folders(dir: &Path) -> Result<Vec<(String, PathBuf)>, String> {
+pub fn avatar_folders(dir: &Path) -> super::Result<Vec<(String, PathBuf)>> {
     if !dir.is_dir() {
-        return Err(format!("database folder {} does not exist", dir.display()));
+        return Err(format!("database folder {} does not exist", dir.display()).into());
     }
     let is_avatar =
         |p: &Path| p.join("point_cloud.ply").is_file() && p.join("flame_param.npz").is_file();
@@ -59,7 +59,7 @@ pub fn avatar_folders(dir: &Path) -> Result<Vec<(String, PathBuf)>, String> {
         return Ok(vec![(name_of(dir), dir.to_path_buf())]);
     }
     let mut out: Vec<(String, PathBuf)> = std::fs::read_dir(dir)
-        .map_err(|e| format!("cannot list {}: {e}", dir.display()))?
+        .map_err(|e| super::FileError::access("list", dir, e))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| is_avatar(p))
         .map(|p| (name_of(&p), p))
@@ -69,21 +69,19 @@ pub fn avatar_folders(dir: &Path) -> Result<Vec<(String, PathBuf)>, String> {
         return Err(format!(
             "{} holds no GaussianAvatars avatars (folders with point_cloud.ply and flame_param.npz)",
             dir.display()
-        ));
+        ).into());
     }
     Ok(out)
 }
 
 /// Loads a folder database. `flame` is (model, masks); `None` uses the built-in head.
-pub fn load_folder(dir: &Path, flame: Option<(&Path, &Path)>) -> Result<Database, String> {
+pub fn load_folder(dir: &Path, flame: Option<(&Path, &Path)>) -> super::Result<Database> {
     let folders = avatar_folders(dir)?;
     let mut digest = blake3::Hasher::new();
     let model: HeadModel = match flame {
         Some((m, k)) => {
             for p in [m, k] {
-                digest.update(
-                    &std::fs::read(p).map_err(|e| format!("cannot read {}: {e}", p.display()))?,
-                );
+                digest.update(&super::read_file(p)?);
             }
             load_flame(m, k)?
         }
@@ -93,9 +91,7 @@ pub fn load_folder(dir: &Path, flame: Option<(&Path, &Path)>) -> Result<Database
     for (name, path) in &folders {
         for f in ["point_cloud.ply", "flame_param.npz"] {
             let p = path.join(f);
-            digest.update(
-                &std::fs::read(&p).map_err(|e| format!("cannot read {}: {e}", p.display()))?,
-            );
+            digest.update(&std::fs::read(&p).map_err(|e| super::FileError::access("read", &p, e))?);
         }
         sources.push(read_avatar(path, name, &model)?);
     }

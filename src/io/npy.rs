@@ -84,7 +84,7 @@ fn parse_header(text: &str) -> Result<(Dtype, bool, bool, Vec<usize>), String> {
 }
 
 /// Parses `.npy` bytes.
-pub fn parse_npy(bytes: &[u8]) -> Result<NdArray, String> {
+pub fn parse_npy(bytes: &[u8]) -> super::Result<NdArray> {
     if !bytes.starts_with(MAGIC) || bytes.len() < 10 {
         return Err("not a .npy array (bad magic)".into());
     }
@@ -100,7 +100,7 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NdArray, String> {
                 12,
             )
         }
-        v => return Err(format!("npy format version {v} is not supported")),
+        v => return Err(format!("npy format version {v} is not supported").into()),
     };
     let end = start
         .checked_add(header_len)
@@ -108,7 +108,13 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NdArray, String> {
         .ok_or("npy header is truncated")?;
     let header = std::str::from_utf8(&bytes[start..end]).map_err(|_| "npy header is not text")?;
     let (dtype, big, fortran, shape) = parse_header(header)?;
-    NdArray::from_bytes(shape, dtype, big, fortran, &bytes[end..])
+    Ok(NdArray::from_bytes(
+        shape,
+        dtype,
+        big,
+        fortran,
+        &bytes[end..],
+    )?)
 }
 
 /// Element data to write: f32, f64 or i32/u32 values.
@@ -154,8 +160,8 @@ pub fn write_npy(shape: &[usize], data: NpyData) -> Vec<u8> {
 }
 
 /// Parses `.npz` bytes into arrays by name (without the `.npy` suffix).
-pub fn parse_npz(bytes: &[u8]) -> Result<BTreeMap<String, NdArray>, String> {
-    parse_npz_within(bytes, MIN_INFLATION_BUDGET)
+pub fn parse_npz(bytes: &[u8]) -> super::Result<BTreeMap<String, NdArray>> {
+    Ok(parse_npz_within(bytes, MIN_INFLATION_BUDGET)?)
 }
 
 /// [`parse_npz`] with the inflation floor given.
@@ -203,16 +209,16 @@ fn parse_npz_within(bytes: &[u8], floor: u64) -> Result<BTreeMap<String, NdArray
 }
 
 /// Reads a `.npz` file.
-pub fn read_npz(path: &Path) -> Result<BTreeMap<String, NdArray>, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    parse_npz(&bytes).map_err(|e| format!("{}: {e}", path.display()))
+pub fn read_npz(path: &Path) -> super::Result<BTreeMap<String, NdArray>> {
+    let bytes = super::read_file(path)?;
+    parse_npz(&bytes).map_err(|e| e.in_file(path))
 }
 
 /// Writes arrays as a `.npz` archive; `compress` deflates the members (numpy's
 /// `savez_compressed`), otherwise they are stored (`savez`).
-pub fn write_npz(path: &Path, arrays: &[(&str, Vec<u8>)], compress: bool) -> Result<(), String> {
+pub fn write_npz(path: &Path, arrays: &[(&str, Vec<u8>)], compress: bool) -> super::Result<()> {
     let file =
-        std::fs::File::create(path).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        std::fs::File::create(path).map_err(|e| super::FileError::access("write", path, e))?;
     let mut zip = zip::ZipWriter::new(file);
     let method = if compress {
         zip::CompressionMethod::Deflated
@@ -225,10 +231,10 @@ pub fn write_npz(path: &Path, arrays: &[(&str, Vec<u8>)], compress: bool) -> Res
     for (name, npy) in arrays {
         zip.start_file(format!("{name}.npy"), options)
             .and_then(|_| zip.write_all(npy).map_err(Into::into))
-            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+            .map_err(|e| super::FileError::access("write", path, e))?;
     }
     zip.finish()
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        .map_err(|e| super::FileError::access("write", path, e))?;
     Ok(())
 }
 
@@ -278,7 +284,7 @@ mod tests {
             "deflate shrinks zeros more than 64×"
         );
         assert_eq!(parse_npz(&bytes).unwrap()["z"].data.len(), 1 << 20);
-        let e = parse_npz_within(&bytes, 1 << 20).unwrap_err();
+        let e = parse_npz_within(&bytes, 1 << 20).unwrap_err().to_string();
         assert!(e.contains("inflates to more than 1 MiB"), "{e}");
     }
 
@@ -286,7 +292,7 @@ mod tests {
     fn npy_rejects_lies() {
         let mut bytes = write_npy(&[4], NpyData::F64(&[1.0, 2.0, 3.0, 4.0]));
         bytes.truncate(bytes.len() - 3);
-        assert!(parse_npy(&bytes).unwrap_err().contains("needs"));
+        assert!(parse_npy(&bytes).unwrap_err().to_string().contains("needs"));
         let huge = write_npy(&[1], NpyData::F64(&[1.0]));
         let text = String::from_utf8_lossy(&huge).replace("(1,)", "(9999999999999,)");
         assert!(parse_npy(text.as_bytes()).is_err());
@@ -296,7 +302,10 @@ mod tests {
         o.extend_from_slice(&[1, 0]);
         o.extend_from_slice(&(object.len() as u16).to_le_bytes());
         o.extend_from_slice(object.as_bytes());
-        assert!(parse_npy(&o).unwrap_err().contains("not supported"));
+        assert!(parse_npy(&o)
+            .unwrap_err()
+            .to_string()
+            .contains("not supported"));
     }
 
     #[test]

@@ -56,7 +56,7 @@ pub fn write_obj(
     positions: &[Vec3],
     triangles: &[[u32; 3]],
     regions: &[Region],
-) -> Result<(), String> {
+) -> super::Result<()> {
     let colours = vertex_regions(positions.len(), triangles, regions);
     let mut out = Vec::with_capacity(positions.len() * 48 + triangles.len() * 24);
     writeln!(
@@ -73,5 +73,5 @@ pub fn write_obj(
     for t in triangles {
         writeln!(out, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1).ok();
     }
-    std::fs::write(path, out).map_err(|e| format!("cannot write {}: {e}", path.display()))
+    super::write_file(path, &out)
 }

@@ -918,7 +918,7 @@ impl Machine {
 }
 
 /// Parses a pickle into a value.
-pub fn parse(data: &[u8]) -> Result<Value, String> {
+pub fn parse(data: &[u8]) -> super::Result<Value> {
     let mut r = Reader { data, pos: 0 };
     let mut m = Machine {
         heap: Vec::new(),
@@ -933,7 +933,7 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
             0x80 => {
                 let proto = r.byte()?;
                 if proto > 5 {
-                    return Err(format!("pickle protocol {proto} is not supported"));
+                    return Err(format!("pickle protocol {proto} is not supported").into());
                 }
             }
             0x95 => {
@@ -941,7 +941,7 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
             }
             b'.' => {
                 let root = m.pop()?;
-                return m.value(root, 0);
+                return Ok(m.value(root, 0)?);
             }
             b'(' => m.marks.push(m.stack.len()),
             b'0' => {
@@ -1171,22 +1171,22 @@ pub fn parse(data: &[u8]) -> Result<Value, String> {
             b'i' | b'o' | b'P' | b'Q' | 0x82..=0x84 => {
                 return Err(format!(
                     "pickle opcode 0x{op:02x} (code execution or persistent ids) is refused"
-                ));
+                )
+                .into());
             }
             _ => {
-                return Err(format!(
-                    "unknown pickle opcode 0x{op:02x} at byte {}",
-                    r.pos - 1
-                ))
+                return Err(
+                    format!("unknown pickle opcode 0x{op:02x} at byte {}", r.pos - 1).into(),
+                )
             }
         }
     }
 }
 
 /// Reads a pickle file.
-pub fn read(path: &std::path::Path) -> Result<Value, String> {
-    let data = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    parse(&data).map_err(|e| format!("{}: {e}", path.display()))
+pub fn read(path: &std::path::Path) -> super::Result<Value> {
+    let data = super::read_file(path)?;
+    parse(&data).map_err(|e| e.in_file(path))
 }
 
 #[cfg(test)]
@@ -1278,7 +1278,7 @@ mod tests {
             Value::Dict(vec![(Value::Str("k".into()), Value::Int(2))])
         );
         // A list that contains itself is refused, not followed forever.
-        let e = parse(b"\x80\x02]q\x00h\x00a.").unwrap_err();
+        let e = parse(b"\x80\x02]q\x00h\x00a.").unwrap_err().to_string();
         assert!(e.contains("contains itself"), "{e}");
     }
 
@@ -1334,24 +1334,29 @@ mod tests {
 
     #[test]
     fn refuses_code_and_bombs() {
-        let e = parse(b"cos\nsystem\n(S'ls'\ntR.").unwrap_err();
+        let e = parse(b"cos\nsystem\n(S'ls'\ntR.").unwrap_err().to_string();
         assert!(e.contains("'os.system'"), "{e}");
-        let e = parse(b"\x80\x04\x8c\x08builtins\x8c\x04eval\x93.").unwrap_err();
+        let e = parse(b"\x80\x04\x8c\x08builtins\x8c\x04eval\x93.")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("builtins.eval"), "{e}");
-        assert!(parse(b"\x80\x02(").unwrap_err().contains("ends early"));
+        assert!(parse(b"\x80\x02(")
+            .unwrap_err()
+            .to_string()
+            .contains("ends early"));
         assert!(parse(b"\x80\x02cnumpy\ndtype\n\x85R.").is_err());
         // Nesting: 10000 nested lists.
         let mut deep = b"\x80\x02".to_vec();
         deep.extend(std::iter::repeat_n(b'(', 10_000));
         deep.extend(std::iter::repeat_n(b'l', 10_000));
         deep.push(b'.');
-        assert!(parse(&deep).unwrap_err().contains("deeply"));
+        assert!(parse(&deep).unwrap_err().to_string().contains("deeply"));
         // Billion laughs: a list memoised and repeated many times over.
         let mut laughs = b"\x80\x02](K\x01K\x02K\x03K\x04eq\x00".to_vec();
         for _ in 0..40 {
             laughs.extend_from_slice(b"(h\x00h\x00h\x00h\x00h\x00h\x00h\x00h\x00lq\x00");
         }
         laughs.push(b'.');
-        assert!(parse(&laughs).unwrap_err().contains("expand"));
+        assert!(parse(&laughs).unwrap_err().to_string().contains("expand"));
     }
 }

@@ -148,7 +148,7 @@ impl Columns {
 const MAX_HEADER: usize = 1 << 20;
 
 /// Parses the header; returns format, elements and the body offset.
-pub fn parse_header(bytes: &[u8]) -> Result<(PlyFormat, Vec<Element>, usize), String> {
+pub fn parse_header(bytes: &[u8]) -> super::Result<(PlyFormat, Vec<Element>, usize)> {
     if !bytes.starts_with(b"ply\n") && !bytes.starts_with(b"ply\r\n") {
         return Err("not a PLY file (it does not start with 'ply')".into());
     }
@@ -176,7 +176,7 @@ pub fn parse_header(bytes: &[u8]) -> Result<(PlyFormat, Vec<Element>, usize), St
                     "ascii" => PlyFormat::Ascii,
                     "binary_little_endian" => PlyFormat::BinaryLittleEndian,
                     "binary_big_endian" => PlyFormat::BinaryBigEndian,
-                    _ => return Err(format!("PLY format '{kind}' is not supported")),
+                    _ => return Err(format!("PLY format '{kind}' is not supported").into()),
                 })
             }
             ["element", name, count] => elements.push(Element {
@@ -201,7 +201,7 @@ pub fn parse_header(bytes: &[u8]) -> Result<(PlyFormat, Vec<Element>, usize), St
                     list_count: None,
                 });
             }
-            _ => return Err(bad()),
+            _ => return Err(bad().into()),
         }
     }
     let format = format.ok_or("PLY header has no 'format' line")?;
@@ -215,7 +215,7 @@ fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
 /// Reads the scalar columns of element `wanted` (list properties are skipped).
 /// Allocation is bounded by the file size: a header that claims more rows than
 /// the body can hold is an error.
-pub fn read_element(bytes: &[u8], wanted: &str) -> Result<Columns, String> {
+pub fn read_element(bytes: &[u8], wanted: &str) -> super::Result<Columns> {
     let (format, elements, body) = parse_header(bytes)?;
     let data = &bytes[body..];
     let mut cursor = 0usize;
@@ -247,7 +247,8 @@ pub fn read_element(bytes: &[u8], wanted: &str) -> Result<Columns, String> {
                 element.count,
                 crate::text::printable(&element.name),
                 bytes.len()
-            ));
+            )
+            .into());
         }
         let keep = element.name == wanted;
         let mut columns: Vec<Vec<f64>> = if keep {
@@ -282,7 +283,9 @@ pub fn read_element(bytes: &[u8], wanted: &str) -> Result<Columns, String> {
                         cursor += count_ty.size();
                         let n = count_ty.decode(b, big);
                         if !(0.0..=1e7).contains(&n) {
-                            return Err(format!("PLY list '{}' has invalid length {n}", p.name));
+                            return Err(
+                                format!("PLY list '{}' has invalid length {n}", p.name).into()
+                            );
                         }
                         cursor = cursor
                             .checked_add(n as usize * p.ty.size())
@@ -340,7 +343,7 @@ pub fn read_element(bytes: &[u8], wanted: &str) -> Result<Columns, String> {
             return Ok(out);
         }
     }
-    Err(format!("PLY file has no '{wanted}' element"))
+    Err(format!("PLY file has no '{wanted}' element").into())
 }
 
 /// Number of `f_rest_*` properties and the SH degree they imply.
@@ -360,14 +363,14 @@ fn sh_layout(columns: &Columns) -> Result<(usize, u8), String> {
 
 /// Reads a standard 3DGS PLY (world space) into a scene. NaN or infinite values
 /// are rejected with the row that has them.
-pub fn read_splat_ply(path: &Path) -> Result<SplatScene, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    let scene = parse_splat_ply(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+pub fn read_splat_ply(path: &Path) -> super::Result<SplatScene> {
+    let bytes = super::read_file(path)?;
+    let scene = parse_splat_ply(&bytes).map_err(|e| e.in_file(path))?;
     Ok(scene)
 }
 
 /// Parses standard 3DGS PLY bytes into a scene.
-pub fn parse_splat_ply(bytes: &[u8]) -> Result<SplatScene, String> {
+pub fn parse_splat_ply(bytes: &[u8]) -> super::Result<SplatScene> {
     let c = read_element(bytes, "vertex")?;
     let rows = InriaRows::new(&c, None)?;
     let mut scene = SplatScene::with_degree(rows.degree);
@@ -552,7 +555,7 @@ pub fn encode_inria_ply<'a>(
 
 /// Writes a scene as a standard 3DGS PLY (binary little endian), readable by any
 /// splat viewer.
-pub fn write_splat_ply(path: &Path, scene: &SplatScene) -> Result<(), String> {
+pub fn write_splat_ply(path: &Path, scene: &SplatScene) -> super::Result<()> {
     let out = encode_inria_ply(
         "written by visage",
         scene.len(),
@@ -568,9 +571,9 @@ pub fn write_splat_ply(path: &Path, scene: &SplatScene) -> Result<(), String> {
         },
     );
     let mut file =
-        std::fs::File::create(path).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        std::fs::File::create(path).map_err(|e| super::FileError::access("write", path, e))?;
     file.write_all(&out)
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+        .map_err(|e| super::FileError::access("write", path, e))
 }
 
 #[cfg(test)]
@@ -635,15 +638,18 @@ mod tests {
         let absurd = b"ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty float x\nend_header\n\0\0\0\0";
         assert!(read_element(absurd, "vertex")
             .unwrap_err()
+            .to_string()
             .contains("more than the file"));
         let short = b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\nproperty float y\nend_header\n\0\0\0\0\0\0\0\0\0\0";
         assert!(read_element(short, "vertex").is_err());
         assert!(read_element(b"plx\n", "vertex")
             .unwrap_err()
+            .to_string()
             .contains("not a PLY"));
         let no_end = b"ply\nformat ascii 1.0\nelement vertex 1\n";
         assert!(read_element(no_end, "vertex")
             .unwrap_err()
+            .to_string()
             .contains("end_header"));
     }
 
@@ -651,15 +657,27 @@ mod tests {
     fn wrongly_typed_and_missing_properties_are_named() {
         let list_x = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\nproperty float y\nproperty float z\nend_header\n2 1 2 3 4\n";
         let c = read_element(list_x, "vertex").unwrap();
-        assert!(c.require("x").unwrap_err().contains("'x' is a list"));
-        assert!(c.require("w").unwrap_err().contains("no 'w' property"));
+        assert!(c
+            .require("x")
+            .unwrap_err()
+            .to_string()
+            .contains("'x' is a list"));
+        assert!(c
+            .require("w")
+            .unwrap_err()
+            .to_string()
+            .contains("no 'w' property"));
         assert!(parse_splat_ply(list_x)
             .unwrap_err()
+            .to_string()
             .contains("'x' is a list"));
         let bad_type =
             b"ply\nformat ascii 1.0\nelement vertex 1\nproperty quaternion x\nend_header\n1\n";
         assert!(read_element(bad_type, "vertex").is_err());
         let nan = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nproperty float f_dc_0\nproperty float f_dc_1\nproperty float f_dc_2\nproperty float opacity\nproperty float scale_0\nproperty float scale_1\nproperty float scale_2\nproperty float rot_0\nproperty float rot_1\nproperty float rot_2\nproperty float rot_3\nend_header\n0 0 nan 0 0 0 0 0 0 0 1 0 0 0\n";
-        assert!(parse_splat_ply(nan).unwrap_err().contains("NaN"));
+        assert!(parse_splat_ply(nan)
+            .unwrap_err()
+            .to_string()
+            .contains("NaN"));
     }
 }

@@ -48,7 +48,7 @@ impl DatabaseSpec {
     pub fn load(&self) -> Result<(Database, Duration)> {
         if self.db != "builtin" {
             let start = Instant::now();
-            let config = crate::io::folder::read_config().map_err(Error::Input)?;
+            let config = crate::io::folder::read_config()?;
             let flame = self.flame.clone().or(config.flame);
             let masks = self.masks.clone().or(config.masks);
             let files = match (&flame, &masks) {
@@ -60,8 +60,7 @@ impl DatabaseSpec {
                     ))
                 }
             };
-            let db = crate::io::folder::load_folder(std::path::Path::new(&self.db), files)
-                .map_err(Error::Input)?;
+            let db = crate::io::folder::load_folder(std::path::Path::new(&self.db), files)?;
             return Ok((db, start.elapsed()));
         }
         if !(1..=MAX_GAUSSIANS_PER_AVATAR).contains(&self.gaussians_per_avatar) {
