@@ -57,6 +57,12 @@ impl CpuRenderer {
         Self::default()
     }
 
+    /// The sort keys of the last frame (depth bits, first and last tile; zero
+    /// for culled Gaussians), for comparing with the GPU's `project` kernel.
+    pub fn keys(&self) -> &[TileKey] {
+        &self.keys
+    }
+
     /// Keeps the Gaussians to render (call when the selection changes).
     pub fn set_gaussians(&mut self, set: &GaussianSet) {
         self.set = Some(set.clone());

@@ -14,18 +14,12 @@
 //! on any driver, lavapipe included.
 
 use super::constants::{DIGITS, GROUP, SORT_BLOCK as BLOCK};
-use super::device::{compute_pipeline, read_buffer, uniform_and_storage, Growable, MAX_GROUPS};
+use super::device::{read_buffer, Growable, MAX_GROUPS};
+use super::kernels::{
+    RadixHistogram, RadixScatter, ScanApply, ScanReduce, ScanSums, SortKeys, TilesCount, TilesEmit,
+    TilesRanges,
+};
 use crate::error::{Error, Result};
-
-const SORT_KEYS: &str = include_str!("../../../shaders/sort_keys.wgsl");
-const RADIX_HISTOGRAM: &str = include_str!("../../../shaders/radix_histogram.wgsl");
-const RADIX_SCATTER: &str = include_str!("../../../shaders/radix_scatter.wgsl");
-const SCAN_REDUCE: &str = include_str!("../../../shaders/scan_reduce.wgsl");
-const SCAN_SUMS: &str = include_str!("../../../shaders/scan_sums.wgsl");
-const SCAN_APPLY: &str = include_str!("../../../shaders/scan_apply.wgsl");
-const TILES_COUNT: &str = include_str!("../../../shaders/tiles_count.wgsl");
-const TILES_EMIT: &str = include_str!("../../../shaders/tiles_emit.wgsl");
-const TILES_RANGES: &str = include_str!("../../../shaders/tiles_ranges.wgsl");
 
 /// Bytes between uniform slots (the largest offset alignment wgpu allows devices to ask).
 const SLOT: u64 = 256;
@@ -56,16 +50,17 @@ impl SortParams {
     }
 }
 
-struct Pipelines {
-    sort_keys: wgpu::ComputePipeline,
-    histogram: wgpu::ComputePipeline,
-    scatter: wgpu::ComputePipeline,
-    scan_reduce: wgpu::ComputePipeline,
-    scan_sums: wgpu::ComputePipeline,
-    scan_apply: wgpu::ComputePipeline,
-    tiles_count: wgpu::ComputePipeline,
-    tiles_emit: wgpu::ComputePipeline,
-    tiles_ranges: wgpu::ComputePipeline,
+/// The sort and binning kernels.
+struct Kernels {
+    sort_keys: SortKeys,
+    histogram: RadixHistogram,
+    scatter: RadixScatter,
+    scan_reduce: ScanReduce,
+    scan_sums: ScanSums,
+    scan_apply: ScanApply,
+    tiles_count: TilesCount,
+    tiles_emit: TilesEmit,
+    tiles_ranges: TilesRanges,
 }
 
 /// A pair of key/value buffers the radix passes ping-pong between.
@@ -76,8 +71,10 @@ struct KeyValues {
 
 impl KeyValues {
     fn new(device: &wgpu::Device, label: &'static str) -> Self {
-        // COPY_SRC so tests can compare the lists with the CPU's.
-        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        // COPY_SRC and COPY_DST so tests can fill them and compare with the CPU.
+        let storage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
         let g = || Growable::new(device, label, storage);
         Self {
             keys: [g(), g()],
@@ -95,7 +92,7 @@ impl KeyValues {
 
 /// The GPU sort and binning stage with its reusable buffers.
 pub(super) struct GpuBinning {
-    pipelines: Pipelines,
+    kernels: Kernels,
     params: wgpu::Buffer,
     slots: Vec<SortParams>,
     depth: KeyValues,
@@ -111,38 +108,23 @@ pub(super) struct GpuBinning {
     result: usize,
 }
 
-/// What a pass binds: a parameter slot and storage buffers in binding order.
-struct Dispatch<'a> {
-    pipeline: &'a wgpu::ComputePipeline,
-    slot: u64,
-    buffers: Vec<&'a wgpu::Buffer>,
-    groups: u32,
-}
-
 impl GpuBinning {
     /// Compiles the kernels.
     pub fn new(device: &wgpu::Device) -> Self {
-        let make = |name, source, read_only: &[bool]| {
-            compute_pipeline(device, name, source, &uniform_and_storage(read_only))
-        };
-        let pipelines = Pipelines {
-            sort_keys: make("sort_keys", SORT_KEYS, &[true, false, false]),
-            histogram: make("radix_histogram", RADIX_HISTOGRAM, &[true, false]),
-            scatter: make(
-                "radix_scatter",
-                RADIX_SCATTER,
-                &[true, true, true, false, false],
-            ),
-            scan_reduce: make("scan_reduce", SCAN_REDUCE, &[true, false]),
-            scan_sums: make("scan_sums", SCAN_SUMS, &[false]),
-            scan_apply: make("scan_apply", SCAN_APPLY, &[false, true]),
-            tiles_count: make("tiles_count", TILES_COUNT, &[true, true, false]),
-            tiles_emit: make("tiles_emit", TILES_EMIT, &[true, true, true, false, false]),
-            tiles_ranges: make("tiles_ranges", TILES_RANGES, &[true, false]),
+        let kernels = Kernels {
+            sort_keys: SortKeys::new(device),
+            histogram: RadixHistogram::new(device),
+            scatter: RadixScatter::new(device),
+            scan_reduce: ScanReduce::new(device),
+            scan_sums: ScanSums::new(device),
+            scan_apply: ScanApply::new(device),
+            tiles_count: TilesCount::new(device),
+            tiles_emit: TilesEmit::new(device),
+            tiles_ranges: TilesRanges::new(device),
         };
         let storage = wgpu::BufferUsages::STORAGE;
         Self {
-            pipelines,
+            kernels,
             params: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("sort params"),
                 size: SLOT * SLOTS,
@@ -214,29 +196,28 @@ impl GpuBinning {
         let mut encoder = device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
-            let p = &self.pipelines;
+            let k = &self.kernels;
             let d = &self.depth;
-            self.run(
+            let groups = (count.div_ceil(GROUP), 1);
+            k.sort_keys.dispatch(
                 device,
                 &mut pass,
-                Dispatch {
-                    pipeline: &p.sort_keys,
-                    slot: per_gaussian,
-                    buffers: vec![keys, &d.keys[0].buffer, &d.values[0].buffer],
-                    groups: count.div_ceil(GROUP),
-                },
+                self.uniform(per_gaussian),
+                keys,
+                &d.keys[0].buffer,
+                &d.values[0].buffer,
+                groups,
             );
             let order = self.encode_radix(device, &mut pass, &depth_sort, &self.depth);
             let order = &self.depth.values[order].buffer;
-            self.run(
+            k.tiles_count.dispatch(
                 device,
                 &mut pass,
-                Dispatch {
-                    pipeline: &p.tiles_count,
-                    slot: per_gaussian,
-                    buffers: vec![keys, order, &self.entries.buffer],
-                    groups: count.div_ceil(GROUP),
-                },
+                self.uniform(per_gaussian),
+                keys,
+                order,
+                &self.entries.buffer,
+                groups,
             );
             self.encode_scan(device, &mut pass, &entry_scan, &self.entries.buffer);
         }
@@ -268,34 +249,27 @@ impl GpuBinning {
             self.write_slots(queue);
             {
                 let mut pass = encoder.begin_compute_pass(&Default::default());
-                let p = &self.pipelines;
+                let k = &self.kernels;
                 let t = &self.tiles;
-                self.run(
+                k.tiles_emit.dispatch(
                     device,
                     &mut pass,
-                    Dispatch {
-                        pipeline: &p.tiles_emit,
-                        slot: per_gaussian,
-                        buffers: vec![
-                            keys,
-                            &self.depth.values[order].buffer,
-                            &self.entries.buffer,
-                            &t.keys[0].buffer,
-                            &t.values[0].buffer,
-                        ],
-                        groups: count.div_ceil(GROUP),
-                    },
+                    self.uniform(per_gaussian),
+                    keys,
+                    &self.depth.values[order].buffer,
+                    &self.entries.buffer,
+                    &t.keys[0].buffer,
+                    &t.values[0].buffer,
+                    (count.div_ceil(GROUP), 1),
                 );
                 let sorted = self.encode_radix(device, &mut pass, &tile_sort, &self.tiles);
-                self.run(
+                k.tiles_ranges.dispatch(
                     device,
                     &mut pass,
-                    Dispatch {
-                        pipeline: &p.tiles_ranges,
-                        slot: per_entry,
-                        buffers: vec![&t.keys[sorted].buffer, &self.ranges.buffer],
-                        groups: entries.div_ceil(GROUP),
-                    },
+                    self.uniform(per_entry),
+                    &t.keys[sorted].buffer,
+                    &self.ranges.buffer,
+                    (entries.div_ceil(GROUP), 1),
                 );
             }
             self.result = tile_sort.result;
@@ -369,35 +343,28 @@ impl GpuBinning {
         plan: &RadixPlan,
         kv: &KeyValues,
     ) -> usize {
-        let p = &self.pipelines;
+        let k = &self.kernels;
         let mut from = 0;
         for &slot in &plan.passes {
-            self.run(
+            k.histogram.dispatch(
                 device,
                 pass,
-                Dispatch {
-                    pipeline: &p.histogram,
-                    slot,
-                    buffers: vec![&kv.keys[from].buffer, &self.histogram.buffer],
-                    groups: plan.blocks,
-                },
+                self.uniform(slot),
+                &kv.keys[from].buffer,
+                &self.histogram.buffer,
+                (plan.blocks, 1),
             );
             self.encode_scan(device, pass, &plan.scan, &self.histogram.buffer);
-            self.run(
+            k.scatter.dispatch(
                 device,
                 pass,
-                Dispatch {
-                    pipeline: &p.scatter,
-                    slot,
-                    buffers: vec![
-                        &kv.keys[from].buffer,
-                        &kv.values[from].buffer,
-                        &self.histogram.buffer,
-                        &kv.keys[1 - from].buffer,
-                        &kv.values[1 - from].buffer,
-                    ],
-                    groups: plan.blocks,
-                },
+                self.uniform(slot),
+                &kv.keys[from].buffer,
+                &kv.values[from].buffer,
+                &self.histogram.buffer,
+                &kv.keys[1 - from].buffer,
+                &kv.values[1 - from].buffer,
+                (plan.blocks, 1),
             );
             from = 1 - from;
         }
@@ -412,57 +379,29 @@ impl GpuBinning {
         plan: &ScanPlan,
         data: &wgpu::Buffer,
     ) {
-        let p = &self.pipelines;
+        let k = &self.kernels;
         let sums = &self.sums.buffer;
-        for (pipeline, slot, buffers, groups) in [
-            (
-                &p.scan_reduce,
-                plan.per_element,
-                vec![data, sums],
-                plan.sums,
-            ),
-            (&p.scan_sums, plan.per_sum, vec![sums], 1),
-            (&p.scan_apply, plan.per_element, vec![data, sums], plan.sums),
-        ] {
-            self.run(
-                device,
-                pass,
-                Dispatch {
-                    pipeline,
-                    slot,
-                    buffers,
-                    groups,
-                },
-            );
-        }
+        let (per_element, per_sum) = (self.uniform(plan.per_element), self.uniform(plan.per_sum));
+        k.scan_reduce.dispatch(
+            device,
+            pass,
+            per_element.clone(),
+            data,
+            sums,
+            (plan.sums, 1),
+        );
+        k.scan_sums.dispatch(device, pass, per_sum, sums, (1, 1));
+        k.scan_apply
+            .dispatch(device, pass, per_element, data, sums, (plan.sums, 1));
     }
 
-    fn run(&self, device: &wgpu::Device, pass: &mut wgpu::ComputePass<'_>, d: Dispatch) {
-        let mut entries = vec![wgpu::BindGroupEntry {
-            binding: 0,
-            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer: &self.params,
-                offset: d.slot * SLOT,
-                size: wgpu::BufferSize::new(std::mem::size_of::<SortParams>() as u64),
-            }),
-        }];
-        entries.extend(
-            d.buffers
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry {
-                    binding: i as u32 + 1,
-                    resource: b.as_entire_binding(),
-                }),
-        );
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &d.pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
-        pass.set_pipeline(d.pipeline);
-        pass.set_bind_group(0, &group, &[]);
-        pass.dispatch_workgroups(d.groups.max(1), 1, 1);
+    /// The parameter slot `slot` as a uniform binding.
+    fn uniform(&self, slot: u64) -> wgpu::BufferBinding<'_> {
+        wgpu::BufferBinding {
+            buffer: &self.params,
+            offset: slot * SLOT,
+            size: wgpu::BufferSize::new(std::mem::size_of::<SortParams>() as u64),
+        }
     }
 }
 
@@ -535,6 +474,82 @@ mod tests {
                 [depth.to_bits(), pack_tile(x0, y0), pack_tile(x1, y1), 1]
             })
             .collect()
+    }
+
+    /// Kernel level: scan_reduce, scan_sums and scan_apply give the CPU's
+    /// exclusive prefix sum and total, across block boundaries.
+    #[test]
+    fn scan_kernels_match_the_cpu_prefix_sum() {
+        let renderer = GpuRenderer::new().expect("a wgpu adapter (lavapipe in CI)");
+        let (device, queue) = renderer.device_and_queue();
+        let mut b = GpuBinning::new(device);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for n in [1u32, 255, 1024, 1025, 4_097, 70_001] {
+            let data: Vec<u32> = (0..n).map(|_| rng.random_range(0..9)).collect();
+            b.slots.clear();
+            let plan = b.scan_plan(n);
+            b.sums.ensure(device, (u64::from(plan.sums) + 1) * 4);
+            b.write_slots(queue);
+            let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: None,
+                contents: bytemuck::cast_slice(&data),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            });
+            let mut encoder = device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                b.encode_scan(device, &mut pass, &plan, &buffer);
+            }
+            queue.submit([encoder.finish()]);
+            let gpu = read_back(device, queue, &buffer, n as usize);
+            let sums = read_back(device, queue, &b.sums.buffer, plan.sums as usize + 1);
+            let mut running = 0;
+            let cpu: Vec<u32> = data
+                .iter()
+                .map(|&x| {
+                    let before = running;
+                    running += x;
+                    before
+                })
+                .collect();
+            assert_eq!(gpu, cpu, "{n} elements");
+            assert_eq!(sums[plan.sums as usize], running, "{n} elements: total");
+        }
+    }
+
+    /// Kernel level: radix_histogram + radix_scatter, one 8-bit pass, order
+    /// keys and values like the CPU's stable sort by that digit.
+    #[test]
+    fn radix_kernels_match_a_stable_cpu_sort_by_one_digit() {
+        let renderer = GpuRenderer::new().expect("a wgpu adapter (lavapipe in CI)");
+        let (device, queue) = renderer.device_and_queue();
+        let mut b = GpuBinning::new(device);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        for n in [1u32, 300, 1024, 3_001, 40_000] {
+            // Few distinct digits, so ties are everywhere.
+            let keys: Vec<u32> = (0..n).map(|_| rng.random::<u32>() & 0x0000_0f0f).collect();
+            let values: Vec<u32> = (0..n).collect();
+            b.slots.clear();
+            let plan = b.radix_plan(n, 1..2);
+            b.depth.ensure(device, n);
+            b.ensure_scratch(device, &plan, &plan.scan);
+            b.write_slots(queue);
+            queue.write_buffer(&b.depth.keys[0].buffer, 0, bytemuck::cast_slice(&keys));
+            queue.write_buffer(&b.depth.values[0].buffer, 0, bytemuck::cast_slice(&values));
+            let mut encoder = device.create_command_encoder(&Default::default());
+            let result = {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                b.encode_radix(device, &mut pass, &plan, &b.depth)
+            };
+            queue.submit([encoder.finish()]);
+            let gpu_keys = read_back(device, queue, &b.depth.keys[result].buffer, n as usize);
+            let gpu_values = read_back(device, queue, &b.depth.values[result].buffer, n as usize);
+            let mut order: Vec<u32> = (0..n).collect();
+            order.sort_by_key(|&i| (keys[i as usize] >> 8) & 255); // stable
+            assert_eq!(gpu_values, order, "{n} keys");
+            let sorted: Vec<u32> = order.iter().map(|&i| keys[i as usize]).collect();
+            assert_eq!(gpu_keys, sorted, "{n} keys");
+        }
     }
 
     #[test]

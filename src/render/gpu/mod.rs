@@ -19,18 +19,16 @@ use crate::avatar::gaussians::GaussianSet;
 use crate::error::{Error, Result};
 use crate::scene::camera::Camera;
 use binning::GpuBinning;
-use device::{compute_pipeline, map_and_read, uniform_and_storage, wait, Growable, MAX_GROUPS};
+use device::{map_and_read, wait, Growable, MAX_GROUPS};
+use kernels::{Bind, PackRgb, Project, Rasterize};
 
 pub mod binning;
 pub mod constants;
 pub mod device;
+pub mod kernels;
 
+use constants::GROUP;
 pub use constants::TILE;
-
-const BIND: &str = include_str!("../../../shaders/bind.wgsl");
-const PROJECT: &str = include_str!("../../../shaders/project.wgsl");
-const RASTERIZE: &str = include_str!("../../../shaders/rasterize.wgsl");
-const PACK_RGB: &str = include_str!("../../../shaders/pack_rgb.wgsl");
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -63,10 +61,10 @@ pub struct GpuRenderer {
     queue: wgpu::Queue,
     adapter: wgpu::AdapterInfo,
     limits: wgpu::Limits,
-    bind_pipeline: wgpu::ComputePipeline,
-    project_pipeline: wgpu::ComputePipeline,
-    raster_pipeline: wgpu::ComputePipeline,
-    pack_pipeline: wgpu::ComputePipeline,
+    bind: Bind,
+    project: Project,
+    rasterize: Rasterize,
+    pack_rgb: PackRgb,
     camera: wgpu::Buffer,
     scene: Option<SceneBuffers>,
     frames: Growable,
@@ -134,30 +132,8 @@ impl GpuRenderer {
             })
             .await
             .map_err(|e| Error::device(format!("cannot open the graphics device: {e}")))?;
-        let bind_pipeline = compute_pipeline(
-            &device,
-            "bind",
-            BIND,
-            &uniform_and_storage(&[true, true, false]),
-        );
-        let project_pipeline = compute_pipeline(
-            &device,
-            "project",
-            PROJECT,
-            &uniform_and_storage(&[true, true, false, false]),
-        );
-        let raster_pipeline = compute_pipeline(
-            &device,
-            "rasterize",
-            RASTERIZE,
-            &uniform_and_storage(&[true, true, true, false]),
-        );
-        let pack_pipeline = compute_pipeline(
-            &device,
-            "pack_rgb",
-            PACK_RGB,
-            &uniform_and_storage(&[true, false]),
-        );
+        let (bind, project) = (Bind::new(&device), Project::new(&device));
+        let (rasterize, pack_rgb) = (Rasterize::new(&device), PackRgb::new(&device));
         let binning = GpuBinning::new(&device);
         let camera = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("camera"),
@@ -167,7 +143,12 @@ impl GpuRenderer {
         });
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let frames = Growable::new(&device, "frames", storage);
-        let image = Growable::new(&device, "image", wgpu::BufferUsages::STORAGE);
+        // COPY_SRC: the kernel tests read the RGBA image back.
+        let image = Growable::new(
+            &device,
+            "image",
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        );
         let packed = Growable::new(
             &device,
             "packed image",
@@ -183,10 +164,10 @@ impl GpuRenderer {
             limits,
             device,
             queue,
-            bind_pipeline,
-            project_pipeline,
-            raster_pipeline,
-            pack_pipeline,
+            bind,
+            project,
+            rasterize,
+            pack_rgb,
             camera,
             scene: None,
             frames,
@@ -283,7 +264,12 @@ impl GpuRenderer {
             sh_stride: stride as u32,
             local: init("local gaussians", bytemuck::cast_slice(&local), storage),
             sh: init("sh", bytemuck::cast_slice(&sh), storage),
-            world: empty("world gaussians", n as u64 * 48, storage),
+            // COPY_SRC: the kernel tests read it back.
+            world: empty(
+                "world gaussians",
+                n as u64 * 48,
+                storage | wgpu::BufferUsages::COPY_SRC,
+            ),
             projected: empty("projected", n as u64 * 48, storage),
             keys: empty(
                 "keys",
@@ -335,35 +321,30 @@ impl GpuRenderer {
         // bind + project, then read the keys back.
         let t = Instant::now();
         let n = scene.count;
-        let groups = n.div_ceil(256).max(1);
-        let bind_group = self.bind_group(
-            &self.bind_pipeline,
-            &[
-                &self.camera,
+        let groups = n.div_ceil(GROUP).max(1);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            let camera = self.camera.as_entire_buffer_binding();
+            self.bind.dispatch(
+                &self.device,
+                &mut pass,
+                camera.clone(),
                 &scene.local,
                 &self.frames.buffer,
                 &scene.world,
-            ],
-        );
-        let project_group = self.bind_group(
-            &self.project_pipeline,
-            &[
-                &self.camera,
+                (groups, 1),
+            );
+            self.project.dispatch(
+                &self.device,
+                &mut pass,
+                camera,
                 &scene.world,
                 &scene.sh,
                 &scene.projected,
                 &scene.keys,
-            ],
-        );
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.bind_pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(groups, 1, 1);
-            pass.set_pipeline(&self.project_pipeline);
-            pass.set_bind_group(0, &project_group, &[]);
-            pass.dispatch_workgroups(groups, 1, 1);
+                (groups, 1),
+            );
         }
         self.queue.submit([encoder.finish()]);
         if self.profile_stages {
@@ -394,31 +375,30 @@ impl GpuRenderer {
         self.image.ensure(&self.device, image_bytes);
         self.packed.ensure(&self.device, packed_bytes);
         self.image_readback.ensure(&self.device, packed_bytes);
-        let raster_group = self.bind_group(
-            &self.raster_pipeline,
-            &[
-                &self.camera,
+        let pack_groups = (packed_bytes / 4).div_ceil(GROUP as u64) as u32;
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            let camera = self.camera.as_entire_buffer_binding();
+            self.rasterize.dispatch(
+                &self.device,
+                &mut pass,
+                camera.clone(),
                 &scene.projected,
                 &self.binning.ranges.buffer,
                 self.binning.list(),
                 &self.image.buffer,
-            ],
-        );
-        let pack_group = self.bind_group(
-            &self.pack_pipeline,
-            &[&self.camera, &self.image.buffer, &self.packed.buffer],
-        );
-        let pack_groups = (packed_bytes / 4).div_ceil(256) as u32;
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.raster_pipeline);
-            pass.set_bind_group(0, &raster_group, &[]);
-            pass.dispatch_workgroups(tiles.0, tiles.1, 1);
-            pass.set_pipeline(&self.pack_pipeline);
-            pass.set_bind_group(0, &pack_group, &[]);
+                tiles,
+            );
             let columns = pack_groups.min(MAX_GROUPS);
-            pass.dispatch_workgroups(columns, pack_groups.div_ceil(columns), 1);
+            self.pack_rgb.dispatch(
+                &self.device,
+                &mut pass,
+                camera,
+                &self.image.buffer,
+                &self.packed.buffer,
+                (columns, pack_groups.div_ceil(columns)),
+            );
         }
         encoder.copy_buffer_to_buffer(
             &self.packed.buffer,
@@ -446,27 +426,6 @@ impl GpuRenderer {
             width,
             height,
             pixels,
-        })
-    }
-
-    fn bind_group(
-        &self,
-        pipeline: &wgpu::ComputePipeline,
-        buffers: &[&wgpu::Buffer],
-    ) -> wgpu::BindGroup {
-        let layout = pipeline.get_bind_group_layout(0);
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &layout,
-            entries: &entries,
         })
     }
 }
@@ -510,5 +469,217 @@ fn camera_uniform(
             settings.background[2],
         ],
         tuning: [settings.early_stop.clamp(0.0, 1.0), 0.0, 0.0, 0.0],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Quat, Vec3};
+    use rand::{Rng, SeedableRng};
+
+    use super::*;
+    use crate::avatar::binding::{local_to_world, triangle_frames};
+    use crate::avatar::gaussians::sigmoid;
+    use crate::scene::camera::Orbit;
+
+    /// Kernel level: `bind` places every Gaussian (f32 on the GPU) as the CPU
+    /// binding does, degenerate triangles and unnormalised rotations included.
+    #[test]
+    fn bind_kernel_matches_the_cpu_binding() {
+        let mut renderer = GpuRenderer::new().expect("a wgpu adapter (lavapipe in CI)");
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut v = || {
+            Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+        };
+        let mut positions: Vec<Vec3> = (0..30).map(|_| v()).collect();
+        positions.push(positions[0]); // a repeated vertex: a degenerate triangle
+        let mut triangles: Vec<[u32; 3]> = (0..10).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect();
+        triangles.push([0, 30, 1]);
+        let frames = triangle_frames(&positions, &triangles);
+        let mut set = crate::avatar::gaussians::GaussianSet::with_degree(0);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(6);
+        for i in 0..700u32 {
+            let mut r = || rng.random_range(-1.0f32..1.0);
+            let q = Quat::from_xyzw(r(), r(), r(), r() + 1.5); // unnormalised
+            set.push(
+                i % triangles.len() as u32,
+                Vec3::new(r(), r(), r()),
+                q,
+                Vec3::new(r(), r(), r()) * 3.0,
+                r() * 4.0,
+                &[0.5, 0.5, 0.5],
+            );
+        }
+        renderer.set_gaussians(&set).unwrap();
+        renderer
+            .render(
+                &frames,
+                &Orbit::STUDY.camera(32, 24),
+                &RenderSettings::default(),
+            )
+            .unwrap();
+        let scene = renderer.scene.as_ref().unwrap();
+        let bytes = set.len() as u64 * 48;
+        let staging = renderer.device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = renderer.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&scene.world, 0, &staging, 0, bytes);
+        renderer.queue.submit([encoder.finish()]);
+        let world: Vec<f32> = device::read_buffer(&renderer.device, &staging, bytes).unwrap();
+        for i in 0..set.len() {
+            let w = &world[12 * i..12 * i + 12];
+            let frame = &frames[set.binding[i] as usize];
+            let cpu = local_to_world(frame, set.position[i], set.rotation[i], set.log_scale[i]);
+            let close = |a: f32, b: f32, what: &str| {
+                assert!(
+                    (a - b).abs() <= 1e-5 * (1.0 + b.abs()),
+                    "Gaussian {i} {what}: GPU {a}, CPU {b}"
+                );
+            };
+            for c in 0..3 {
+                close(w[c], cpu.position[c], "position");
+                close(w[8 + c], cpu.scale[c], "scale");
+            }
+            close(w[3], sigmoid(set.opacity_logit[i]), "opacity");
+            let gpu_q = Quat::from_xyzw(w[5], w[6], w[7], w[4]);
+            assert!(
+                gpu_q.dot(cpu.rotation).abs() > 1.0 - 1e-5,
+                "Gaussian {i} rotation"
+            );
+        }
+    }
+
+    /// Kernel level: `project` (f32) culls the same Gaussians as the CPU
+    /// renderer's f64 projection and writes the same depth and tile rectangle,
+    /// but for rounding at the edges: Gaussians behind, at and just in front of
+    /// the camera, tiny and huge scales included.
+    #[test]
+    fn project_kernel_matches_the_cpu_projection() {
+        let mut gpu = GpuRenderer::new().expect("a wgpu adapter (lavapipe in CI)");
+        let mut cpu = crate::render::cpu::CpuRenderer::new();
+        let frames = triangle_frames(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let mut set = crate::avatar::gaussians::GaussianSet::with_degree(1);
+        for k in 0..4_000 {
+            let mut r = || rng.random_range(-1.0f32..1.0);
+            // Spread along the view axis through and behind the camera (at z = 3).
+            let position = Vec3::new(r() * 1.5, r() * 1.5, r() * 4.0);
+            let log_scale = match k % 10 {
+                0 => Vec3::splat(-12.0), // tiny
+                1 => Vec3::splat(1.0),   // huge
+                _ => Vec3::new(r(), r(), r()) * 2.0 - Vec3::splat(3.0),
+            };
+            let sh: Vec<f32> = (0..12).map(|_| r() * 0.5).collect();
+            set.push(
+                0,
+                position,
+                Quat::from_xyzw(r(), r(), r(), 1.0),
+                log_scale,
+                r() * 3.0,
+                &sh,
+            );
+        }
+        let camera = Orbit {
+            radius: 3.0,
+            fov_deg: 50.0,
+            target: [0.0, 0.0, 0.0],
+            ..Orbit::STUDY
+        }
+        .camera(160, 120);
+        let settings = RenderSettings::default();
+        gpu.set_gaussians(&set).unwrap();
+        gpu.render(&frames, &camera, &settings).unwrap();
+        cpu.set_gaussians(&set);
+        cpu.render(&frames, &camera, &settings).unwrap();
+        let scene = gpu.scene.as_ref().unwrap();
+        let bytes = set.len() as u64 * 16;
+        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&scene.keys, 0, &staging, 0, bytes);
+        gpu.queue.submit([encoder.finish()]);
+        let keys: Vec<[u32; 4]> = device::read_buffer(&gpu.device, &staging, bytes).unwrap();
+        let (mut visible, mut differ) = (0, 0);
+        for (i, (g, c)) in keys.iter().zip(cpu.keys()).enumerate() {
+            if g[3] != c[3] || g[1..3] != c[1..3] {
+                differ += 1;
+                continue;
+            }
+            if c[3] == 1 {
+                visible += 1;
+                let (a, b) = (f32::from_bits(g[0]), f32::from_bits(c[0]));
+                assert!(
+                    (a - b).abs() <= 1e-5 * b.abs(),
+                    "Gaussian {i}: depth {a} vs {b}"
+                );
+            }
+        }
+        assert!(visible > 500, "only {visible} visible");
+        assert!(
+            differ * 200 <= keys.len(),
+            "{differ} of {} keys differ",
+            keys.len()
+        );
+    }
+
+    /// Kernel level: `pack_rgb` keeps the RGB bytes of every RGBA pixel, in
+    /// order, across image sizes that do not fill whole words or workgroups.
+    #[test]
+    fn pack_rgb_kernel_matches_the_cpu_packing() {
+        let mut renderer = GpuRenderer::new().expect("a wgpu adapter (lavapipe in CI)");
+        let mut set = crate::avatar::gaussians::GaussianSet::with_degree(0);
+        set.push(
+            0,
+            Vec3::ZERO,
+            Quat::IDENTITY,
+            Vec3::splat(-2.0),
+            3.0,
+            &[1.0, -0.5, 0.2],
+        );
+        renderer.set_gaussians(&set).unwrap();
+        let frames = triangle_frames(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
+        for (w, h) in [(1, 1), (7, 5), (33, 17), (160, 120)] {
+            let camera = Orbit {
+                radius: 3.0,
+                fov_deg: 60.0,
+                target: [0.3, 0.3, 0.0],
+                ..Orbit::STUDY
+            }
+            .camera(w, h);
+            let image = renderer
+                .render(&frames, &camera, &RenderSettings::default())
+                .unwrap();
+            // The RGBA image the rasteriser wrote, packed on the CPU.
+            let words = (w * h) as u64;
+            let staging = renderer.device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size: words * 4,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut encoder = renderer.device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(&renderer.image.buffer, 0, &staging, 0, words * 4);
+            renderer.queue.submit([encoder.finish()]);
+            let rgba: Vec<u32> =
+                device::read_buffer(&renderer.device, &staging, words * 4).unwrap();
+            let cpu: Vec<u8> = rgba
+                .iter()
+                .flat_map(|p| p.to_le_bytes()[..3].to_vec())
+                .collect();
+            assert_eq!(image.pixels, cpu, "{w}x{h}");
+            assert!(cpu.iter().any(|&c| c > 0), "{w}x{h}: something drawn");
+        }
     }
 }
