@@ -11,15 +11,15 @@ fuzz_target!(|data: &[u8]| {
             let _ = visage::compose::recipe::Recipe::from_toml(text);
         }
         1 => {
-            let _ = visage::tui::session::Session::parse(text, "fuzz");
+            let _ = visage::editor::session::Session::parse(text, "fuzz");
         }
         2 => {
             let _ = visage::tui::keymap::Keymap::builtin().merge_text(text, "fuzz");
         }
         _ => {
             for line in text.lines() {
-                if let Ok(c) = visage::tui::command::Command::parse(line) {
-                    assert_eq!(visage::tui::command::Command::parse(&c.to_string()).as_ref(), Ok(&c));
+                if let Ok(c) = visage::editor::command::Command::parse(line) {
+                    assert_eq!(visage::editor::command::Command::parse(&c.to_string()).as_ref(), Ok(&c));
                 }
             }
         }

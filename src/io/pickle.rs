@@ -1332,6 +1332,45 @@ mod tests {
         assert_eq!(ring.data, (15..30).map(|i| i as f64).collect::<Vec<_>>());
     }
 
+    /// Damaged copies of real pickles (bytes flipped, cut, spliced) parse or
+    /// fail with a message — never panic, loop or blow up.
+    #[test]
+    fn damaged_real_pickles_never_panic() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(42);
+        let files = [
+            "tests/data/real-protocol2.pkl",
+            "tests/data/real-protocol5.pkl",
+            "tests/data/chumpy/generic_masks_p0.pkl",
+        ];
+        for file in files {
+            let original = std::fs::read(file).unwrap();
+            for _ in 0..400 {
+                let mut bytes = original.clone();
+                match rng.random_range(0..3) {
+                    0 => {
+                        for _ in 0..rng.random_range(1..8) {
+                            let at = rng.random_range(0..bytes.len());
+                            bytes[at] = rng.random();
+                        }
+                    }
+                    1 => bytes.truncate(rng.random_range(0..bytes.len())),
+                    _ => {
+                        let from = rng.random_range(0..bytes.len());
+                        let to = rng.random_range(0..bytes.len());
+                        let len = rng.random_range(1..64).min(bytes.len() - from.max(to));
+                        let chunk = bytes[from..from + len].to_vec();
+                        bytes.splice(to..to, chunk);
+                    }
+                }
+                if let Ok(v) = parse(&bytes) {
+                    let _ = v.as_array();
+                    let _ = v.get("v_template").map(Value::as_array);
+                }
+            }
+        }
+    }
+
     #[test]
     fn refuses_code_and_bombs() {
         let e = parse(b"cos\nsystem\n(S'ls'\ntR.").unwrap_err().to_string();
