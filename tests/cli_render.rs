@@ -324,3 +324,94 @@ fn scenes_with_floaters_render_framed_and_y_down_scenes_upright() {
         std::fs::remove_file(p).ok();
     }
 }
+
+/// `visage convert` between INRIA PLY and .splat: lossless where the format
+/// keeps everything, the cost measured where it does not; .splat files render
+/// like the reference; broken ones are one line and exit 2.
+#[test]
+fn convert_between_ply_and_splat_reports_the_error() {
+    let (ply, splat, back) = (temp("ring.ply"), temp("ring.splat"), temp("ring-back.ply"));
+    write_splat_ply(&ply, &ring_scene(3)).unwrap();
+    let json = |args: &[&str]| -> serde_json::Value {
+        let o = visage(args);
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let to_splat = json(&[
+        "convert",
+        ply.to_str().unwrap(),
+        splat.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(to_splat["gaussians"], 300);
+    assert_eq!(
+        (
+            to_splat["sh_degree_in"].as_u64(),
+            to_splat["sh_degree_out"].as_u64()
+        ),
+        (Some(3), Some(0))
+    );
+    assert_eq!(to_splat["bytes_out"], 300 * 32);
+    let lossy = to_splat["psnr_db"].as_f64().unwrap();
+    assert!(
+        (20.0..99.0).contains(&lossy),
+        "SH 3 → 0 and 8-bit colour cost something: {lossy}"
+    );
+    let to_ply = json(&[
+        "convert",
+        splat.to_str().unwrap(),
+        back.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(
+        to_ply["psnr_db"].as_f64().unwrap() >= 99.0,
+        "splat → PLY keeps everything"
+    );
+
+    let (fast, slow) = (temp("splat.png"), temp("splat-ref.png"));
+    for (out, extra) in [(&fast, None), (&slow, Some("--reference"))] {
+        let mut args = vec![
+            "render",
+            "--ply",
+            splat.to_str().unwrap(),
+            "--size",
+            "80x60",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let o = visage(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let (a, b) = (
+        RgbImage::load_png(&fast).unwrap(),
+        RgbImage::load_png(&slow).unwrap(),
+    );
+    assert!(psnr(&a, &b).unwrap() >= 40.0);
+
+    let broken = temp("broken.splat");
+    std::fs::write(&broken, [0u8; 33]).unwrap();
+    for args in [
+        vec!["convert", broken.to_str().unwrap(), back.to_str().unwrap()],
+        vec![
+            "render",
+            "--ply",
+            broken.to_str().unwrap(),
+            "-o",
+            fast.to_str().unwrap(),
+        ],
+        vec!["convert", ply.to_str().unwrap(), "/tmp/scene.obj"],
+    ] {
+        let o = visage(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+    for p in [ply, splat, back, fast, slow, broken] {
+        std::fs::remove_file(p).ok();
+    }
+}

@@ -6,6 +6,7 @@ mod bench_render;
 mod bench_terminal;
 mod camera;
 mod compose;
+mod convert;
 mod db;
 mod edit;
 mod info;
@@ -44,6 +45,8 @@ enum Command {
     Export(compose::ExportArgs),
     /// Render a still to PNG.
     Render(render::RenderArgs),
+    /// Convert a 3DGS scene between INRIA PLY and .splat, reporting the error.
+    Convert(convert::ConvertArgs),
     /// Measure speed beside error.
     Bench(bench::BenchArgs),
     /// Write test fixtures in the real formats (FLAME-layout model and masks
@@ -72,6 +75,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Compose(args)) => compose::run_compose(&args),
         Some(Command::Export(args)) => compose::run_export(&args),
         Some(Command::Render(args)) => render::run(&args),
+        Some(Command::Convert(args)) => convert::run(&args),
         Some(Command::Bench(args)) => bench::run(&args),
         Some(Command::Fixtures(args)) => run_fixtures(&args),
         Some(Command::Edit(args)) => edit::run_edit(&args),

@@ -10,7 +10,6 @@ use super::compose::{build, build_from};
 use super::DbArgs;
 use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
-use crate::io::ply::read_splat_ply;
 use crate::pipeline::composer::{reference_image, Composer, Painter};
 use crate::render::reference::render_reference;
 use crate::render::settings::RenderSettings;
@@ -26,7 +25,8 @@ pub struct RenderArgs {
     /// Recipe file (TOML); without one (and without --ply) the first source is shown.
     #[arg(long, value_name = "FILE", conflicts_with = "ply")]
     recipe: Option<PathBuf>,
-    /// A standard 3DGS PLY (INRIA layout, SH degree 0-3) to render instead of a composite.
+    /// A 3DGS scene to render instead of a composite: an INRIA PLY (SH degree
+    /// 0-3) or an antimatter15 .splat.
     #[arg(long, value_name = "FILE")]
     ply: Option<PathBuf>,
     /// Frame of the recipe's motion.
@@ -151,7 +151,7 @@ enum Subject {
 pub fn run(args: &RenderArgs) -> Result<()> {
     let overrides = args.camera.overrides()?;
     let (mut subject, orbit) = if let Some(ply) = &args.ply {
-        let scene = read_splat_ply(ply)?;
+        let scene = crate::io::splat::read_scene(ply)?;
         let orbit = frame_scene(&scene, &overrides)
             .ok_or_else(|| Error::input(format!("{} holds no Gaussians", ply.display())))?;
         (Subject::Ply(scene), orbit)
