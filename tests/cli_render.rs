@@ -415,3 +415,88 @@ fn convert_between_ply_and_splat_reports_the_error() {
         std::fs::remove_file(p).ok();
     }
 }
+
+/// `bench render` on scenes: a synthetic one made deterministically and a
+/// file, with load time and peak memory beside the usual rows.
+#[test]
+fn bench_render_measures_scenes() {
+    let out = visage(&[
+        "bench",
+        "render",
+        "--synthetic-scale",
+        "20000",
+        "--renderers",
+        "cpu",
+        "--iterations",
+        "1",
+        "--warmup",
+        "0",
+        "--sizes",
+        "120x80",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(doc["gaussians"], 20000);
+    assert!(doc["load_ms"].as_f64().unwrap() > 0.0);
+    assert!(doc["peak_rss_mb"].as_f64().unwrap() > 1.0);
+    let row = &doc["renderers"][0]["rows"][0];
+    assert_eq!(
+        (row["width"].as_u64(), row["height"].as_u64()),
+        (Some(120), Some(80))
+    );
+    assert!(row["psnr_db"].as_f64().unwrap() >= 40.0, "{row}");
+    assert!(
+        row["ms_median"].as_f64().unwrap() > 0.0 && row["stages_ms"]["project"].as_f64().is_some()
+    );
+
+    let splat = temp("bench.splat");
+    visage::io::splat::write_splat(&splat, &ring_scene(0)).unwrap();
+    let out = visage(&[
+        "bench",
+        "render",
+        "--ply",
+        splat.to_str().unwrap(),
+        "--renderers",
+        "cpu",
+        "--iterations",
+        "1",
+        "--warmup",
+        "0",
+        "--sizes",
+        "64x48",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(doc["gaussians"], 300);
+    for bad in [
+        vec!["bench", "render", "--synthetic-scale", "0"],
+        vec![
+            "bench",
+            "render",
+            "--synthetic-scale",
+            "10",
+            "--recipe",
+            "recipes/three-sources.toml",
+        ],
+        vec!["bench", "render", "--ply", "/no/such.splat"],
+    ] {
+        let o = visage(&bad);
+        assert_eq!(
+            o.status.code(),
+            Some(2),
+            "{bad:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    std::fs::remove_file(splat).ok();
+}

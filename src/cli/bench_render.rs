@@ -9,6 +9,7 @@ use clap::Args;
 use serde_json::{json, Value};
 
 use super::bench::summarize;
+use super::bench_scene::{bench_scene, peak_rss_mb, SceneSource, SCENE_SIZES};
 use super::compose::{build, build_from};
 use super::render::parse_size;
 use super::DbArgs;
@@ -27,10 +28,17 @@ pub struct RenderBenchArgs {
     #[command(flatten)]
     db: DbArgs,
     /// Recipe to render (default: a four-source composite with cross-fade and skin correction).
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["ply", "synthetic_scale"])]
     recipe: Option<PathBuf>,
-    /// Image sizes, comma-separated WxH.
-    #[arg(long, value_delimiter = ',', default_values = ["160x120", "320x240", "640x480", "1280x720"], value_parser = parse_size)]
+    /// A 3DGS scene (.ply or .splat) to measure instead of a composite.
+    #[arg(long, value_name = "FILE", conflicts_with = "synthetic_scale")]
+    ply: Option<PathBuf>,
+    /// A deterministic synthetic scene of N Gaussians to measure instead of a composite.
+    #[arg(long, value_name = "N")]
+    synthetic_scale: Option<usize>,
+    /// Image sizes, comma-separated WxH (default: 160x120,320x240,640x480,1280x720
+    /// for composites; 120x80,200x120,320x240,640x480 for scenes).
+    #[arg(long, value_delimiter = ',', value_parser = parse_size)]
     sizes: Vec<(u32, u32)>,
     /// Size at which the knobs are compared.
     #[arg(long, default_value = "320x240", value_parser = parse_size)]
@@ -180,6 +188,32 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
     if args.iterations == 0 {
         return Err(Error::input("--iterations must be at least 1"));
     }
+    let source = match (&args.ply, args.synthetic_scale) {
+        (Some(path), _) => Some(SceneSource::File(path)),
+        (None, Some(0)) => return Err(Error::input("--synthetic-scale must be at least 1")),
+        (None, Some(n)) => Some(SceneSource::Synthetic(n)),
+        (None, None) => None,
+    };
+    if let Some(source) = source {
+        let sizes = if args.sizes.is_empty() {
+            SCENE_SIZES.to_vec()
+        } else {
+            args.sizes.clone()
+        };
+        let doc = bench_scene(
+            source,
+            &sizes,
+            &args.renderers,
+            (args.warmup, args.iterations),
+        )?;
+        return print(&doc, args.json);
+    }
+    let sizes = if args.sizes.is_empty() {
+        vec![(160, 120), (320, 240), (640, 480), (1280, 720)]
+    } else {
+        args.sizes.clone()
+    };
+    let t = Instant::now();
     let (mut composer, _) = match &args.recipe {
         Some(path) => build(&args.db, path, Some(0))?,
         None => build_from(&args.db, Some(0), bench_recipe_for)?,
@@ -190,7 +224,8 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
         scale: 1.0,
     };
     let mut references = Vec::new();
-    for &(w, h) in &args.sizes {
+    let load_ms = t.elapsed().as_secs_f64() * 1e3;
+    for &(w, h) in &sizes {
         let camera = orbit.camera(w, h);
         let t = Instant::now();
         let image = reference_image(&composer, &camera, &RenderSettings::default());
@@ -256,12 +291,18 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
     let doc = json!({
         "bench": "render",
         "gaussians": composer.composite().gaussians.len(),
+        "load_ms": load_ms,
+        "peak_rss_mb": peak_rss_mb(),
         "renderers": renderers,
     });
-    if args.json {
+    print(&doc, args.json)
+}
+
+fn print(doc: &Value, json: bool) -> Result<()> {
+    if json {
         println!("{doc}");
     } else {
-        print_tables(&doc);
+        print_tables(doc);
     }
     Ok(())
 }
@@ -330,7 +371,18 @@ fn knob_cases() -> Vec<(&'static str, String, Case)> {
 }
 
 fn print_tables(doc: &Value) {
-    println!("render bench: {} Gaussians", doc["gaussians"]);
+    println!(
+        "render bench: {} Gaussians{}; loaded in {:.0} ms, peak memory {}",
+        doc["gaussians"],
+        doc["scene"]
+            .as_str()
+            .map(|s| format!(" ({s})"))
+            .unwrap_or_default(),
+        doc["load_ms"].as_f64().unwrap_or(0.0),
+        doc["peak_rss_mb"]
+            .as_f64()
+            .map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
+    );
     for r in doc["renderers"].as_array().into_iter().flatten() {
         print_renderer(r);
     }

@@ -3,6 +3,7 @@
 
 mod bench;
 mod bench_render;
+mod bench_scene;
 mod bench_terminal;
 mod camera;
 mod compose;

@@ -4,3 +4,4 @@
 
 pub mod camera;
 pub mod splats;
+pub mod synthetic;

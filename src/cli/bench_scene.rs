@@ -1,0 +1,141 @@
+//! `visage bench render --ply FILE` / `--synthetic-scale N`: a world-space 3DGS
+//! scene instead of a composite — load time, peak memory, and per size the
+//! frame time, stage times and PSNR against the f64 reference, per renderer.
+
+use std::time::Instant;
+
+use serde_json::{json, Value};
+
+use super::bench::summarize;
+use super::render::frame_scene;
+use crate::error::{Error, Result};
+use crate::render::image::psnr_report;
+use crate::render::reference::render_reference;
+use crate::render::settings::{RenderSettings, StageTimings};
+use crate::render::{Backend, SplatRenderer};
+use crate::scene::camera::{Camera, CameraOverrides};
+use crate::scene::splats::SplatScene;
+
+/// Sizes measured on scenes unless `--sizes` is given.
+pub const SCENE_SIZES: [(u32, u32); 4] = [(120, 80), (200, 120), (320, 240), (640, 480)];
+
+/// Where the scene comes from.
+pub enum SceneSource<'a> {
+    /// A file (.ply or .splat).
+    File(&'a std::path::Path),
+    /// [`crate::scene::synthetic::synthetic_scene`] of this many Gaussians.
+    Synthetic(usize),
+}
+
+/// The process's peak resident memory in MiB (Linux), when known.
+pub fn peak_rss_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+/// Times `warmup + iterations` frames of the uploaded scene; returns the frame
+/// times and the median stage times of a second, profiled pass.
+fn time_scene(
+    renderer: &mut SplatRenderer,
+    camera: &Camera,
+    (warmup, iterations): (usize, usize),
+) -> Result<(Vec<f64>, StageTimings)> {
+    let settings = RenderSettings::default();
+    let (mut totals, mut stages) = (Vec::new(), Vec::new());
+    for profiled in [false, true] {
+        renderer.set_stage_profiling(profiled);
+        for it in 0..warmup + iterations {
+            let t = Instant::now();
+            renderer.render_world(camera, &settings)?;
+            let ms = t.elapsed().as_secs_f64() * 1e3;
+            if it < warmup {
+                continue;
+            }
+            if profiled {
+                stages.push(renderer.timings());
+            } else {
+                totals.push(ms);
+            }
+        }
+    }
+    renderer.set_stage_profiling(false);
+    let median = |f: fn(&StageTimings) -> f64| summarize(stages.iter().map(f).collect()).0;
+    Ok((
+        totals,
+        StageTimings {
+            upload: median(|s| s.upload),
+            project: median(|s| s.project),
+            sort: median(|s| s.sort),
+            rasterize: median(|s| s.rasterize),
+            readback: median(|s| s.readback),
+        },
+    ))
+}
+
+/// Runs the scene benchmark and returns its JSON document.
+pub fn bench_scene(
+    source: SceneSource,
+    sizes: &[(u32, u32)],
+    renderers: &[Backend],
+    rounds: (usize, usize),
+) -> Result<Value> {
+    let t = Instant::now();
+    let (scene, name): (SplatScene, String) = match source {
+        SceneSource::File(path) => (
+            crate::io::splat::read_scene(path)?,
+            path.display().to_string(),
+        ),
+        SceneSource::Synthetic(n) => (
+            crate::scene::synthetic::synthetic_scene(n, 1),
+            format!("synthetic {n}"),
+        ),
+    };
+    let load_ms = t.elapsed().as_secs_f64() * 1e3;
+    let orbit = frame_scene(&scene, &CameraOverrides::default())
+        .ok_or_else(|| Error::input(format!("{name} holds no Gaussians")))?;
+    let mut references = Vec::new();
+    for &(w, h) in sizes {
+        let camera = orbit.camera(w, h);
+        let t = Instant::now();
+        let image = render_reference(&scene, &camera, &RenderSettings::default());
+        references.push((camera, image, t.elapsed().as_secs_f64() * 1e3));
+    }
+    let mut docs = Vec::new();
+    for &backend in renderers {
+        let t = Instant::now();
+        let mut renderer = SplatRenderer::open(backend)?;
+        let setup_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        renderer.set_world_scene(&scene)?;
+        let upload_ms = t.elapsed().as_secs_f64() * 1e3;
+        let mut rows = Vec::new();
+        for (camera, reference, reference_ms) in &references {
+            let image = renderer.render_world(camera, &RenderSettings::default())?;
+            let psnr_db = psnr_report(&image, reference).unwrap_or(0.0);
+            let (totals, stages) = time_scene(&mut renderer, camera, rounds)?;
+            let (median, p90) = summarize(totals);
+            rows.push(json!({
+                "width": camera.width, "height": camera.height, "ms_median": median, "ms_p90": p90,
+                "fps": 1e3 / median, "psnr_db": psnr_db, "stages_ms": stages, "reference_ms": reference_ms,
+            }));
+        }
+        docs.push(json!({
+            "renderer": backend,
+            "device": renderer.description(),
+            "setup_ms": setup_ms,
+            "gaussian_upload_ms": upload_ms,
+            "rows": rows,
+            "knobs": [],
+        }));
+    }
+    Ok(json!({
+        "bench": "render",
+        "scene": name,
+        "gaussians": scene.len(),
+        "load_ms": load_ms,
+        "peak_rss_mb": peak_rss_mb(),
+        "renderers": docs,
+    }))
+}
