@@ -6,8 +6,13 @@
 //!
 //! Numerics are those of the reference (`projection.rs`: projection and SH in
 //! f64), with blending in f32 and the same depth sort and tile binning as the GPU
-//! path. Tiles are rasterised in parallel; a tile stops once every pixel in it
-//! is saturated.
+//! path. What no frame changes is prepared once per upload (each Gaussian's
+//! covariance in its triangle's frame, its opacity), so a frame only places
+//! centres, turns covariances by the triangle frames and projects; the centre
+//! comes first, so Gaussians behind the camera cost nothing more. The sort and
+//! binning run in parallel (the same lists as a serial stable sort), tiles are
+//! rasterised one task each, entries whose footprint is already saturated are
+//! skipped, and a tile stops once every pixel in it is saturated.
 
 use std::time::Instant;
 
@@ -19,7 +24,7 @@ use super::settings::RenderSettings;
 use super::settings::StageTimings;
 use super::sh::eval_rgb;
 use super::tiles::{pack_tile, TileBins, TileKey};
-use crate::avatar::binding::{local_to_world, TriangleFrame};
+use crate::avatar::binding::TriangleFrame;
 use crate::avatar::gaussians::{sigmoid, GaussianSet};
 use crate::error::{Error, Result};
 use crate::scene::camera::Camera;
@@ -40,10 +45,43 @@ struct Splat {
     rgb: [f32; 3],
 }
 
+/// What a Gaussian's projection needs that no frame changes, prepared once
+/// per upload: its covariance in its triangle's frame (R S Sᵀ Rᵀ of the local
+/// rotation and scale, upper triangle) and its opacity after the sigmoid.
+#[derive(Clone, Copy, Debug, Default)]
+struct Prepared {
+    cov_local: [f32; 6],
+    opacity: f32,
+}
+
+impl Prepared {
+    fn of(set: &GaussianSet, i: usize) -> Self {
+        let r = glam::Mat3::from_quat(crate::avatar::binding::normalize_quat(set.rotation[i]));
+        let m = r * glam::Mat3::from_diagonal(set.log_scale[i].exp());
+        let c = m * m.transpose();
+        Self {
+            cov_local: [
+                c.x_axis.x, c.y_axis.x, c.z_axis.x, c.y_axis.y, c.z_axis.y, c.z_axis.z,
+            ],
+            opacity: sigmoid(set.opacity_logit[i]).min(1.0),
+        }
+    }
+
+    /// The world covariance on a triangle frame: (k R) Σ (k R)ᵀ.
+    fn cov_world(&self, frame: &TriangleFrame, scale_modifier: f32) -> glam::DMat3 {
+        let [xx, xy, xz, yy, yz, zz] = self.cov_local.map(f64::from);
+        let local = glam::DMat3::from_cols_array(&[xx, xy, xz, xy, yy, yz, xz, yz, zz]);
+        let k = f64::from(frame.scale) * f64::from(scale_modifier);
+        let r = frame.rotation.as_dmat3() * k;
+        r * local * r.transpose()
+    }
+}
+
 /// The CPU renderer; same interface as the GPU one.
 #[derive(Default)]
 pub struct CpuRenderer {
     set: Option<GaussianSet>,
+    prepared: Vec<Prepared>,
     splats: Vec<Splat>,
     keys: Vec<TileKey>,
     bins: TileBins,
@@ -65,6 +103,10 @@ impl CpuRenderer {
 
     /// Keeps the Gaussians to render (call when the selection changes).
     pub fn set_gaussians(&mut self, set: &GaussianSet) {
+        self.prepared = (0..set.len())
+            .into_par_iter()
+            .map(|i| Prepared::of(set, i))
+            .collect();
         self.set = Some(set.clone());
     }
 
@@ -93,6 +135,7 @@ impl CpuRenderer {
         self.splats.resize(n, Splat::default());
         self.keys.resize(n, [0; 4]);
         let last_frame = frames.len() - 1;
+        let prepared = &self.prepared;
         self.splats
             .par_iter_mut()
             .zip(self.keys.par_iter_mut())
@@ -101,20 +144,20 @@ impl CpuRenderer {
             .for_each(|(i, (splat, key))| {
                 *key = [0; 4];
                 let frame = &frames[(set.binding[i] as usize).min(last_frame)];
-                let g = local_to_world(frame, set.position[i], set.rotation[i], set.log_scale[i]);
-                let opacity = sigmoid(set.opacity_logit[i]).min(1.0);
-                if opacity.is_nan() || opacity <= 0.0 || !g.position.is_finite() {
+                let opacity = prepared[i].opacity;
+                // Centre first: what is behind the camera costs nothing more.
+                let position = frame.scale * (frame.rotation * set.position[i]) + frame.center;
+                if opacity.is_nan() || opacity <= 0.0 || !position.is_finite() {
                     return;
                 }
-                let Some(s) =
-                    cam.project(g.position, g.rotation, g.scale * settings.scale_modifier)
-                else {
+                let cov = prepared[i].cov_world(frame, settings.scale_modifier);
+                let Some(s) = cam.project_covariance(position, cov) else {
                     return;
                 };
                 let Some((x0, y0, x1, y1)) = s.pixel_rect(width, height) else {
                     return;
                 };
-                let dir = (g.position.as_dvec3() - cam.eye).normalize_or_zero();
+                let dir = (position.as_dvec3() - cam.eye).normalize_or_zero();
                 let rgb = eval_rgb(set.sh_of(i), degree, dir.to_array());
                 *splat = Splat {
                     x: s.center[0] as f32,
@@ -140,28 +183,39 @@ impl CpuRenderer {
 
         let t = Instant::now();
         let mut rgba = vec![0u8; (width * height * 3) as usize];
-        let row_bytes = (width * 3) as usize;
-        let band = row_bytes * CPU_TILE as usize;
         let (splats, bins) = (&self.splats, &self.bins);
         let background = settings.background;
         let early_stop = settings.early_stop;
-        rgba.par_chunks_mut(band)
-            .enumerate()
-            .for_each(|(ty, rows)| {
-                for tx in 0..tiles.0 {
-                    let tile = (ty as u32 * tiles.0 + tx) as usize;
-                    blend_tile(
-                        rows,
-                        row_bytes,
-                        (tx * CPU_TILE, ty as u32 * CPU_TILE),
-                        (width, height),
-                        bins.tile(tile),
-                        splats,
-                        background,
-                        early_stop,
-                    );
+        // One task per tile (tiles cost very different amounts), each into its
+        // own small buffer; the image is assembled after.
+        let tile_pixels: Vec<[[u8; 3]; TILE_PIXELS]> = (0..tiles.0 * tiles.1)
+            .into_par_iter()
+            .map(|tile| {
+                let origin = ((tile % tiles.0) * CPU_TILE, (tile / tiles.0) * CPU_TILE);
+                blend_tile(
+                    origin,
+                    (width, height),
+                    bins.tile(tile as usize),
+                    splats,
+                    background,
+                    early_stop,
+                )
+            })
+            .collect();
+        let row_bytes = (width * 3) as usize;
+        for (tile, pixels) in tile_pixels.iter().enumerate() {
+            let (x0, y0) = (
+                (tile as u32 % tiles.0) * CPU_TILE,
+                (tile as u32 / tiles.0) * CPU_TILE,
+            );
+            let w = (width - x0).min(CPU_TILE) as usize;
+            for ly in 0..(height - y0).min(CPU_TILE) as usize {
+                let at = (y0 as usize + ly) * row_bytes + x0 as usize * 3;
+                for (lx, px) in pixels[ly * CPU_TILE as usize..][..w].iter().enumerate() {
+                    rgba[at + 3 * lx..at + 3 * lx + 3].copy_from_slice(px);
                 }
-            });
+            }
+        }
         timings.rasterize = ms(t);
         self.timings = timings;
         Ok(RgbImage {
@@ -176,24 +230,26 @@ fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-/// Blends one tile front to back into `rows` (the image rows of its tile band).
-#[allow(clippy::too_many_arguments)]
+/// Pixels of one tile.
+const TILE_PIXELS: usize = (CPU_TILE * CPU_TILE) as usize;
+
+/// Blends one tile front to back; returns its pixels, row-major (CPU_TILE wide).
 fn blend_tile(
-    rows: &mut [u8],
-    row_bytes: usize,
     origin: (u32, u32),
     size: (u32, u32),
     list: &[u32],
     splats: &[Splat],
     background: [f32; 3],
     early_stop: f32,
-) {
+) -> [[u8; 3]; TILE_PIXELS] {
     const N: usize = (CPU_TILE * CPU_TILE) as usize;
     let w = (size.0 - origin.0).min(CPU_TILE);
     let h = (size.1 - origin.1).min(CPU_TILE);
     let mut colour = [[0.0f32; 3]; N];
     let mut transmittance = [1.0f32; N];
-    let mut done = [false; N];
+    // Saturated pixels, one bit a pixel, a word a row: an entry whose whole
+    // footprint is saturated is skipped without touching its pixels.
+    let mut done = [0u16; CPU_TILE as usize];
     let mut remaining = w * h;
     let (ox, oy) = (origin.0 as f32, origin.1 as f32);
     for &i in list {
@@ -206,12 +262,16 @@ fn blend_tile(
         if x1 < x0 as f32 || y1 < y0 as f32 {
             continue;
         }
+        let row_mask = (((1u32 << (x1 as u32 - x0 + 1)) - 1) << x0) as u16;
+        if (y0..=y1 as u32).all(|ly| done[ly as usize] & row_mask == row_mask) {
+            continue;
+        }
         let [a, b, c] = s.conic;
         for ly in y0..=y1 as u32 {
             let dy = oy + ly as f32 + 0.5 - s.y;
             for lx in x0..=x1 as u32 {
                 let p = (ly * CPU_TILE + lx) as usize;
-                if done[p] {
+                if done[ly as usize] & (1 << lx) != 0 {
                     continue;
                 }
                 let dx = ox + lx as f32 + 0.5 - s.x;
@@ -226,7 +286,7 @@ fn blend_tile(
                 let t = transmittance[p];
                 let next = t * (1.0 - alpha);
                 if next < early_stop {
-                    done[p] = true;
+                    done[ly as usize] |= 1 << lx;
                     remaining -= 1;
                     continue;
                 }
@@ -241,13 +301,14 @@ fn blend_tile(
             break;
         }
     }
+    let mut out = [[0u8; 3]; TILE_PIXELS];
     for ly in 0..h {
         for lx in 0..w {
             let p = (ly * CPU_TILE + lx) as usize;
-            let k = ly as usize * row_bytes + (origin.0 + lx) as usize * 3;
-            for ch in 0..3 {
-                rows[k + ch] = quantize(colour[p][ch] + transmittance[p] * background[ch]);
-            }
+            out[p] = std::array::from_fn(|ch| {
+                quantize(colour[p][ch] + transmittance[p] * background[ch])
+            });
         }
     }
+    out
 }

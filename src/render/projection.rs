@@ -97,7 +97,24 @@ impl ProjectionCamera {
             return None;
         }
         let m = r * DMat3::from_diagonal(s);
-        let cov_world = m * m.transpose();
+        self.project_view(p, m * m.transpose())
+    }
+
+    /// Projects a Gaussian given by its centre and world covariance (for
+    /// renderers that prepare covariances ahead of the frame).
+    pub fn project_covariance(&self, position: Vec3, cov_world: DMat3) -> Option<Splat2D> {
+        let p = self.rotation * position.as_dvec3() + self.translation;
+        let depth = -p.z;
+        if !(depth >= self.near && depth <= self.far && cov_world.is_finite()) {
+            return None;
+        }
+        self.project_view(p, cov_world)
+    }
+
+    /// The rest of the projection, from the view-space centre `p` (in front
+    /// of the camera, checked) and the world covariance.
+    fn project_view(&self, p: DVec3, cov_world: DMat3) -> Option<Splat2D> {
+        let depth = -p.z;
         let cov_view = self.rotation * cov_world * self.rotation.transpose();
         let lim_x = FRUSTUM_GUARD * self.tan_half_x;
         let lim_y = FRUSTUM_GUARD * self.tan_half_y;

@@ -3,6 +3,8 @@
 //! ties keep index order, so results are deterministic), then per-tile lists of
 //! Gaussian indices in front-to-back order.
 
+use rayon::prelude::*;
+
 /// Sort keys of one Gaussian: depth bits, first tile (x | y << 16), last tile,
 /// and 1 when visible (0 = culled).
 pub type TileKey = [u32; 4];
@@ -17,8 +19,7 @@ pub fn pack_tile(x: u32, y: u32) -> u32 {
 pub struct TileBins {
     /// Visible Gaussians, front to back.
     pub order: Vec<u32>,
-    temp: Vec<u32>,
-    counts: Vec<u32>,
+    sort_keys: Vec<u64>,
     /// Gaussian indices, each tile's run front to back.
     pub list: Vec<u32>,
     /// Per tile: start and end in `list`.
@@ -27,19 +28,12 @@ pub struct TileBins {
 
 impl TileBins {
     /// Sorts the visible Gaussians of `keys` by depth (on the top `sort_bits` bits,
-    /// 8-32) and lists them per tile of a `tiles.0 × tiles.1` grid.
+    /// 8-32) and lists them per tile of a `tiles.0 × tiles.1` grid. Parallel,
+    /// and the same lists as a serial stable sort and binning: depth ties keep
+    /// index order, and each tile lists its Gaussians front to back.
     pub fn bin(&mut self, keys: &[TileKey], tiles: (u32, u32), sort_bits: u8) {
-        self.order.clear();
-        self.order.extend(
-            keys.iter()
-                .enumerate()
-                .filter(|(_, k)| k[3] != 0)
-                .map(|(i, _)| i as u32),
-        );
-        radix_sort_by_depth(&mut self.order, &mut self.temp, keys, sort_bits);
+        sort_by_depth(&mut self.order, &mut self.sort_keys, keys, sort_bits);
         let tile_count = (tiles.0 * tiles.1) as usize;
-        self.counts.clear();
-        self.counts.resize(tile_count + 1, 0);
         let rect = |k: &TileKey| {
             (
                 k[1] & 0xffff,
@@ -48,32 +42,64 @@ impl TileBins {
                 (k[2] >> 16).min(tiles.1 - 1),
             )
         };
-        for &i in &self.order {
-            let (x0, y0, x1, y1) = rect(&keys[i as usize]);
-            for ty in y0..=y1 {
-                for tx in x0..=x1 {
-                    self.counts[(ty * tiles.0 + tx) as usize + 1] += 1;
+        // Per chunk of the depth order, how many entries each tile gets.
+        let chunk = self
+            .order
+            .len()
+            .div_ceil(rayon::current_num_threads() * 4)
+            .max(4096);
+        let chunk_counts: Vec<Vec<u32>> = self
+            .order
+            .par_chunks(chunk)
+            .map(|part| {
+                let mut counts = vec![0u32; tile_count];
+                for &i in part {
+                    let (x0, y0, x1, y1) = rect(&keys[i as usize]);
+                    for ty in y0..=y1 {
+                        for tx in x0..=x1 {
+                            counts[(ty * tiles.0 + tx) as usize] += 1;
+                        }
+                    }
                 }
-            }
-        }
-        for t in 0..tile_count {
-            self.counts[t + 1] += self.counts[t];
-        }
+                counts
+            })
+            .collect();
+        // Each tile's run starts after the tiles before it; within a tile,
+        // chunk c writes after chunks 0..c (depth order is kept).
         self.ranges.clear();
-        self.ranges
-            .extend((0..tile_count).map(|t| [self.counts[t], self.counts[t + 1]]));
-        self.list.clear();
-        self.list.resize(self.counts[tile_count] as usize, 0);
-        for &i in &self.order {
-            let (x0, y0, x1, y1) = rect(&keys[i as usize]);
-            for ty in y0..=y1 {
-                for tx in x0..=x1 {
-                    let t = (ty * tiles.0 + tx) as usize;
-                    self.list[self.counts[t] as usize] = i;
-                    self.counts[t] += 1;
-                }
+        let mut starts: Vec<Vec<u32>> = vec![vec![0; tile_count]; chunk_counts.len()];
+        let mut next = 0u32;
+        for t in 0..tile_count {
+            let first = next;
+            for (c, counts) in chunk_counts.iter().enumerate() {
+                starts[c][t] = next;
+                next += counts[t];
             }
+            self.ranges.push([first, next]);
         }
+        self.list.clear();
+        self.list.resize(next as usize, 0);
+        let list = SharedSlice(self.list.as_mut_ptr());
+        self.order
+            .par_chunks(chunk)
+            .zip(starts.par_iter_mut())
+            .for_each(|(part, at)| {
+                let list = &list;
+                for &i in part {
+                    let (x0, y0, x1, y1) = rect(&keys[i as usize]);
+                    for ty in y0..=y1 {
+                        for tx in x0..=x1 {
+                            let slot = &mut at[(ty * tiles.0 + tx) as usize];
+                            // SAFETY: the slots of chunk c in tile t are
+                            // starts[c][t] .. starts[c][t] + counts[c][t], disjoint
+                            // from every other chunk's and tile's and inside
+                            // `list`, whose length is the total of all counts.
+                            unsafe { list.0.add(*slot as usize).write(i) };
+                            *slot += 1;
+                        }
+                    }
+                }
+            });
     }
 
     /// The front-to-back Gaussians of tile `t`.
@@ -82,31 +108,32 @@ impl TileBins {
     }
 }
 
-/// Stable LSD radix sort of `order` by depth bits; only the top `bits` bits of the
-/// key are sorted on (fewer passes, coarser order).
-fn radix_sort_by_depth(order: &mut Vec<u32>, temp: &mut Vec<u32>, keys: &[TileKey], bits: u8) {
-    temp.clear();
-    temp.resize(order.len(), 0);
-    let passes = (bits.clamp(8, 32) as u32).div_ceil(8);
-    for pass in (4 - passes)..4 {
-        let shift = pass * 8;
-        let mut counts = [0usize; 257];
-        for &i in order.iter() {
-            counts[((keys[i as usize][0] >> shift) & 0xff) as usize + 1] += 1;
-        }
-        if counts.contains(&order.len()) {
-            continue; // every key has the same byte here
-        }
-        for b in 0..256 {
-            counts[b + 1] += counts[b];
-        }
-        for &i in order.iter() {
-            let b = ((keys[i as usize][0] >> shift) & 0xff) as usize;
-            temp[counts[b]] = i;
-            counts[b] += 1;
-        }
-        std::mem::swap(order, temp);
-    }
+/// A pointer the binning threads write disjoint slots through.
+struct SharedSlice(*mut u32);
+// SAFETY: every thread writes only its own slots (see `TileBins::bin`).
+unsafe impl Sync for SharedSlice {}
+
+/// The visible Gaussians (`keys[i][3] != 0`) in depth order on the top `bits`
+/// bits (8-32, rounded up to whole bytes as the GPU's radix passes do), ties in
+/// index order: a parallel sort of (depth, index) pairs, which orders exactly
+/// as a stable sort by depth does.
+fn sort_by_depth(order: &mut Vec<u32>, pairs: &mut Vec<u64>, keys: &[TileKey], bits: u8) {
+    let bits = u32::from(bits.clamp(8, 32)).div_ceil(8) * 8;
+    let mask = if bits == 32 {
+        u32::MAX
+    } else {
+        !(u32::MAX >> bits)
+    };
+    pairs.clear();
+    pairs.par_extend(
+        keys.par_iter()
+            .enumerate()
+            .filter(|(_, k)| k[3] != 0)
+            .map(|(i, k)| (u64::from(k[0] & mask) << 32) | i as u64),
+    );
+    pairs.par_sort_unstable();
+    order.clear();
+    order.par_extend(pairs.par_iter().map(|p| *p as u32));
 }
 
 #[cfg(test)]
