@@ -298,3 +298,26 @@ fn empty_and_fully_culled_scenes_show_the_background() {
     );
     check_scene("behind only", &scene, &camera, 99.0);
 }
+
+/// Culling: a synthetic scene (floor, backdrop, subject, floaters) seen so that
+/// half of it lies outside the view — left, right, below, behind the camera —
+/// renders like the reference on every renderer: culling drops only what the
+/// reference would not draw.
+#[test]
+fn a_scene_half_outside_the_frustum_renders_like_the_reference() {
+    let scene = visage::scene::synthetic::synthetic_scene(30_000, 3);
+    // Standing on the floor inside the scene, looking along it: much of it is
+    // behind, beside or below the view.
+    let camera = camera_at(Vec3::new(0.8, 0.4, 2.2), Vec3::new(2.8, 0.3, -2.4), 96, 72, 40.0);
+    let cull = visage::render::projection::ProjectionCamera::new(&camera);
+    let outside = scene
+        .position
+        .iter()
+        .filter(|p| {
+            cull.project_covariance(**p, glam::DMat3::IDENTITY * 1e-8)
+                .is_none()
+        })
+        .count();
+    assert!(outside * 2 >= scene.len(), "only {outside} of {} outside the view", scene.len());
+    check_scene("half outside the frustum", &scene, &camera, 45.0);
+}
