@@ -308,7 +308,13 @@ fn a_scene_half_outside_the_frustum_renders_like_the_reference() {
     let scene = visage::scene::synthetic::synthetic_scene(30_000, 3);
     // Standing on the floor inside the scene, looking along it: much of it is
     // behind, beside or below the view.
-    let camera = camera_at(Vec3::new(0.8, 0.4, 2.2), Vec3::new(2.8, 0.3, -2.4), 96, 72, 40.0);
+    let camera = camera_at(
+        Vec3::new(0.8, 0.4, 2.2),
+        Vec3::new(2.8, 0.3, -2.4),
+        96,
+        72,
+        40.0,
+    );
     let cull = visage::render::projection::ProjectionCamera::new(&camera);
     let outside = scene
         .position
@@ -318,6 +324,10 @@ fn a_scene_half_outside_the_frustum_renders_like_the_reference() {
                 .is_none()
         })
         .count();
-    assert!(outside * 2 >= scene.len(), "only {outside} of {} outside the view", scene.len());
+    assert!(
+        outside * 2 >= scene.len(),
+        "only {outside} of {} outside the view",
+        scene.len()
+    );
     check_scene("half outside the frustum", &scene, &camera, 45.0);
 }

@@ -372,13 +372,17 @@ fn knob_cases() -> Vec<(&'static str, String, Case)> {
 
 fn print_tables(doc: &Value) {
     println!(
-        "render bench: {} Gaussians{}; loaded in {:.0} ms, peak memory {}",
+        "render bench: {} Gaussians{}; loaded in {:.0} ms{}, peak memory {}",
         doc["gaussians"],
         doc["scene"]
             .as_str()
             .map(|s| format!(" ({s})"))
             .unwrap_or_default(),
         doc["load_ms"].as_f64().unwrap_or(0.0),
+        doc["load_peak_rss_mb"]
+            .as_f64()
+            .map(|m| format!(" (peak {m:.0} MiB after loading)"))
+            .unwrap_or_default(),
         doc["peak_rss_mb"]
             .as_f64()
             .map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))

@@ -93,6 +93,7 @@ pub fn bench_scene(
         ),
     };
     let load_ms = t.elapsed().as_secs_f64() * 1e3;
+    let load_peak = peak_rss_mb();
     let orbit = frame_scene(&scene, &CameraOverrides::default())
         .ok_or_else(|| Error::input(format!("{name} holds no Gaussians")))?;
     let mut references = Vec::new();
@@ -135,6 +136,7 @@ pub fn bench_scene(
         "scene": name,
         "gaussians": scene.len(),
         "load_ms": load_ms,
+        "load_peak_rss_mb": load_peak,
         "peak_rss_mb": peak_rss_mb(),
         "renderers": docs,
     }))

@@ -10,6 +10,7 @@ pub mod obj;
 pub mod pickle;
 pub mod pickle_write;
 pub mod ply;
+pub mod ply_stream;
 pub mod splat;
 
 use std::path::{Path, PathBuf};

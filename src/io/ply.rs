@@ -364,9 +364,11 @@ fn sh_layout(columns: &Columns) -> Result<(usize, u8), String> {
 /// Reads a standard 3DGS PLY (world space) into a scene. NaN or infinite values
 /// are rejected with the row that has them.
 pub fn read_splat_ply(path: &Path) -> super::Result<SplatScene> {
+    if let Some(scene) = super::ply_stream::read_fast(path)? {
+        return Ok(scene);
+    }
     let bytes = super::read_file(path)?;
-    let scene = parse_splat_ply(&bytes).map_err(|e| e.in_file(path))?;
-    Ok(scene)
+    parse_splat_ply(&bytes).map_err(|e| e.in_file(path))
 }
 
 /// Parses standard 3DGS PLY bytes into a scene.

@@ -115,15 +115,22 @@ impl SceneFormat {
 /// Reads a 3DGS scene: a PLY by its `ply` magic (whatever the extension),
 /// else a `.splat` by its extension (the format has no header to recognise).
 pub fn read_scene(path: &Path) -> Result<SplatScene> {
-    let bytes = read_file(path)?;
-    let scene = if bytes.starts_with(b"ply") {
-        super::ply::parse_splat_ply(&bytes)
+    let mut magic = [0u8; 3];
+    let is_ply = std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read(&mut f, &mut magic))
+        .map_err(|e| FileError::access("read", path, e))?
+        == 3
+        && &magic == b"ply";
+    if is_ply {
+        super::ply::read_splat_ply(path)
     } else if SceneFormat::of(path).ok() == Some(SceneFormat::Splat) {
-        parse_splat(&bytes)
+        read_splat(path)
     } else {
-        Err("neither a PLY (no 'ply' header) nor a .splat file".into())
-    };
-    scene.map_err(|e| e.in_file(path))
+        Err(FileError::Malformed(format!(
+            "{}: neither a PLY (no 'ply' header) nor a .splat file",
+            path.display()
+        )))
+    }
 }
 
 /// Writes a 3DGS scene in the format its extension names.

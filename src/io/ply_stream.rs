@@ -1,0 +1,260 @@
+//! The fast path for the PLYs 3DGS trainers write: one `vertex` element of
+//! float32 properties, binary little endian. The file is read in chunks of
+//! whole rows and each chunk is decoded in parallel straight into the scene's
+//! arrays, so a scene of a million Gaussians loads in a fraction of a second
+//! and the memory it takes is the scene plus one chunk (the general reader
+//! holds the whole file and every column as f64 as well). Anything else goes
+//! to the general reader.
+
+use std::io::Read;
+use std::path::Path;
+
+use glam::{Quat, Vec3};
+use rayon::prelude::*;
+
+use super::ply::{parse_header, Element, PlyFormat, ScalarType};
+use super::{FileError, Result};
+use crate::avatar::gaussians::{sh_coefficients, sh_degree_for, sigmoid};
+use crate::scene::splats::SplatScene;
+
+/// Bytes read (and decoded in parallel) at a time.
+const CHUNK_BYTES: usize = 16 << 20;
+
+/// Byte offsets of the properties a scene needs within one row.
+struct Layout {
+    row: usize,
+    position: [usize; 3],
+    dc: [usize; 3],
+    rest: Vec<usize>,
+    opacity: usize,
+    scale: [usize; 3],
+    rotation: [usize; 4],
+}
+
+impl Layout {
+    /// The layout when the element is all float32 and has every property;
+    /// None sends the file to the general reader (which names what is wrong).
+    fn of(element: &Element) -> Option<Layout> {
+        if element.name != "vertex"
+            || element
+                .properties
+                .iter()
+                .any(|p| p.list_count.is_some() || p.ty != ScalarType::Float)
+        {
+            return None;
+        }
+        let at = |name: &str| {
+            element
+                .properties
+                .iter()
+                .position(|p| p.name == name)
+                .map(|k| 4 * k)
+        };
+        let rest_count = (0..)
+            .take_while(|k| at(&format!("f_rest_{k}")).is_some())
+            .count();
+        sh_degree_for(1 + rest_count / 3).filter(|_| rest_count % 3 == 0)?;
+        Some(Layout {
+            row: 4 * element.properties.len(),
+            position: [at("x")?, at("y")?, at("z")?],
+            dc: [at("f_dc_0")?, at("f_dc_1")?, at("f_dc_2")?],
+            rest: (0..rest_count)
+                .map(|k| at(&format!("f_rest_{k}")))
+                .collect::<Option<_>>()?,
+            opacity: at("opacity")?,
+            scale: [at("scale_0")?, at("scale_1")?, at("scale_2")?],
+            rotation: [at("rot_0")?, at("rot_1")?, at("rot_2")?, at("rot_3")?],
+        })
+    }
+}
+
+fn f32_at(row: &[u8], at: usize) -> f32 {
+    f32::from_le_bytes([row[at], row[at + 1], row[at + 2], row[at + 3]])
+}
+
+/// Reads a 3DGS PLY through the fast path; `Ok(None)` when the file is not of
+/// the kind it handles.
+pub fn read_fast(path: &Path) -> Result<Option<SplatScene>> {
+    let mut file = std::fs::File::open(path).map_err(|e| FileError::access("read", path, e))?;
+    let mut head = vec![0u8; 64 << 10];
+    let n = read_up_to(&mut file, &mut head).map_err(|e| FileError::access("read", path, e))?;
+    head.truncate(n);
+    let Ok((PlyFormat::BinaryLittleEndian, elements, body)) = parse_header(&head) else {
+        return Ok(None);
+    };
+    let [element] = elements.as_slice() else {
+        return Ok(None);
+    };
+    let Some(layout) = Layout::of(element) else {
+        return Ok(None);
+    };
+    let rows = element.count;
+    let file_len = file
+        .metadata()
+        .map_err(|e| FileError::access("read", path, e))?
+        .len();
+    let need = (rows as u64)
+        .checked_mul(layout.row as u64)
+        .and_then(|b| b.checked_add(body as u64));
+    if need.is_none_or(|need| need > file_len) {
+        return Err(FileError::Malformed(format!(
+            "{}: PLY header claims {rows} vertices, more than the file holds",
+            path.display()
+        )));
+    }
+    let degree = sh_degree_for(1 + layout.rest.len() / 3).expect("checked by the layout");
+    let stride = 3 * sh_coefficients(degree);
+    let mut scene = SplatScene::with_degree(degree);
+    scene.position = vec![Vec3::ZERO; rows];
+    scene.rotation = vec![Quat::IDENTITY; rows];
+    scene.scale = vec![Vec3::ZERO; rows];
+    scene.opacity = vec![0.0; rows];
+    scene.sh = vec![0.0; rows * stride];
+
+    // The body bytes already read, then whole chunks of rows.
+    let mut pending: Vec<u8> = head[body.min(head.len())..].to_vec();
+    let rows_per_chunk = (CHUNK_BYTES / layout.row).max(1);
+    let mut done = 0;
+    while done < rows {
+        let take = rows_per_chunk.min(rows - done);
+        let bytes = take * layout.row;
+        if pending.len() < bytes {
+            let have = pending.len();
+            pending.resize(bytes, 0);
+            file.read_exact(&mut pending[have..])
+                .map_err(|e| FileError::access("read", path, e))?;
+        }
+        decode_rows(&layout, &pending[..bytes], done, stride, &mut scene)
+            .map_err(|e| FileError::Malformed(format!("{}: {e}", path.display())))?;
+        pending.drain(..bytes);
+        done += take;
+    }
+    Ok(Some(scene))
+}
+
+/// Fills `scene` rows `first..first + bytes.len() / row` from `bytes`, in parallel.
+fn decode_rows(
+    layout: &Layout,
+    bytes: &[u8],
+    first: usize,
+    stride: usize,
+    scene: &mut SplatScene,
+) -> std::result::Result<(), String> {
+    let count = bytes.len() / layout.row;
+    let range = first..first + count;
+    let per_channel = layout.rest.len() / 3;
+    bytes
+        .par_chunks(layout.row)
+        .zip(scene.position[range.clone()].par_iter_mut())
+        .zip(scene.rotation[range.clone()].par_iter_mut())
+        .zip(scene.scale[range.clone()].par_iter_mut())
+        .zip(scene.opacity[range.clone()].par_iter_mut())
+        .zip(scene.sh[first * stride..(first + count) * stride].par_chunks_mut(stride))
+        .enumerate()
+        .try_for_each(
+            |(k, (((((row, position), rotation), scale), opacity), sh))| {
+                let f = |at: usize| f32_at(row, at);
+                let v3 = |a: [usize; 3]| Vec3::new(f(a[0]), f(a[1]), f(a[2]));
+                let (p, log_scale, o) = (v3(layout.position), v3(layout.scale), f(layout.opacity));
+                let q = [
+                    f(layout.rotation[0]),
+                    f(layout.rotation[1]),
+                    f(layout.rotation[2]),
+                    f(layout.rotation[3]),
+                ];
+                for ch in 0..3 {
+                    sh[ch] = f(layout.dc[ch]);
+                    for j in 0..per_channel {
+                        sh[(j + 1) * 3 + ch] = f(layout.rest[ch * per_channel + j]);
+                    }
+                }
+                let finite = p.is_finite()
+                    && log_scale.is_finite()
+                    && o.is_finite()
+                    && q.iter().all(|x| x.is_finite())
+                    && sh.iter().all(|x| x.is_finite());
+                if !finite {
+                    return Err(format!(
+                        "Gaussian {} has a NaN or infinite value",
+                        first + k
+                    ));
+                }
+                *position = p;
+                // Files store w x y z, not normalised.
+                *rotation =
+                    crate::avatar::binding::normalize_quat(Quat::from_xyzw(q[1], q[2], q[3], q[0]));
+                *scale = log_scale.exp();
+                *opacity = sigmoid(o);
+                Ok(())
+            },
+        )
+}
+
+/// Reads until `buf` is full or the file ends; returns the bytes read.
+fn read_up_to(file: &mut std::fs::File, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match file.read(&mut buf[n..])? {
+            0 => break,
+            k => n += k,
+        }
+    }
+    Ok(n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The fast path reads what the general reader reads, bit for bit, on a
+    /// file written by plyfile (tests/data/splat/ring.ply) and on our own
+    /// SH-degree-3 output; other files fall back.
+    #[test]
+    fn fast_path_matches_the_general_reader() {
+        let ring = Path::new("tests/data/splat/ring.ply");
+        let fast = read_fast(ring)
+            .unwrap()
+            .expect("plyfile's float32 PLY takes the fast path");
+        let general = super::super::ply::parse_splat_ply(&std::fs::read(ring).unwrap()).unwrap();
+        assert_eq!(fast, general);
+        let dir = std::env::temp_dir().join(format!("visage-ply-stream-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let big = dir.join("sh3.ply");
+        let scene = crate::scene::synthetic::synthetic_scene(70_000, 4);
+        super::super::ply::write_splat_ply(&big, &scene).unwrap();
+        let fast = read_fast(&big).unwrap().unwrap();
+        let general = super::super::ply::parse_splat_ply(&std::fs::read(&big).unwrap()).unwrap();
+        assert_eq!(fast, general);
+        // Cut short: the header claims more rows than the file holds.
+        let bytes = std::fs::read(&big).unwrap();
+        let cut = dir.join("cut.ply");
+        std::fs::write(&cut, &bytes[..bytes.len() - 10]).unwrap();
+        assert!(read_fast(&cut)
+            .unwrap_err()
+            .to_string()
+            .contains("more than the file holds"));
+        // A NaN in a row is named.
+        let mut nan = bytes.clone();
+        let body = bytes
+            .windows(11)
+            .position(|w| w == b"end_header\n")
+            .unwrap()
+            + 11;
+        nan[body..body + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+        let bad = dir.join("nan.ply");
+        std::fs::write(&bad, nan).unwrap();
+        assert!(read_fast(&bad)
+            .unwrap_err()
+            .to_string()
+            .contains("Gaussian 0"));
+        // ASCII goes to the general reader.
+        let ascii = dir.join("ascii.ply");
+        std::fs::write(
+            &ascii,
+            b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nend_header\n",
+        )
+        .unwrap();
+        assert!(read_fast(&ascii).unwrap().is_none());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
