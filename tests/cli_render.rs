@@ -35,39 +35,41 @@ fn ring_scene(degree: u8) -> SplatScene {
     scene
 }
 
+/// `render --ply` of a scene file at 80×60 with the default renderer and with
+/// `--reference`.
+fn render_and_reference(scene: &std::path::Path, tag: &str) -> (RgbImage, RgbImage) {
+    let images = [None, Some("--reference")].map(|extra| {
+        let out = temp(&format!("{tag}-{}.png", extra.is_some()));
+        let mut args = vec![
+            "render",
+            "--ply",
+            scene.to_str().unwrap(),
+            "--size",
+            "80x60",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let o = visage(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let image = RgbImage::load_png(&out).unwrap();
+        std::fs::remove_file(out).ok();
+        image
+    });
+    let [fast, reference] = images;
+    (fast, reference)
+}
+
 #[test]
 fn renders_standard_3dgs_plys_of_degree_0_and_3_like_the_reference() {
     for degree in [0u8, 3] {
         let ply = temp(&format!("ring{degree}.ply"));
         write_splat_ply(&ply, &ring_scene(degree)).unwrap();
-        let (fast, slow) = (
-            temp(&format!("fast{degree}.png")),
-            temp(&format!("ref{degree}.png")),
-        );
-        for (out, extra) in [(&fast, None), (&slow, Some("--reference"))] {
-            let mut args = vec![
-                "render",
-                "--ply",
-                ply.to_str().unwrap(),
-                "--size",
-                "80x60",
-                "-o",
-                out.to_str().unwrap(),
-            ];
-            args.extend(extra);
-            let o = visage(&args);
-            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        }
-        let (a, b) = (
-            RgbImage::load_png(&fast).unwrap(),
-            RgbImage::load_png(&slow).unwrap(),
-        );
+        let (a, b) = render_and_reference(&ply, &format!("ring{degree}"));
         assert_eq!((a.width, a.height), (80, 60));
         assert!(psnr(&a, &b).unwrap() >= 40.0, "degree {degree}");
         assert!(a.pixels.iter().any(|&v| v > 30), "the ring is visible");
-        for p in [ply, fast, slow] {
-            std::fs::remove_file(p).ok();
-        }
+        std::fs::remove_file(ply).ok();
     }
 }
 
@@ -372,26 +374,9 @@ fn convert_between_ply_and_splat_reports_the_error() {
         "splat → PLY keeps everything"
     );
 
-    let (fast, slow) = (temp("splat.png"), temp("splat-ref.png"));
-    for (out, extra) in [(&fast, None), (&slow, Some("--reference"))] {
-        let mut args = vec![
-            "render",
-            "--ply",
-            splat.to_str().unwrap(),
-            "--size",
-            "80x60",
-            "-o",
-            out.to_str().unwrap(),
-        ];
-        args.extend(extra);
-        let o = visage(&args);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    }
-    let (a, b) = (
-        RgbImage::load_png(&fast).unwrap(),
-        RgbImage::load_png(&slow).unwrap(),
-    );
+    let (a, b) = render_and_reference(&splat, "splat");
     assert!(psnr(&a, &b).unwrap() >= 40.0);
+    let fast = temp("splat.png");
 
     let broken = temp("broken.splat");
     std::fs::write(&broken, [0u8; 33]).unwrap();
@@ -411,7 +396,7 @@ fn convert_between_ply_and_splat_reports_the_error() {
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert_eq!(err.trim().lines().count(), 1, "{err}");
     }
-    for p in [ply, splat, back, fast, slow, broken] {
+    for p in [ply, splat, back, fast, broken] {
         std::fs::remove_file(p).ok();
     }
 }
