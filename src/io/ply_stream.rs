@@ -215,15 +215,15 @@ mod tests {
         let fast = read_fast(ring)
             .unwrap()
             .expect("plyfile's float32 PLY takes the fast path");
-        let general = super::super::ply::parse_splat_ply(&std::fs::read(ring).unwrap()).unwrap();
+        let general = crate::io::ply::parse_splat_ply(&std::fs::read(ring).unwrap()).unwrap();
         assert_eq!(fast, general);
         let dir = std::env::temp_dir().join(format!("visage-ply-stream-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let big = dir.join("sh3.ply");
         let scene = crate::scene::synthetic::synthetic_scene(70_000, 4);
-        super::super::ply::write_splat_ply(&big, &scene).unwrap();
+        crate::io::ply::write_splat_ply(&big, &scene).unwrap();
         let fast = read_fast(&big).unwrap().unwrap();
-        let general = super::super::ply::parse_splat_ply(&std::fs::read(&big).unwrap()).unwrap();
+        let general = crate::io::ply::parse_splat_ply(&std::fs::read(&big).unwrap()).unwrap();
         assert_eq!(fast, general);
         // Cut short: the header claims more rows than the file holds.
         let bytes = std::fs::read(&big).unwrap();
