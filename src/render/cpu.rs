@@ -4,8 +4,8 @@
 //! visits each entry once per tile and touches only the pixels its footprint
 //! covers, so the same frame costs a fraction of that.
 //!
-//! Numerics are those of the reference (`projection.rs`: projection and SH in
-//! f64), with blending in f32 and the same depth sort and tile binning as the GPU
+//! Numerics are those of the reference (`projection.rs`: projection in f64),
+//! with SH colour and blending in f32 and the same depth sort and tile binning as the GPU
 //! path. What no frame changes is prepared once per upload (each Gaussian's
 //! covariance in its triangle's frame, its opacity), so a frame only places
 //! centres, turns covariances by the triangle frames and projects; the centre
@@ -22,7 +22,7 @@ use super::image::{quantize, RgbImage};
 use super::projection::{ProjectionCamera, MAX_ALPHA, MIN_ALPHA};
 use super::settings::RenderSettings;
 use super::settings::StageTimings;
-use super::sh::eval_rgb;
+use super::sh::eval_rgb_f32;
 use super::tiles::{pack_tile, TileBins, TileKey};
 use crate::avatar::binding::TriangleFrame;
 use crate::avatar::gaussians::{sigmoid, GaussianSet};
@@ -157,8 +157,8 @@ impl CpuRenderer {
                 let Some((x0, y0, x1, y1)) = s.pixel_rect(width, height) else {
                     return;
                 };
-                let dir = (position.as_dvec3() - cam.eye).normalize_or_zero();
-                let rgb = eval_rgb(set.sh_of(i), degree, dir.to_array());
+                let dir = (position - cam.eye.as_vec3()).normalize_or_zero();
+                let rgb = eval_rgb_f32(set.sh_of(i), degree, dir.to_array());
                 *splat = Splat {
                     x: s.center[0] as f32,
                     y: s.center[1] as f32,
@@ -166,7 +166,7 @@ impl CpuRenderer {
                     conic: s.conic.map(|c| c as f32),
                     opacity,
                     cutoff: ((MIN_ALPHA / opacity as f64).ln() - 1e-6) as f32,
-                    rgb: rgb.map(|c| c as f32),
+                    rgb,
                 };
                 *key = [
                     (s.depth as f32).to_bits(),

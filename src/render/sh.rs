@@ -69,9 +69,81 @@ pub fn eval_rgb(sh: &[f32], use_degree: u8, d: [f64; 3]) -> [f64; 3] {
     rgb.map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 })
 }
 
+/// [`eval_rgb`] in f32 (the CPU renderer's per-frame colour; its error
+/// against the f64 version is measured by `visage bench render` and bounded
+/// by a test).
+pub fn eval_rgb_f32(sh: &[f32], use_degree: u8, d: [f32; 3]) -> [f32; 3] {
+    let [x, y, z] = d;
+    let mut b = [0.0f32; 16];
+    b[0] = C0 as f32;
+    if use_degree >= 1 {
+        b[1] = -C1 as f32 * y;
+        b[2] = C1 as f32 * z;
+        b[3] = -C1 as f32 * x;
+    }
+    if use_degree >= 2 {
+        let (xx, yy, zz) = (x * x, y * y, z * z);
+        let c2 = C2.map(|c| c as f32);
+        b[4] = c2[0] * x * y;
+        b[5] = c2[1] * y * z;
+        b[6] = c2[2] * (2.0 * zz - xx - yy);
+        b[7] = c2[3] * x * z;
+        b[8] = c2[4] * (xx - yy);
+        if use_degree >= 3 {
+            let c3 = C3.map(|c| c as f32);
+            b[9] = c3[0] * y * (3.0 * xx - yy);
+            b[10] = c3[1] * x * y * z;
+            b[11] = c3[2] * y * (4.0 * zz - xx - yy);
+            b[12] = c3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+            b[13] = c3[4] * x * (4.0 * zz - xx - yy);
+            b[14] = c3[5] * z * (xx - yy);
+            b[15] = c3[6] * x * (xx - 3.0 * yy);
+        }
+    }
+    let coefficients = (sh.len() / 3).min((use_degree as usize + 1).pow(2));
+    let mut rgb = [0.5f32; 3];
+    for (k, bk) in b.iter().enumerate().take(coefficients) {
+        for (ch, out) in rgb.iter_mut().enumerate() {
+            *out += bk * sh[k * 3 + ch];
+        }
+    }
+    rgb.map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// f32 evaluation stays within a few f32 steps of the f64 one for SH
+    /// coefficients of trained-scene size, all degrees, many directions.
+    #[test]
+    fn f32_evaluation_matches_f64() {
+        let mut worst = 0.0f64;
+        for k in 0..2000u32 {
+            let t = k as f64 * 0.618_033_988_75;
+            let z = 1.0 - 2.0 * ((k as f64 + 0.5) / 2000.0);
+            let r = (1.0 - z * z).sqrt();
+            let d = [
+                r * (t * std::f64::consts::TAU).cos(),
+                r * (t * std::f64::consts::TAU).sin(),
+                z,
+            ];
+            let sh: Vec<f32> = (0..48)
+                .map(|j| {
+                    (((j * 7 + k as usize * 13) % 97) as f32 / 97.0 - 0.5)
+                        * if j < 3 { 4.0 } else { 0.6 }
+                })
+                .collect();
+            for degree in 0..=3 {
+                let a = eval_rgb(&sh, degree, d);
+                let b = eval_rgb_f32(&sh, degree, d.map(|c| c as f32));
+                for ch in 0..3 {
+                    worst = worst.max((a[ch] - b[ch] as f64).abs());
+                }
+            }
+        }
+        assert!(worst < 1e-5, "worst difference {worst:e}");
+    }
 
     #[test]
     fn dc_only_is_view_independent() {
