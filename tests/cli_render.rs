@@ -485,3 +485,34 @@ fn bench_render_measures_scenes() {
     }
     std::fs::remove_file(splat).ok();
 }
+
+/// SuperSplat's compressed PLY, as PlayCanvas's splat-transform writes it,
+/// renders like the reference and converts to the other formats.
+#[test]
+fn compressed_plys_render_and_convert() {
+    let packed = std::path::Path::new("tests/data/splat/ring3.compressed.ply");
+    let (a, b) = render_and_reference(packed, "compressed");
+    assert!(psnr(&a, &b).unwrap() >= 40.0);
+    assert!(a.pixels.iter().any(|&v| v > 30), "the ring is visible");
+    let out = temp("from-compressed.ply");
+    let o = visage(&[
+        "convert",
+        packed.to_str().unwrap(),
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        (
+            report["gaussians"].as_u64(),
+            report["sh_degree_out"].as_u64()
+        ),
+        (Some(200), Some(3))
+    );
+    assert!(
+        report["psnr_db"].as_f64().unwrap() >= 99.0,
+        "decoded once, then lossless"
+    );
+    std::fs::remove_file(out).ok();
+}

@@ -2,6 +2,7 @@
 //! GaussianAvatars avatar folders, folder databases and the fixtures generator.
 
 pub mod avatar;
+pub mod compressed_ply;
 pub mod fixtures;
 pub mod flame;
 pub mod folder;

@@ -371,8 +371,13 @@ pub fn read_splat_ply(path: &Path) -> super::Result<SplatScene> {
     parse_splat_ply(&bytes).map_err(|e| e.in_file(path))
 }
 
-/// Parses standard 3DGS PLY bytes into a scene.
+/// Parses standard 3DGS PLY bytes into a scene (SuperSplat's compressed
+/// layout included).
 pub fn parse_splat_ply(bytes: &[u8]) -> super::Result<SplatScene> {
+    let (_, elements, _) = parse_header(bytes)?;
+    if super::compressed_ply::is_compressed(&elements) {
+        return Ok(super::compressed_ply::parse_compressed_ply(bytes)?);
+    }
     let c = read_element(bytes, "vertex")?;
     let rows = InriaRows::new(&c, None)?;
     let mut scene = SplatScene::with_degree(rows.degree);

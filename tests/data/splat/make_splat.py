@@ -7,6 +7,10 @@ python3 tests/data/splat/make_splat.py. The outputs are committed.
 - ring.ply: 200 Gaussians on a ring, SH degree 0, random scales, rotations
   (not normalised) and opacities, binary little endian.
 - ring.splat: ply2splat's conversion in file order (sort=False).
+- ring3.ply: the same ring with SH degree 3 (45 f_rest properties).
+
+make_compressed.sh then turns ring.ply and ring3.ply into SuperSplat's
+compressed PLY with PlayCanvas's splat-transform.
 """
 import os
 
@@ -31,3 +35,13 @@ ply_path = os.path.join(here, "ring.ply")
 PlyData([PlyElement.describe(v, "vertex")], byte_order="<").write(ply_path)
 count = ply2splat.convert(ply_path, os.path.join(here, "ring.splat"), sort=False)
 print("wrote ring.ply and ring.splat,", count, "splats")
+
+rest = [("f_rest_%d" % k, "f4") for k in range(45)]
+props3 = props[:9] + rest + props[9:]
+v3 = np.zeros(n, dtype=props3)
+for name, _ in props:
+    v3[name] = v[name]
+for name, _ in rest:
+    v3[name] = rng.uniform(-0.3, 0.3, n)
+PlyData([PlyElement.describe(v3, "vertex")], byte_order="<").write(os.path.join(here, "ring3.ply"))
+print("wrote ring3.ply")
