@@ -15,6 +15,9 @@
 //!   after the sigmoid); the colour is 0.5 + C0·f_dc;
 //! - SH: a byte b is `(n − 0.5)·8` with n = 0, 1 or (b + 0.5)/256 for b = 0,
 //!   255 or anything else.
+//!
+//! [`encode_compressed_ply`] writes the same layout (in scene order, bounds
+//! per run of 256), so `visage convert` can produce it.
 
 use glam::{Quat, Vec3};
 
@@ -185,10 +188,193 @@ pub fn parse_compressed_ply(bytes: &[u8]) -> Result<SplatScene, String> {
     Ok(scene)
 }
 
+/// Min and max of `values` (0..0 when empty).
+fn range(values: impl Iterator<Item = f32>) -> (f32, f32) {
+    values.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    })
+}
+
+/// `v` as an unsigned fraction of `lo..hi` in `bits` bits, rounded.
+fn quantise(v: f32, (lo, hi): (f32, f32), bits: u32) -> u32 {
+    let max = ((1u32 << bits) - 1) as f32;
+    let t = if hi > lo {
+        ((v - lo) / (hi - lo)).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (t * max).round() as u32
+}
+
+/// Encodes a scene in the compressed layout.
+pub fn encode_compressed_ply(scene: &SplatScene) -> Vec<u8> {
+    use crate::avatar::gaussians::dc_to_rgb;
+    let n = scene.len();
+    let rest = scene.sh_stride() - 3;
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment SuperSplat compressed layout, written by visage\nelement chunk {}\n",
+        n.div_ceil(CHUNK)
+    );
+    for name in [
+        "min_x",
+        "min_y",
+        "min_z",
+        "max_x",
+        "max_y",
+        "max_z",
+        "min_scale_x",
+        "min_scale_y",
+        "min_scale_z",
+        "max_scale_x",
+        "max_scale_y",
+        "max_scale_z",
+        "min_r",
+        "min_g",
+        "min_b",
+        "max_r",
+        "max_g",
+        "max_b",
+    ] {
+        header += &format!("property float {name}\n");
+    }
+    header += &format!("element vertex {n}\n");
+    for name in [
+        "packed_position",
+        "packed_rotation",
+        "packed_scale",
+        "packed_color",
+    ] {
+        header += &format!("property uint {name}\n");
+    }
+    if rest > 0 {
+        header += &format!("element sh {n}\n");
+        for k in 0..rest {
+            header += &format!("property uchar f_rest_{k}\n");
+        }
+    }
+    header += "end_header\n";
+    let mut out = header.into_bytes();
+    let log_scale = |i: usize| scene.scale[i].max(Vec3::splat(1e-30)).ln();
+    let rgb = |i: usize, ch: usize| dc_to_rgb(scene.sh_of(i)[ch]);
+    let mut packed = Vec::with_capacity(n * 16);
+    for start in (0..n).step_by(CHUNK) {
+        let ids = start..(start + CHUNK).min(n);
+        let axis = |f: &dyn Fn(usize) -> f32| range(ids.clone().map(f));
+        let p: [(f32, f32); 3] = std::array::from_fn(|k| axis(&|i| scene.position[i][k]));
+        let s: [(f32, f32); 3] = std::array::from_fn(|k| axis(&|i| log_scale(i)[k]));
+        let c: [(f32, f32); 3] = std::array::from_fn(|k| axis(&|i| rgb(i, k)));
+        for v in [
+            p[0].0, p[1].0, p[2].0, p[0].1, p[1].1, p[2].1, s[0].0, s[1].0, s[2].0, s[0].1, s[1].1,
+            s[2].1, c[0].0, c[1].0, c[2].0, c[0].1, c[1].1, c[2].1,
+        ] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        for i in ids {
+            let pos = scene.position[i];
+            let position = quantise(pos.x, p[0], 11) << 21
+                | quantise(pos.y, p[1], 10) << 11
+                | quantise(pos.z, p[2], 11);
+            let q = crate::avatar::binding::normalize_quat(scene.rotation[i]);
+            let mut wxyz = [q.w, q.x, q.y, q.z];
+            let big = (0..4)
+                .max_by(|&a, &b| wxyz[a].abs().total_cmp(&wxyz[b].abs()))
+                .unwrap_or(0);
+            if wxyz[big] < 0.0 {
+                wxyz = wxyz.map(|c| -c);
+            }
+            let mut rotation = (big as u32) << 30;
+            for (slot, k) in (0..4).filter(|&k| k != big).enumerate() {
+                let t = (wxyz[k] / std::f32::consts::SQRT_2 + 0.5).clamp(0.0, 1.0);
+                rotation |= ((t * 1023.0).round() as u32) << (20 - 10 * slot);
+            }
+            let ls = log_scale(i);
+            let scale = quantise(ls.x, s[0], 11) << 21
+                | quantise(ls.y, s[1], 10) << 11
+                | quantise(ls.z, s[2], 11);
+            let colour = quantise(rgb(i, 0), c[0], 8) << 24
+                | quantise(rgb(i, 1), c[1], 8) << 16
+                | quantise(rgb(i, 2), c[2], 8) << 8
+                | (scene.opacity[i].clamp(0.0, 1.0) * 255.0).round() as u32;
+            for w in [position, rotation, scale, colour] {
+                packed.extend_from_slice(&w.to_le_bytes());
+            }
+        }
+    }
+    out.extend_from_slice(&packed);
+    if rest > 0 {
+        let per_channel = rest / 3;
+        for i in 0..n {
+            let sh = scene.sh_of(i);
+            for ch in 0..3 {
+                for j in 0..per_channel {
+                    let v = sh[(j + 1) * 3 + ch];
+                    out.push(((v / 8.0 + 0.5) * 256.0).floor().clamp(0.0, 255.0) as u8);
+                }
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::avatar::gaussians::dc_to_rgb;
+
+    /// What visage writes reads back within the quantisation, SH degrees 0
+    /// and 3, across chunk boundaries; degenerate input stays finite.
+    #[test]
+    fn round_trips_within_quantisation() {
+        for degree in [0u8, 3] {
+            let mut scene = crate::scene::synthetic::synthetic_scene(700, 9);
+            if degree == 0 {
+                let mut flat = SplatScene::with_degree(0);
+                for i in 0..scene.len() {
+                    flat.push(
+                        scene.position[i],
+                        scene.rotation[i],
+                        scene.scale[i],
+                        scene.opacity[i],
+                        &scene.sh_of(i)[..3],
+                    );
+                }
+                scene = flat;
+            }
+            // A zero scale and a zero quaternion.
+            scene.scale[5] = Vec3::ZERO;
+            scene.rotation[6] = Quat::from_xyzw(0.0, 0.0, 0.0, 0.0);
+            let back = parse_compressed_ply(&encode_compressed_ply(&scene)).unwrap();
+            assert_eq!((back.len(), back.sh_degree), (scene.len(), degree));
+            for i in 0..scene.len() {
+                assert!(back.position[i].is_finite() && back.scale[i].is_finite());
+                if i == 5 || i == 6 {
+                    continue;
+                }
+                let chunk =
+                    &scene.position[i / CHUNK * CHUNK..((i / CHUNK + 1) * CHUNK).min(scene.len())];
+                let extent = chunk.iter().fold(Vec3::ZERO, |m, p| m.max(p.abs())) * 2.0;
+                assert!(
+                    (back.position[i] - scene.position[i])
+                        .abs()
+                        .cmple(extent / 1000.0 + Vec3::splat(1e-6))
+                        .all(),
+                    "{i}"
+                );
+                assert!(
+                    back.rotation[i].dot(scene.rotation[i].normalize()).abs() > 0.999,
+                    "{i}"
+                );
+                assert!((back.opacity[i] - scene.opacity[i]).abs() <= 0.5 / 255.0 + 1e-6);
+                for ch in 0..3 {
+                    let (a, b) = (dc_to_rgb(back.sh_of(i)[ch]), dc_to_rgb(scene.sh_of(i)[ch]));
+                    assert!((a - b).abs() <= 1.0 / 255.0, "{i} colour");
+                }
+                for (a, b) in back.sh_of(i)[3..].iter().zip(&scene.sh_of(i)[3..]) {
+                    assert!((a - b).abs() <= 8.0 / 256.0 + 1e-6, "{i} SH");
+                }
+            }
+        }
+    }
 
     /// Files PlayCanvas's splat-transform 3.7.0 compressed from PLYs written by
     /// plyfile (tests/data/splat/make_compressed.sh): every Gaussian comes back
@@ -241,6 +427,51 @@ mod tests {
                 for (a, b) in packed.sh_of(i)[3..].iter().zip(&original.sh_of(j)[3..]) {
                     assert!((a - b).abs() <= 8.0 / 256.0, "{name} {i} SH: {a} vs {b}");
                 }
+            }
+        }
+    }
+
+    /// What visage writes, splat-transform 3.7.0 reads the same way
+    /// (tests/data/splat/make_compressed.sh: ring3.visage.decoded.ply is the
+    /// tool's decoding of visage's ring3.visage.compressed.ply).
+    #[test]
+    fn splat_transform_reads_what_visage_writes() {
+        let dir = std::path::Path::new("tests/data/splat");
+        let ours = std::fs::read(dir.join("ring3.visage.compressed.ply")).unwrap();
+        let original = crate::io::ply::read_splat_ply(&dir.join("ring3.ply")).unwrap();
+        assert_eq!(
+            ours,
+            encode_compressed_ply(&original),
+            "the writer still writes the committed bytes"
+        );
+        let mine = parse_compressed_ply(&ours).unwrap();
+        let theirs = crate::io::ply::read_splat_ply(&dir.join("ring3.visage.decoded.ply")).unwrap();
+        assert_eq!(
+            (mine.len(), mine.sh_degree),
+            (theirs.len(), theirs.sh_degree)
+        );
+        for i in 0..mine.len() {
+            assert!(
+                (mine.position[i] - theirs.position[i]).abs().max_element() < 1e-5,
+                "{i} position"
+            );
+            assert!(
+                (mine.scale[i] / theirs.scale[i] - Vec3::ONE)
+                    .abs()
+                    .max_element()
+                    < 1e-4,
+                "{i} scale"
+            );
+            assert!(
+                mine.rotation[i].dot(theirs.rotation[i]).abs() > 1.0 - 1e-5,
+                "{i} rotation"
+            );
+            assert!(
+                (mine.opacity[i] - theirs.opacity[i]).abs() < 1e-5,
+                "{i} opacity"
+            );
+            for (a, b) in mine.sh_of(i).iter().zip(theirs.sh_of(i)) {
+                assert!((a - b).abs() < 1e-4, "{i} SH {a} vs {b}");
             }
         }
     }

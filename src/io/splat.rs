@@ -89,6 +89,8 @@ pub fn write_splat(path: &Path, scene: &SplatScene) -> Result<()> {
 pub enum SceneFormat {
     /// INRIA PLY (any SH degree).
     Ply,
+    /// SuperSplat's compressed PLY (`.compressed.ply`).
+    CompressedPly,
     /// antimatter15 `.splat`.
     Splat,
 }
@@ -96,6 +98,10 @@ pub enum SceneFormat {
 impl SceneFormat {
     /// The format a path's extension names.
     pub fn of(path: &Path) -> Result<SceneFormat> {
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if name.to_ascii_lowercase().ends_with(".compressed.ply") {
+            return Ok(SceneFormat::CompressedPly);
+        }
         match path
             .extension()
             .and_then(|e| e.to_str())
@@ -105,7 +111,7 @@ impl SceneFormat {
             Some("ply") => Ok(SceneFormat::Ply),
             Some("splat") => Ok(SceneFormat::Splat),
             _ => Err(FileError::Malformed(format!(
-                "{}: unknown scene format (use .ply or .splat)",
+                "{}: unknown scene format (use .ply, .compressed.ply or .splat)",
                 path.display()
             ))),
         }
@@ -137,6 +143,9 @@ pub fn read_scene(path: &Path) -> Result<SplatScene> {
 pub fn write_scene(path: &Path, scene: &SplatScene) -> Result<()> {
     match SceneFormat::of(path)? {
         SceneFormat::Ply => super::ply::write_splat_ply(path, scene),
+        SceneFormat::CompressedPly => {
+            write_file(path, &super::compressed_ply::encode_compressed_ply(scene))
+        }
         SceneFormat::Splat => write_splat(path, scene),
     }
 }
