@@ -63,6 +63,24 @@ pub fn run(args: &BenchArgs) -> Result<()> {
 }
 
 /// Median and 90th percentile of timings in milliseconds.
+/// The median of each stage over profiled frames (zeros when there are none).
+pub fn median_stages(
+    stages: &[crate::render::settings::StageTimings],
+) -> crate::render::settings::StageTimings {
+    use crate::render::settings::StageTimings;
+    if stages.is_empty() {
+        return StageTimings::default();
+    }
+    let median = |f: fn(&StageTimings) -> f64| summarize(stages.iter().map(f).collect()).0;
+    StageTimings {
+        upload: median(|s| s.upload),
+        project: median(|s| s.project),
+        sort: median(|s| s.sort),
+        rasterize: median(|s| s.rasterize),
+        readback: median(|s| s.readback),
+    }
+}
+
 pub fn summarize(mut ms: Vec<f64>) -> (f64, f64) {
     ms.sort_by(f64::total_cmp);
     let at = |q: f64| ms[((ms.len() - 1) as f64 * q).round() as usize];

@@ -8,7 +8,7 @@ use std::time::Instant;
 use clap::Args;
 use serde_json::{json, Value};
 
-use super::bench::summarize;
+use super::bench::{median_stages, summarize};
 use super::bench_scene::{bench_scene, peak_rss_mb, SceneSource, SCENE_SIZES};
 use super::compose::{build, build_from};
 use super::render::parse_size;
@@ -143,18 +143,7 @@ fn time_frames(
         }
     }
     painter.renderer_mut().set_stage_profiling(false);
-    if stages.is_empty() {
-        return Ok((totals, StageTimings::default()));
-    }
-    let median = |f: fn(&StageTimings) -> f64| summarize(stages.iter().map(f).collect()).0;
-    let stage = StageTimings {
-        upload: median(|s| s.upload),
-        project: median(|s| s.project),
-        sort: median(|s| s.sort),
-        rasterize: median(|s| s.rasterize),
-        readback: median(|s| s.readback),
-    };
-    Ok((totals, stage))
+    Ok((totals, median_stages(&stages)))
 }
 
 fn scaled_camera(camera: &Camera, scale: f32) -> Camera {

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use serde_json::{json, Value};
 
-use super::bench::summarize;
+use super::bench::{median_stages, summarize};
 use super::render::frame_scene;
 use crate::error::{Error, Result};
 use crate::render::image::psnr_report;
@@ -61,17 +61,7 @@ fn time_scene(
         }
     }
     renderer.set_stage_profiling(false);
-    let median = |f: fn(&StageTimings) -> f64| summarize(stages.iter().map(f).collect()).0;
-    Ok((
-        totals,
-        StageTimings {
-            upload: median(|s| s.upload),
-            project: median(|s| s.project),
-            sort: median(|s| s.sort),
-            rasterize: median(|s| s.rasterize),
-            readback: median(|s| s.readback),
-        },
-    ))
+    Ok((totals, median_stages(&stages)))
 }
 
 /// Runs the scene benchmark and returns its JSON document.

@@ -28,6 +28,28 @@ use crate::scene::splats::SplatScene;
 /// Gaussians per chunk of bounds.
 const CHUNK: usize = 256;
 
+/// The `chunk` element's properties: position, log-scale and colour bounds.
+const CHUNK_PROPERTIES: [&str; 18] = [
+    "min_x",
+    "min_y",
+    "min_z",
+    "max_x",
+    "max_y",
+    "max_z",
+    "min_scale_x",
+    "min_scale_y",
+    "min_scale_z",
+    "max_scale_x",
+    "max_scale_y",
+    "max_scale_z",
+    "min_r",
+    "min_g",
+    "min_b",
+    "max_r",
+    "max_g",
+    "max_b",
+];
+
 /// True for a header of the compressed layout.
 pub fn is_compressed(elements: &[Element]) -> bool {
     elements.iter().any(|e| e.name == "chunk")
@@ -61,26 +83,10 @@ pub fn parse_compressed_ply(bytes: &[u8]) -> Result<SplatScene, String> {
             n.div_ceil(CHUNK)
         ));
     }
-    let position = columns(
-        &chunks,
-        &["min_x", "min_y", "min_z", "max_x", "max_y", "max_z"],
-    )?;
-    let scale = columns(
-        &chunks,
-        &[
-            "min_scale_x",
-            "min_scale_y",
-            "min_scale_z",
-            "max_scale_x",
-            "max_scale_y",
-            "max_scale_z",
-        ],
-    )?;
-    let colour = columns(
-        &chunks,
-        &["min_r", "min_g", "min_b", "max_r", "max_g", "max_b"],
-    )
-    .ok();
+    let position = columns(&chunks, &CHUNK_PROPERTIES[0..6])?;
+    let scale = columns(&chunks, &CHUNK_PROPERTIES[6..12])?;
+    // Older files carry no colour bounds: the bytes are the colour itself.
+    let colour = columns(&chunks, &CHUNK_PROPERTIES[12..18]).ok();
     let words = columns(
         &vertex,
         &[
@@ -215,26 +221,7 @@ pub fn encode_compressed_ply(scene: &SplatScene) -> Vec<u8> {
         "ply\nformat binary_little_endian 1.0\ncomment SuperSplat compressed layout, written by visage\nelement chunk {}\n",
         n.div_ceil(CHUNK)
     );
-    for name in [
-        "min_x",
-        "min_y",
-        "min_z",
-        "max_x",
-        "max_y",
-        "max_z",
-        "min_scale_x",
-        "min_scale_y",
-        "min_scale_z",
-        "max_scale_x",
-        "max_scale_y",
-        "max_scale_z",
-        "min_r",
-        "min_g",
-        "min_b",
-        "max_r",
-        "max_g",
-        "max_b",
-    ] {
+    for name in CHUNK_PROPERTIES {
         header += &format!("property float {name}\n");
     }
     header += &format!("element vertex {n}\n");

@@ -25,35 +25,52 @@ pub const C3: [f64; 7] = [
     -0.590_043_589_926_643_5,
 ];
 
-/// The SH basis functions for direction `d` (unit), up to `degree`.
-pub fn basis(degree: u8, d: [f64; 3]) -> [f64; 16] {
-    let [x, y, z] = d;
-    let mut b = [0.0; 16];
-    b[0] = C0;
-    if degree >= 1 {
-        b[1] = -C1 * y;
-        b[2] = C1 * z;
-        b[3] = -C1 * x;
-    }
-    if degree >= 2 {
-        let (xx, yy, zz) = (x * x, y * y, z * z);
-        b[4] = C2[0] * x * y;
-        b[5] = C2[1] * y * z;
-        b[6] = C2[2] * (2.0 * zz - xx - yy);
-        b[7] = C2[3] * x * z;
-        b[8] = C2[4] * (xx - yy);
-        if degree >= 3 {
-            b[9] = C3[0] * y * (3.0 * xx - yy);
-            b[10] = C3[1] * x * y * z;
-            b[11] = C3[2] * y * (4.0 * zz - xx - yy);
-            b[12] = C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
-            b[13] = C3[4] * x * (4.0 * zz - xx - yy);
-            b[14] = C3[5] * z * (xx - yy);
-            b[15] = C3[6] * x * (xx - 3.0 * yy);
+/// Defines an SH basis function for one float type (f64 for the reference,
+/// f32 for the CPU renderer): the same polynomials, written once.
+macro_rules! sh_basis {
+    ($(#[doc = $doc:expr])* $name:ident, $t:ty) => {
+        $(#[doc = $doc])*
+        #[allow(clippy::unnecessary_cast)]
+        pub fn $name(degree: u8, d: [$t; 3]) -> [$t; 16] {
+            let [x, y, z] = d;
+            let (c1, c2, c3) = (C1 as $t, C2.map(|c| c as $t), C3.map(|c| c as $t));
+            let mut b = [0.0; 16];
+            b[0] = C0 as $t;
+            if degree >= 1 {
+                b[1] = -c1 * y;
+                b[2] = c1 * z;
+                b[3] = -c1 * x;
+            }
+            if degree >= 2 {
+                let (xx, yy, zz) = (x * x, y * y, z * z);
+                b[4] = c2[0] * x * y;
+                b[5] = c2[1] * y * z;
+                b[6] = c2[2] * (2.0 * zz - xx - yy);
+                b[7] = c2[3] * x * z;
+                b[8] = c2[4] * (xx - yy);
+                if degree >= 3 {
+                    b[9] = c3[0] * y * (3.0 * xx - yy);
+                    b[10] = c3[1] * x * y * z;
+                    b[11] = c3[2] * y * (4.0 * zz - xx - yy);
+                    b[12] = c3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+                    b[13] = c3[4] * x * (4.0 * zz - xx - yy);
+                    b[14] = c3[5] * z * (xx - yy);
+                    b[15] = c3[6] * x * (xx - 3.0 * yy);
+                }
+            }
+            b
         }
-    }
-    b
+    };
 }
+
+sh_basis!(
+    /// The SH basis functions for direction `d` (unit), up to `degree`.
+    basis, f64
+);
+sh_basis!(
+    /// [`basis`] in f32.
+    basis_f32, f32
+);
 
 /// Colour of a Gaussian seen along `d`, from its coefficient-major SH (`[coef][rgb]`).
 /// `use_degree` may be lower than the stored degree to truncate the expansion.
@@ -73,33 +90,7 @@ pub fn eval_rgb(sh: &[f32], use_degree: u8, d: [f64; 3]) -> [f64; 3] {
 /// against the f64 version is measured by `visage bench render` and bounded
 /// by a test).
 pub fn eval_rgb_f32(sh: &[f32], use_degree: u8, d: [f32; 3]) -> [f32; 3] {
-    let [x, y, z] = d;
-    let mut b = [0.0f32; 16];
-    b[0] = C0 as f32;
-    if use_degree >= 1 {
-        b[1] = -C1 as f32 * y;
-        b[2] = C1 as f32 * z;
-        b[3] = -C1 as f32 * x;
-    }
-    if use_degree >= 2 {
-        let (xx, yy, zz) = (x * x, y * y, z * z);
-        let c2 = C2.map(|c| c as f32);
-        b[4] = c2[0] * x * y;
-        b[5] = c2[1] * y * z;
-        b[6] = c2[2] * (2.0 * zz - xx - yy);
-        b[7] = c2[3] * x * z;
-        b[8] = c2[4] * (xx - yy);
-        if use_degree >= 3 {
-            let c3 = C3.map(|c| c as f32);
-            b[9] = c3[0] * y * (3.0 * xx - yy);
-            b[10] = c3[1] * x * y * z;
-            b[11] = c3[2] * y * (4.0 * zz - xx - yy);
-            b[12] = c3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
-            b[13] = c3[4] * x * (4.0 * zz - xx - yy);
-            b[14] = c3[5] * z * (xx - yy);
-            b[15] = c3[6] * x * (xx - 3.0 * yy);
-        }
-    }
+    let b = basis_f32(use_degree, d);
     let coefficients = (sh.len() / 3).min((use_degree as usize + 1).pow(2));
     let mut rgb = [0.5f32; 3];
     for (k, bk) in b.iter().enumerate().take(coefficients) {
