@@ -202,3 +202,93 @@ fn sigterm_restores_the_terminal() {
     std::fs::remove_file(&status).ok();
     std::fs::remove_file(&record).ok();
 }
+
+/// `visage view FILE` (and `visage FILE`): a scene in a real terminal, moved
+/// with the viewer's keys, journalled, snapshotted and replayed.
+#[test]
+fn view_a_scene_file_fly_and_replay_the_journal() {
+    let tmux = Tmux::new("view");
+    let scene_path = temp("scene.ply");
+    let scene = visage::scene::synthetic::synthetic_scene(30_000, 5);
+    visage::io::ply::write_splat_ply(&scene_path, &scene).unwrap();
+    let (status, record, snap) = (
+        temp("view-status"),
+        temp("view-journal.vsg"),
+        temp("view-snap.png"),
+    );
+    for f in [&status, &record, &snap] {
+        std::fs::remove_file(f).ok();
+    }
+    tmux.start(&format!(
+        "{} view {} --graphics halfblocks --renderer cpu --record {} 2>/dev/null; echo EXIT=$? > {}; sleep 60",
+        env!("CARGO_BIN_EXE_visage"),
+        scene_path.display(),
+        record.display(),
+        status.display()
+    ));
+    let long = Duration::from_secs(60);
+    tmux.wait_for("the viewer", long, |s| {
+        s.contains("scene.ply") && s.contains("30000 Gaussians")
+    });
+    tmux.wait_for("a first frame", long, |s| s.contains(" of 30000 drawn"));
+    // Fly forward, turn, lower the SH degree; an avatar command is refused.
+    tmux.keys(&["w", "w", "Right", "h"]);
+    tmux.wait_for("the SH degree", long, |s| s.contains("SH 2 of 3"));
+    let command = format!("snapshot {}", snap.display());
+    let mut typed: Vec<String> = vec![":".into()];
+    typed.extend(command.chars().map(|c| match c {
+        ' ' => "Space".to_string(),
+        c => c.to_string(),
+    }));
+    typed.push("Enter".into());
+    tmux.keys(&typed.iter().map(String::as_str).collect::<Vec<_>>());
+    tmux.wait_for("the snapshot", long, |s| {
+        s.contains("wrote") && s.contains("snapshot")
+    });
+    tmux.keys(&[":", "p", "l", "a", "y", "Enter"]);
+    tmux.wait_for("the refusal", long, |s| {
+        s.contains("a scene view has no avatars")
+    });
+    tmux.keys(&["q"]);
+    assert_eq!(wait_file(&status, long).trim(), "EXIT=0");
+    let journal = std::fs::read_to_string(&record).unwrap();
+    assert!(journal.contains("\nscene "), "{journal}");
+    for c in ["fly 0.05 0 0", "look 5 0", "sh-degree", "snapshot "] {
+        assert!(journal.contains(c), "{c} not journaled:\n{journal}");
+    }
+    // The journal replays headless and draws the same view.
+    let out = temp("view-replay");
+    std::fs::create_dir_all(&out).unwrap();
+    let o = common::visage(&[
+        "replay",
+        record.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(snap.exists(), "the live snapshot was written");
+    let replayed =
+        visage::render::image::RgbImage::load_png(&out.join(snap.file_name().unwrap())).unwrap();
+    assert!(
+        replayed.pixels.iter().any(|&p| p > 30),
+        "the view shows the scene"
+    );
+
+    // `visage FILE` opens the same viewer.
+    std::fs::remove_file(&status).ok();
+    tmux.cmd(&["kill-server"]);
+    let tmux = Tmux::new("view2");
+    tmux.start(&format!(
+        "{} {} --graphics halfblocks --renderer cpu 2>/dev/null; echo EXIT=$? > {}; sleep 60",
+        env!("CARGO_BIN_EXE_visage"),
+        scene_path.display(),
+        status.display()
+    ));
+    tmux.wait_for("the viewer", long, |s| s.contains("30000 Gaussians"));
+    tmux.keys(&["q"]);
+    assert_eq!(wait_file(&status, long).trim(), "EXIT=0");
+    for f in [&status, &record, &snap, &scene_path] {
+        std::fs::remove_file(f).ok();
+    }
+    std::fs::remove_dir_all(&out).ok();
+}

@@ -7,13 +7,12 @@ use std::time::Instant;
 use serde_json::{json, Value};
 
 use super::bench::{median_stages, summarize};
-use super::render::frame_scene;
 use crate::error::{Error, Result};
 use crate::render::image::psnr_report;
 use crate::render::reference::render_reference;
 use crate::render::settings::{RenderSettings, StageTimings};
 use crate::render::{Backend, SplatRenderer};
-use crate::scene::camera::{Camera, CameraOverrides};
+use crate::scene::camera::{Camera, UpAxis};
 use crate::scene::splats::SplatScene;
 
 /// Sizes measured on scenes unless `--sizes` is given.
@@ -84,7 +83,8 @@ pub fn bench_scene(
     };
     let load_ms = t.elapsed().as_secs_f64() * 1e3;
     let load_peak = peak_rss_mb();
-    let orbit = frame_scene(&scene, &CameraOverrides::default())
+    let orbit = scene
+        .home_orbit(None, UpAxis::default())
         .ok_or_else(|| Error::input(format!("{name} holds no Gaussians")))?;
     let mut references = Vec::new();
     for &(w, h) in sizes {

@@ -99,6 +99,12 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
     let (db, _) = args.db.load()?;
     let engine = Engine::new(db)?;
     let recipe = bench_recipe_for(engine.database());
+    let sources: Vec<String> = engine
+        .database()
+        .sources
+        .iter()
+        .map(|s| s.name.clone())
+        .collect();
     let mut bench = Workbench::new(engine, args.renderer)?;
     let device = bench.renderer_description();
     let mut rows = Vec::new();
@@ -199,13 +205,6 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
                 && matches!(protocol, Protocol::Halfblocks | Protocol::Kitty)
             {
                 let mut rng = ChaCha8Rng::seed_from_u64(50);
-                let sources: Vec<String> = bench
-                    .engine()
-                    .database()
-                    .sources
-                    .iter()
-                    .map(|s| s.name.clone())
-                    .collect();
                 let mut ms = Vec::new();
                 for _ in 0..20 {
                     let mut r = recipe.clone();

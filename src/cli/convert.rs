@@ -8,13 +8,12 @@ use std::path::PathBuf;
 use clap::Args;
 use serde_json::json;
 
-use super::render::frame_scene;
 use crate::error::{Error, Result};
 use crate::io::splat::{read_scene, write_scene};
 use crate::render::image::{psnr_report, RgbImage};
 use crate::render::settings::RenderSettings;
 use crate::render::{Backend, SplatRenderer};
-use crate::scene::camera::{CameraOverrides, Orbit};
+use crate::scene::camera::{Orbit, UpAxis};
 use crate::scene::splats::SplatScene;
 
 /// Arguments of `visage convert`.
@@ -41,7 +40,8 @@ fn view(scene: &SplatScene, orbit: &Orbit) -> Result<RgbImage> {
 /// Runs `visage convert`.
 pub fn run(args: &ConvertArgs) -> Result<()> {
     let input = read_scene(&args.input)?;
-    let orbit = frame_scene(&input, &CameraOverrides::default())
+    let orbit = input
+        .home_orbit(None, UpAxis::default())
         .ok_or_else(|| Error::input(format!("{} holds no Gaussians", args.input.display())))?;
     write_scene(&args.output, &input)?;
     let output = read_scene(&args.output)?;

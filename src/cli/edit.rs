@@ -9,15 +9,15 @@ use super::DbArgs;
 use crate::editor::command::Command;
 use crate::editor::replay::replay;
 use crate::error::{Error, Result};
+use crate::pipeline::{SceneSpec, Subject};
 use crate::render::Backend;
 use crate::tui::app::{run_editor, EditOptions};
 use crate::tui::graphics::GraphicsChoice;
 
-/// Arguments of the editor.
+/// What the editor and the viewer share: sessions, keys, graphics, renderer
+/// and the starting camera.
 #[derive(Args, Debug, Clone, Default)]
-pub struct EditArgs {
-    #[command(flatten)]
-    db: DbArgs,
+pub struct TerminalArgs {
     /// Resume a recorded session (replays it, then continues).
     #[arg(long, value_name = "FILE")]
     session: Option<PathBuf>,
@@ -38,17 +38,69 @@ pub struct EditArgs {
     camera: CameraArgs,
 }
 
-/// Runs the editor.
+/// Arguments of the editor.
+#[derive(Args, Debug, Clone, Default)]
+pub struct EditArgs {
+    #[command(flatten)]
+    db: DbArgs,
+    /// A 3DGS scene file (.ply, .compressed.ply, .splat) to view instead of
+    /// composing avatars: the same as `visage view FILE`.
+    #[arg(value_name = "SCENE")]
+    scene: Option<PathBuf>,
+    #[command(flatten)]
+    terminal: TerminalArgs,
+}
+
+/// Arguments of `visage view`.
+#[derive(Args, Debug, Clone)]
+pub struct ViewArgs {
+    /// A 3DGS scene: INRIA PLY (any SH degree, ASCII or binary), SuperSplat's
+    /// compressed PLY or a .splat file.
+    file: PathBuf,
+    #[command(flatten)]
+    terminal: TerminalArgs,
+}
+
+/// Runs the editor (or, given a scene file, the viewer).
 pub fn run_edit(args: &EditArgs) -> Result<()> {
+    let subject = match &args.scene {
+        Some(file) => scene_subject(file, &args.terminal)?,
+        None => Subject::Avatars(args.db.spec()),
+    };
+    run_terminal(subject, &args.terminal)
+}
+
+/// Runs `visage view FILE`.
+pub fn run_view(args: &ViewArgs) -> Result<()> {
+    run_terminal(scene_subject(&args.file, &args.terminal)?, &args.terminal)
+}
+
+fn scene_subject(file: &std::path::Path, args: &TerminalArgs) -> Result<Subject> {
+    if !file.is_file() {
+        return Err(Error::input(format!(
+            "{} is not a file (visage view takes a .ply, .compressed.ply or .splat scene)",
+            file.display()
+        )));
+    }
+    Ok(Subject::Scene(SceneSpec {
+        path: file.to_path_buf(),
+        up: args.camera.overrides()?.up.unwrap_or_default(),
+    }))
+}
+
+fn run_terminal(subject: Subject, args: &TerminalArgs) -> Result<()> {
     use std::io::IsTerminal;
-    let overrides = args.camera.overrides()?;
+    let mut overrides = args.camera.overrides()?;
+    if matches!(subject, Subject::Scene(_)) {
+        overrides.up = None; // the scene's framed camera has it already
+    }
     if !std::io::stdout().is_terminal() || !std::io::stdin().is_terminal() {
         return Err(Error::input(
             "the editor needs a terminal; for scripts use 'visage replay SESSION' or 'visage render'",
         ));
     }
     run_editor(EditOptions {
-        db: args.db.spec(),
+        subject,
         session: args.session.clone(),
         record: args.record.clone(),
         keymap: args.keymap.clone(),

@@ -36,6 +36,8 @@ pub struct Cli {
 enum Command {
     /// Open the editor (the default command).
     Edit(edit::EditArgs),
+    /// View a 3DGS scene file (PLY, compressed PLY, .splat) in the terminal.
+    View(edit::ViewArgs),
     /// Replay a session file headless, with snapshots and checks.
     Replay(edit::ReplayArgs),
     /// Describe the database: model, regions, sources and motions.
@@ -81,6 +83,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Fixtures(args)) => run_fixtures(&args),
         Some(Command::Edit(args)) => edit::run_edit(&args),
         Some(Command::Replay(args)) => edit::run_replay(&args),
+        Some(Command::View(args)) => edit::run_view(&args),
         None => edit::run_edit(&cli.edit),
     }
 }

@@ -14,7 +14,6 @@ use crate::pipeline::composer::{reference_image, Composer, Painter};
 use crate::render::reference::render_reference;
 use crate::render::settings::RenderSettings;
 use crate::render::{Backend, SplatRenderer};
-use crate::scene::camera::{CameraOverrides, Orbit};
 use crate::scene::splats::SplatScene;
 
 /// Arguments of `visage render`.
@@ -127,20 +126,6 @@ fn render_sequence(
     Ok(())
 }
 
-/// The camera that frames a world-space scene: a 40° field of view (or the
-/// one given) from the front, around the subject without its floaters
-/// ([`SplatScene::robust_bounds`]), with the up axis given. None for a scene
-/// without a finite mean.
-pub fn frame_scene(scene: &SplatScene, overrides: &CameraOverrides) -> Option<Orbit> {
-    let (lo, hi) = scene.robust_bounds()?;
-    let start = Orbit {
-        fov_deg: overrides.fov_deg.unwrap_or(40.0),
-        up: overrides.up.unwrap_or_default(),
-        ..Orbit::STUDY
-    };
-    Some(start.framing(lo, hi))
-}
-
 /// What a still shows: a world-space PLY scene, or a posed composite.
 enum Subject {
     Ply(SplatScene),
@@ -152,7 +137,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let overrides = args.camera.overrides()?;
     let (mut subject, orbit) = if let Some(ply) = &args.ply {
         let scene = crate::io::splat::read_scene(ply)?;
-        let orbit = frame_scene(&scene, &overrides)
+        let orbit = scene
+            .home_orbit(overrides.fov_deg, overrides.up.unwrap_or_default())
             .ok_or_else(|| Error::input(format!("{} holds no Gaussians", ply.display())))?;
         (Subject::Ply(scene), orbit)
     } else {

@@ -42,6 +42,9 @@ pub struct CommandSpec {
     pub edit: bool,
     /// Recorded in session journals (`quit`, `help` and `prompt` are not).
     pub journal: bool,
+    /// Needs an avatar database (edits, groups, sources, animation, the mesh):
+    /// a scene view (`visage view FILE`) refuses it.
+    pub avatar: bool,
 }
 
 /// The words of a command line after its name.
@@ -216,6 +219,25 @@ impl ArgKind for Joint {
     }
 }
 
+/// An optional SH degree, 0 to 3.
+struct Degree;
+impl ArgKind for Degree {
+    type Value = Option<u8>;
+    fn parse(words: &mut Words, what: &str) -> Result<Option<u8>, String> {
+        let Some(word) = words.next() else {
+            return Ok(None);
+        };
+        let d: u8 = number(word, what)?;
+        if d > 3 {
+            return Err(format!("SH degrees are 0 to 3, not {d}"));
+        }
+        Ok(Some(d))
+    }
+    fn write(value: &Option<u8>, out: &mut Vec<String>) {
+        out.extend(value.map(|d| d.to_string()));
+    }
+}
+
 /// Three finite angles (radians).
 struct Angles;
 impl ArgKind for Angles {
@@ -336,6 +358,7 @@ macro_rules! has_flag {
     ($want:ident) => { false };
     (edit, edit $(, $rest:ident)*) => { true };
     (local, local $(, $rest:ident)*) => { true };
+    (avatar, avatar $(, $rest:ident)*) => { true };
     ($want:ident, $first:ident $(, $rest:ident)*) => { has_flag!($want $(, $rest)*) };
 }
 
@@ -361,6 +384,7 @@ macro_rules! commands {
                 summary: $summary,
                 edit: has_flag!(edit $(, $flag)*),
                 journal: !has_flag!(local $(, $flag)*),
+                avatar: has_flag!(avatar $(, $flag)*) || has_flag!(edit $(, $flag)*),
             }, )*
         ];
 
@@ -417,17 +441,17 @@ commands! {
     /// Open the `:` command prompt.
     Prompt => "prompt", "", "open the command prompt", local;
     /// Select a group in the group list.
-    SelectGroup(group: Group as GroupName) => "select-group", "GROUP", "select a group";
+    SelectGroup(group: Group as GroupName) => "select-group", "GROUP", "select a group", avatar;
     /// Move the group cursor down.
-    NextGroup => "next-group", "", "next group";
+    NextGroup => "next-group", "", "next group", avatar;
     /// Move the group cursor up.
-    PrevGroup => "prev-group", "", "previous group";
+    PrevGroup => "prev-group", "", "previous group", avatar;
     /// Select a source in the source strip.
-    SelectSource(source: String as Word) => "select-source", "SOURCE", "select a source";
+    SelectSource(source: String as Word) => "select-source", "SOURCE", "select a source", avatar;
     /// Move the source cursor right.
-    NextSource => "next-source", "", "next source";
+    NextSource => "next-source", "", "next source", avatar;
     /// Move the source cursor left.
-    PrevSource => "prev-source", "", "previous source";
+    PrevSource => "prev-source", "", "previous source", avatar;
     /// Show the selected source's Gaussians in the selected group.
     Assign => "assign", "", "show the selected source's Gaussians in the selected group", edit;
     /// Show a source's Gaussians in a group.
@@ -454,15 +478,15 @@ commands! {
     /// Switch to the next motion.
     NextMotion => "next-motion", "", "next motion", edit;
     /// Start playing at 25 FPS.
-    Play => "play", "", "play at 25 FPS";
+    Play => "play", "", "play at 25 FPS", avatar;
     /// Stop playing.
-    Pause => "pause", "", "pause";
+    Pause => "pause", "", "pause", avatar;
     /// Toggle playing.
-    TogglePlay => "toggle-play", "", "play or pause";
+    TogglePlay => "toggle-play", "", "play or pause", avatar;
     /// Step frames (negative steps back).
-    Step(frames: i64 as Integer) => "step", "N", "step N frames (negative: back)";
+    Step(frames: i64 as Integer) => "step", "N", "step N frames (negative: back)", avatar;
     /// Go to a frame.
-    Frame(frame: usize as Index) => "frame", "N", "go to frame N";
+    Frame(frame: usize as Index) => "frame", "N", "go to frame N", avatar;
     /// Set (or with `None`, toggle) the animation mode.
     Mode(choice: Option<AnimationMode> as Choice<AnimationMode>)
         => "mode", "[fast|exact]", "set or toggle the animation mode", edit;
@@ -481,18 +505,26 @@ commands! {
     /// Back to the default camera.
     CameraReset => "camera-reset", "", "back to the default camera";
     /// Toggle the thesis study limits (±45° yaw, ±15° pitch, radius 2.5).
-    CameraStudy => "camera-study", "", "toggle the thesis study camera limits";
+    CameraStudy => "camera-study", "", "toggle the thesis study camera limits", avatar;
     /// Set parts of the camera (target, radius, field of view, up axis, angles).
     SetCamera(settings: CameraOverrides as CameraSettings)
         => "set-camera", "yaw=D pitch=D radius=R fov=D target=X,Y,Z up=+y|-y|+z|-z", "set parts of the camera";
+    /// Move the camera and its target together (fractions of the orbit radius
+    /// along the view direction, to the right and up on screen): free flight.
+    Fly(forward: f32 as Finite, right: f32 as Finite, up: f32 as Finite)
+        => "fly", "FORWARD RIGHT UP", "move the camera and its target (fractions of the radius)";
+    /// Turn the camera where it stands (degrees; positive turns right and up).
+    Look(yaw: f32 as Finite, pitch: f32 as Finite) => "look", "DYAW DPITCH", "turn the camera where it stands (degrees)";
+    /// Set (or with `None`, cycle down) the highest SH degree drawn.
+    ShDegree(degree: Option<u8> as Degree) => "sh-degree", "[0-3]", "set or cycle the SH degree drawn";
     /// Multiply the debug Gaussian scale.
     DebugScale(factor: f32 as Positive) => "debug-scale", "FACTOR", "multiply the Gaussian scale (debug view)";
     /// Toggle the mesh overlay.
-    ToggleMesh => "toggle-mesh", "", "toggle the mesh overlay";
+    ToggleMesh => "toggle-mesh", "", "toggle the mesh overlay", avatar;
     /// Toggle highlighting the selected group's regions.
-    ToggleHighlight => "toggle-highlight", "", "toggle highlighting the selected group";
+    ToggleHighlight => "toggle-highlight", "", "toggle highlighting the selected group", avatar;
     /// Write the recipe to a TOML file.
-    SaveRecipe(path: String as Word) => "save-recipe", "PATH", "write the recipe as TOML";
+    SaveRecipe(path: String as Word) => "save-recipe", "PATH", "write the recipe as TOML", avatar;
     /// Write the current frame as a standard 3DGS PLY.
     ExportPly(path: String as Word) => "export-ply", "PATH", "write the current frame as a 3DGS PLY";
     /// Write the current view as a PNG.
@@ -590,6 +622,10 @@ mod tests {
             "camera-reset",
             "camera-study",
             "set-camera target=0,0.1,-0.25 radius=3 fov=20 up=-y yaw=-30 pitch=5",
+            "fly 0.1 -0.05 0",
+            "look 5 -2",
+            "sh-degree",
+            "sh-degree 1",
             "debug-scale 0.5",
             "toggle-mesh",
             "toggle-highlight",
@@ -618,7 +654,7 @@ mod tests {
     fn bad_commands_explain_themselves() {
         for (line, needle) in [
             ("", "empty"),
-            ("fly", "unknown command"),
+            ("soar", "unknown command"),
             ("select-group forehead", "unknown group"),
             ("set-shape nose bram", "SOURCE=WEIGHT"),
             ("set-shape nose bram=x", "not a valid weight"),
@@ -630,6 +666,8 @@ mod tests {
             ("set-camera", "no camera setting"),
             ("set-camera radius=-1", "positive"),
             ("set-camera up=sideways", "+y, -y"),
+            ("sh-degree 4", "0 to 3"),
+            ("fly 1 0", "missing up"),
         ] {
             let e = Command::parse(line).unwrap_err();
             assert!(e.contains(needle), "{line}: {e}");

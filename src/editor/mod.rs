@@ -30,11 +30,18 @@ pub struct Editor {
 }
 
 impl Editor {
-    /// An editor on the database's first source, unedited, at tick 0.
+    /// An editor on the database's first source, unedited, at tick 0 (on a
+    /// scene: at the scene's framed camera, its SH degree).
     pub fn new(catalog: Catalog) -> Self {
         let first = catalog.sources.first().map_or("", String::as_str);
+        let mut recipe = Recipe::unedited(first);
+        recipe.camera = catalog.home();
+        let mut state = EditorState::new(recipe);
+        if let Some(scene) = &catalog.scene {
+            state.debug.sh_degree = scene.sh_degree;
+        }
         Self {
-            state: EditorState::new(Recipe::unedited(first)),
+            state,
             catalog,
             tick: 0,
         }
@@ -43,6 +50,11 @@ impl Editor {
     /// An editor for an engine's database.
     pub fn for_engine(engine: &Engine) -> Self {
         Self::new(Catalog::of(engine))
+    }
+
+    /// An editor for what a workbench holds (a database or a scene).
+    pub fn for_bench(bench: &Workbench) -> Self {
+        Self::new(Catalog::of_bench(bench))
     }
 
     /// The current tick.

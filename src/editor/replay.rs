@@ -9,9 +9,7 @@ use serde::Serialize;
 use super::session::{Action, Expectation, Session};
 use super::state::Effect;
 use super::{inside, perform, Editor};
-use crate::compose::engine::Engine;
 use crate::error::{Error, Result};
-use crate::pipeline::workbench::Workbench;
 use crate::render::image::{psnr_report, RgbImage};
 use crate::render::Backend;
 
@@ -78,10 +76,8 @@ impl ReplayReport {
 /// Replays a session file. `out` receives snapshots and exports (skipped without it).
 pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
     let session = Session::load(path)?;
-    let (db, _) = session.header.database().load()?;
-    let engine = Engine::new(db)?;
-    let mut editor = Editor::for_engine(&engine);
-    let mut bench = Workbench::new(engine, Backend::Cpu)?;
+    let mut bench = session.header.subject().open(Backend::Cpu, &|_, _| {})?;
+    let mut editor = Editor::for_bench(&bench);
     if let Some(dir) = out {
         std::fs::create_dir_all(dir)
             .map_err(|e| Error::input(format!("cannot create {}: {e}", dir.display())))?;

@@ -25,7 +25,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::pipeline::DatabaseSpec;
+use crate::pipeline::{DatabaseSpec, SceneSpec, Subject};
+use crate::scene::camera::UpAxis;
 
 use super::command::Command;
 
@@ -86,6 +87,8 @@ pub struct SessionHeader {
     pub sources: usize,
     /// FLAME model and masks of a folder database.
     pub flame: Option<(PathBuf, PathBuf)>,
+    /// The scene file viewed instead of a database (`visage view FILE`).
+    pub scene: Option<SceneSpec>,
     /// Terminal size (columns, rows) when recorded.
     pub terminal: (u16, u16),
     /// Graphics protocol when recorded.
@@ -114,9 +117,29 @@ impl SessionHeader {
                 .as_deref()
                 .map(absolute)
                 .zip(db.masks.as_deref().map(absolute)),
+            scene: None,
             terminal,
             graphics,
             render: (160, 120),
+        }
+    }
+
+    /// A header for a database or a scene (its path made absolute).
+    pub fn for_subject(subject: &Subject, terminal: (u16, u16), graphics: Protocol) -> Self {
+        match subject {
+            Subject::Avatars(db) => Self::new(db, terminal, graphics),
+            Subject::Scene(scene) => Self {
+                scene: Some(scene.absolute()),
+                ..Self::new(&DatabaseSpec::default(), terminal, graphics)
+            },
+        }
+    }
+
+    /// What this header names: its scene, else its database.
+    pub fn subject(&self) -> Subject {
+        match &self.scene {
+            Some(scene) => Subject::Scene(scene.clone()),
+            None => Subject::Avatars(self.database()),
         }
     }
 
@@ -134,6 +157,15 @@ impl SessionHeader {
 
     fn write(&self, out: &mut impl Write) -> std::io::Result<()> {
         writeln!(out, "visage-session {SESSION_VERSION}")?;
+        if let Some(scene) = &self.scene {
+            writeln!(
+                out,
+                "scene {} up={}",
+                quote(&scene.path.display().to_string()),
+                scene.up.name()
+            )?;
+            return self.write_view(out);
+        }
         write!(
             out,
             "db {} seed={} gaussians-per-avatar={} sources={}",
@@ -151,6 +183,11 @@ impl SessionHeader {
             )?;
         }
         writeln!(out)?;
+        self.write_view(out)
+    }
+
+    /// The header lines after the subject.
+    fn write_view(&self, out: &mut impl Write) -> std::io::Result<()> {
         writeln!(out, "terminal {}x{}", self.terminal.0, self.terminal.1)?;
         writeln!(out, "graphics {}", self.graphics.name())?;
         writeln!(out, "render {}x{}", self.render.0, self.render.1)?;
@@ -253,6 +290,7 @@ impl Session {
             gaussians_per_avatar: 50_000,
             sources: crate::avatar::synthetic::MAX_SOURCES,
             flame: None,
+            scene: None,
             terminal: (120, 40),
             graphics: Protocol::Halfblocks,
             render: (160, 120),
@@ -319,6 +357,7 @@ impl Session {
                             }
                         };
                     }
+                    "scene" => header.scene = Some(parse_scene(rest).map_err(|e| err(n, e))?),
                     "terminal" => {
                         let (w, h) = size(rest, "terminal", n, name)?;
                         header.terminal =
@@ -380,6 +419,26 @@ impl Session {
         }
         Ok(Session { header, lines: out })
     }
+}
+
+/// Reads `PATH [up=AXIS]` of a `scene` header line.
+fn parse_scene(rest: &str) -> std::result::Result<SceneSpec, String> {
+    let words = header_words(rest)?;
+    let mut words = words.iter();
+    let path = PathBuf::from(words.next().ok_or("scene needs a file")?);
+    let mut up = UpAxis::default();
+    for kv in words {
+        let axis = kv
+            .strip_prefix("up=")
+            .ok_or_else(|| format!("unknown scene option '{}'", crate::text::printable(kv)))?;
+        up = UpAxis::parse(axis).ok_or_else(|| {
+            format!(
+                "up axis '{}' is not one of +y, -y, +z, -z",
+                crate::text::printable(axis)
+            )
+        })?;
+    }
+    Ok(SceneSpec { path, up })
 }
 
 fn parse_expectation(text: &str) -> std::result::Result<Expectation, String> {
@@ -552,6 +611,29 @@ mod tests {
         assert!(e.contains("not closed"), "{e}");
     }
 
+    /// A scene view's header names the file (absolute, quoted when it has
+    /// spaces) and its up axis, and reads back as the same subject.
+    #[test]
+    fn scene_headers_parse_back() {
+        let subject = Subject::Scene(SceneSpec {
+            path: "my scans/garden.ply".into(),
+            up: UpAxis::NegY,
+        });
+        let header = SessionHeader::for_subject(&subject, (90, 30), Protocol::Kitty);
+        let mut text = Vec::new();
+        header.write(&mut text).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        assert!(text.contains("garden.ply\" up=-y\n"), "{text}");
+        assert!(!text.contains("\ndb "), "{text}");
+        let back = Session::parse(&text, "s.vsg").unwrap().header;
+        assert_eq!(back, header);
+        let Subject::Scene(scene) = back.subject() else {
+            panic!("a scene header opens a scene");
+        };
+        assert!(scene.path.is_absolute() && scene.path.ends_with("my scans/garden.ply"));
+        assert_eq!(scene.up, UpAxis::NegY);
+    }
+
     #[test]
     fn malformed_sessions_name_the_line() {
         let cases = [
@@ -562,7 +644,16 @@ mod tests {
                 "visage-session 1\n---\n3 play\n1 pause\n",
                 ":4: tick 1 goes back",
             ),
-            ("visage-session 1\n---\n0 fly\n", ":3: unknown command"),
+            ("visage-session 1\n---\n0 soar\n", ":3: unknown command"),
+            ("visage-session 1\nscene\n---\n", ":2: scene needs a file"),
+            (
+                "visage-session 1\nscene a.ply up=x\n---\n",
+                ":2: up axis 'x' is not",
+            ),
+            (
+                "visage-session 1\nscene a.ply fov=3\n---\n",
+                ":2: unknown scene option",
+            ),
             ("visage-session 1\n---\nsoon play\n", ":3:"),
             (
                 "visage-session 1\n---\n0 expect image a.png psnr>=x\n",

@@ -11,15 +11,62 @@ use crate::scene::camera::Orbit;
 use super::command::{Command, PoseJoint};
 
 /// Names the editor validates commands against.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Catalog {
     /// Source names, in display order.
     pub sources: Vec<String>,
     /// Motion names and frame counts.
     pub motions: Vec<(String, usize)>,
+    /// The scene viewed, when the editor views a scene file instead of
+    /// composing avatars (`visage view FILE`).
+    pub scene: Option<SceneSummary>,
+}
+
+/// What the editor knows of a scene it views.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneSummary {
+    /// The file's name.
+    pub name: String,
+    /// Gaussians in the file.
+    pub gaussians: usize,
+    /// The file's SH degree.
+    pub sh_degree: u8,
+    /// The framed camera it opened with.
+    pub home: Orbit,
 }
 
 impl Catalog {
+    /// The names a workbench offers: its database's, or its scene's summary.
+    pub fn of_bench(bench: &crate::pipeline::workbench::Workbench) -> Self {
+        match (bench.engine(), bench.scene()) {
+            (Some(engine), _) => Catalog::of(engine),
+            (None, Some(viewed)) => Catalog {
+                scene: Some(SceneSummary {
+                    name: viewed.name.clone(),
+                    gaussians: viewed.scene.len(),
+                    sh_degree: viewed.scene.sh_degree,
+                    home: viewed.home,
+                }),
+                ..Catalog::default()
+            },
+            (None, None) => Catalog::default(),
+        }
+    }
+
+    /// The camera `camera-reset` returns to.
+    pub fn home(&self) -> Orbit {
+        self.scene.as_ref().map_or(Orbit::default(), |s| s.home)
+    }
+
+    /// The orbit radii zoom keeps to: a head's range, or a scene's around its
+    /// framing.
+    fn radius_range(&self) -> (f32, f32) {
+        match &self.scene {
+            Some(s) => (s.home.radius * 1e-3, s.home.radius * 1e2),
+            None => (0.05, 50.0),
+        }
+    }
+
     /// The names a database offers the editor.
     pub fn of(engine: &crate::compose::engine::Engine) -> Self {
         let db = engine.database();
@@ -34,6 +81,7 @@ impl Catalog {
                 .iter()
                 .map(|m| (m.name.clone(), m.frames()))
                 .collect(),
+            scene: None,
         }
     }
 
@@ -156,6 +204,12 @@ impl EditorState {
     /// Applies a command. Edits are recorded for undo; a failing command changes
     /// nothing and returns the reason.
     pub fn apply(&mut self, catalog: &Catalog, command: &Command) -> Result<Vec<Effect>, String> {
+        if catalog.scene.is_some() && command.spec().avatar {
+            return Err(format!(
+                "{}: a scene view has no avatars (open a database with 'visage edit')",
+                command.spec().name
+            ));
+        }
         if command.is_edit() {
             let before = self.recipe.clone();
             match self.update(catalog, command) {
@@ -339,13 +393,31 @@ impl EditorState {
                 self.clamp_study();
             }
             Command::Zoom(f) => {
+                let (lo, hi) = catalog.radius_range();
                 let c = &mut self.recipe.camera;
-                c.radius = (c.radius * f).clamp(0.05, 50.0);
+                c.radius = (c.radius * f).clamp(lo, hi);
                 self.clamp_study();
             }
             Command::CameraReset => {
-                self.recipe.camera = Orbit::default();
+                self.recipe.camera = catalog.home();
                 self.study = false;
+            }
+            Command::Fly(forward, right, up) => {
+                self.refuse_in_study("fly")?;
+                self.recipe.camera = fly(self.recipe.camera, [*forward, *right, *up]);
+            }
+            Command::Look(yaw, pitch) => {
+                self.refuse_in_study("look")?;
+                self.recipe.camera = look(self.recipe.camera, *yaw, *pitch);
+            }
+            Command::ShDegree(d) => {
+                let top = catalog.scene.as_ref().map_or(3, |s| s.sh_degree);
+                self.debug.sh_degree = match d {
+                    Some(d) => *d,
+                    None if self.debug.sh_degree.min(top) == 0 => top,
+                    None => self.debug.sh_degree.min(top) - 1,
+                };
+                self.status = format!("SH degree {} of {top}", self.debug.sh_degree.min(top));
             }
             Command::CameraStudy => {
                 self.study = !self.study;
@@ -371,6 +443,15 @@ impl EditorState {
         Ok(Vec::new())
     }
 
+    fn refuse_in_study(&self, name: &str) -> Result<(), String> {
+        if self.study {
+            return Err(format!(
+                "{name}: the study camera only orbits (camera-study turns it off)"
+            ));
+        }
+        Ok(())
+    }
+
     fn assign(&mut self, group: Group, source: String) {
         let mut edit = self.group_edit(group);
         edit.gaussians = source;
@@ -388,6 +469,41 @@ impl EditorState {
                 .clamp(-Orbit::STUDY_PITCH_LIMIT, Orbit::STUDY_PITCH_LIMIT);
             c.radius = Orbit::STUDY.radius;
         }
+    }
+}
+
+/// The orbit moved with its target by `[forward, right, up]` fractions of its
+/// radius, along the camera's own axes: free flight keeps the view direction.
+pub fn fly(orbit: Orbit, step: [f32; 3]) -> Orbit {
+    let eye = orbit.eye();
+    let target = glam::Vec3::from(orbit.target);
+    let forward = (target - eye).normalize_or(glam::Vec3::NEG_Z);
+    let right = forward
+        .cross(orbit.up.apply(glam::Vec3::Y))
+        .try_normalize()
+        .unwrap_or_else(|| forward.any_orthonormal_vector());
+    let up = right.cross(forward);
+    let delta = (step[0] * forward + step[1] * right + step[2] * up) * orbit.radius;
+    Orbit {
+        target: (target + delta).into(),
+        ..orbit
+    }
+}
+
+/// The orbit turned about its eye by `yaw` degrees to the right and `pitch`
+/// up: the eye stays, the target swings round it.
+pub fn look(orbit: Orbit, yaw: f32, pitch: f32) -> Orbit {
+    let eye = orbit.eye();
+    let turned = Orbit {
+        yaw_deg: (orbit.yaw_deg - yaw + 180.0).rem_euclid(360.0) - 180.0,
+        pitch_deg: (orbit.pitch_deg - pitch).clamp(-89.0, 89.0),
+        ..orbit
+    };
+    // The same eye with the new angles: move the target by the eye's shift.
+    let shift = eye - turned.eye();
+    Orbit {
+        target: (glam::Vec3::from(turned.target) + shift).into(),
+        ..turned
     }
 }
 
@@ -433,7 +549,122 @@ mod tests {
         Catalog {
             sources: ["ada", "bram", "cleo"].map(String::from).to_vec(),
             motions: vec![("talk".into(), 125)],
+            scene: None,
         }
+    }
+
+    fn scene_catalog() -> Catalog {
+        Catalog {
+            scene: Some(SceneSummary {
+                name: "room.ply".into(),
+                gaussians: 10,
+                sh_degree: 2,
+                home: Orbit {
+                    radius: 20.0,
+                    fov_deg: 40.0,
+                    target: [1.0, 2.0, 3.0],
+                    up: crate::scene::camera::UpAxis::NegY,
+                    ..Orbit::STUDY
+                },
+            }),
+            ..Catalog::default()
+        }
+    }
+
+    fn forward(o: &Orbit) -> glam::Vec3 {
+        (glam::Vec3::from(o.target) - o.eye()).normalize()
+    }
+
+    /// Free flight: `fly` moves eye and target together along the camera's
+    /// own axes and keeps the view direction; `look` turns in place. Both
+    /// hold for a y-down scene, whose camera frame is flipped.
+    #[test]
+    fn fly_and_look_move_the_camera_as_a_user_expects() {
+        for up in [
+            crate::scene::camera::UpAxis::PosY,
+            crate::scene::camera::UpAxis::NegY,
+            crate::scene::camera::UpAxis::PosZ,
+        ] {
+            let start = Orbit {
+                yaw_deg: 30.0,
+                pitch_deg: 10.0,
+                up,
+                ..Orbit::STUDY
+            };
+            let moved = fly(start, [0.5, 0.0, 0.0]);
+            let step = moved.eye() - start.eye();
+            assert!((step - forward(&start) * 0.5 * start.radius).length() < 1e-5);
+            assert!((forward(&moved) - forward(&start)).length() < 1e-6);
+            // Right is right on screen: the camera's x axis.
+            let camera = start.camera(100, 100);
+            let screen_right = camera.view().inverse().x_axis.truncate();
+            let strafed = fly(start, [0.0, 0.2, 0.0]).eye() - start.eye();
+            assert!((strafed - screen_right * 0.2 * start.radius).length() < 1e-5);
+            let turned = look(start, 20.0, 0.0);
+            assert!(
+                (turned.eye() - start.eye()).length() < 1e-5,
+                "look keeps the eye"
+            );
+            let level = Orbit {
+                pitch_deg: 0.0,
+                ..start
+            };
+            let angle = forward(&look(level, 20.0, 0.0))
+                .angle_between(forward(&level))
+                .to_degrees();
+            assert!((angle - 20.0).abs() < 0.05, "{angle}");
+            // Turning right brings what was right of centre towards the centre.
+            assert!(forward(&turned).dot(screen_right) > 0.0);
+            let up_turned = look(start, 0.0, 15.0);
+            assert!(
+                forward(&up_turned).dot(up.apply(glam::Vec3::Y))
+                    > forward(&start).dot(up.apply(glam::Vec3::Y))
+            );
+        }
+    }
+
+    #[test]
+    fn a_scene_view_refuses_avatar_commands_and_keeps_its_camera() {
+        let catalog = scene_catalog();
+        let home = catalog.home();
+        let mut s = crate::editor::Editor::new(catalog.clone()).state;
+        assert_eq!(s.recipe.camera, home, "opens at the framed camera");
+        assert_eq!(s.debug.sh_degree, 2, "at the file's SH degree");
+        for line in [
+            "set-gaussians nose ada",
+            "select-group eyes",
+            "play",
+            "toggle-mesh",
+            "save-recipe r.toml",
+            "camera-study",
+        ] {
+            let e = s
+                .apply(&catalog, &Command::parse(line).unwrap())
+                .unwrap_err();
+            assert!(e.contains("scene view"), "{line}: {e}");
+        }
+        for line in ["fly 1 0 0", "look 10 5", "orbit 20 0", "zoom 0.5"] {
+            s.apply(&catalog, &Command::parse(line).unwrap()).unwrap();
+        }
+        assert_ne!(s.recipe.camera, home);
+        // Zoom keeps to the scene's scale, not a head's 0.05-50.
+        for _ in 0..10 {
+            s.apply(&catalog, &Command::Zoom(10.0)).unwrap();
+        }
+        assert_eq!(s.recipe.camera.radius, home.radius * 100.0);
+        let effects = s.apply(&catalog, &Command::parse("snapshot a.png").unwrap());
+        assert_eq!(effects.unwrap(), vec![Effect::Snapshot("a.png".into())]);
+        s.apply(&catalog, &Command::CameraReset).unwrap();
+        assert_eq!(s.recipe.camera, home, "camera-reset returns to the framing");
+        // sh-degree cycles down from the file's degree and wraps.
+        let mut seen = Vec::new();
+        for _ in 0..4 {
+            s.apply(&catalog, &Command::ShDegree(None)).unwrap();
+            seen.push(s.debug.sh_degree);
+        }
+        assert_eq!(seen, [1, 0, 2, 1]);
+        s.apply(&catalog, &Command::ShDegree(Some(0))).unwrap();
+        assert_eq!(s.debug.sh_degree, 0);
     }
 
     fn run(state: &mut EditorState, lines: &[&str]) {

@@ -79,6 +79,10 @@ impl From<FileError> for crate::error::Error {
 /// Result of reading or writing a file format.
 pub type Result<T> = std::result::Result<T, FileError>;
 
+/// Hears how far a long read has got: (bytes done, bytes in all). Called from
+/// the reading thread; a progress bar is the usual listener.
+pub type Progress<'a> = &'a (dyn Fn(u64, u64) + Sync);
+
 /// Reads a whole file.
 pub fn read_file(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|e| FileError::access("read", path, e))

@@ -364,7 +364,12 @@ fn sh_layout(columns: &Columns) -> Result<(usize, u8), String> {
 /// Reads a standard 3DGS PLY (world space) into a scene. NaN or infinite values
 /// are rejected with the row that has them.
 pub fn read_splat_ply(path: &Path) -> super::Result<SplatScene> {
-    if let Some(scene) = super::ply_stream::read_fast(path)? {
+    read_splat_ply_with(path, &|_, _| {})
+}
+
+/// [`read_splat_ply`], telling `progress` how far it got (bytes of the file).
+pub fn read_splat_ply_with(path: &Path, progress: super::Progress) -> super::Result<SplatScene> {
+    if let Some(scene) = super::ply_stream::read_fast(path, progress)? {
         return Ok(scene);
     }
     let bytes = super::read_file(path)?;

@@ -13,7 +13,7 @@ use glam::{Quat, Vec3};
 use rayon::prelude::*;
 
 use super::ply::{parse_header, Element, PlyFormat, ScalarType};
-use super::{FileError, Result};
+use super::{FileError, Progress, Result};
 use crate::avatar::gaussians::{sh_coefficients, sh_degree_for, sigmoid};
 use crate::scene::splats::SplatScene;
 
@@ -73,8 +73,8 @@ fn f32_at(row: &[u8], at: usize) -> f32 {
 }
 
 /// Reads a 3DGS PLY through the fast path; `Ok(None)` when the file is not of
-/// the kind it handles.
-pub fn read_fast(path: &Path) -> Result<Option<SplatScene>> {
+/// the kind it handles. `progress` hears (bytes read, file size) after each chunk.
+pub fn read_fast(path: &Path, progress: Progress) -> Result<Option<SplatScene>> {
     let mut file = std::fs::File::open(path).map_err(|e| FileError::access("read", path, e))?;
     let mut head = vec![0u8; 64 << 10];
     let n = read_up_to(&mut file, &mut head).map_err(|e| FileError::access("read", path, e))?;
@@ -128,6 +128,7 @@ pub fn read_fast(path: &Path) -> Result<Option<SplatScene>> {
             .map_err(|e| FileError::Malformed(format!("{}: {e}", path.display())))?;
         pending.drain(..bytes);
         done += take;
+        progress((body + done * layout.row) as u64, file_len);
     }
     Ok(Some(scene))
 }
@@ -212,7 +213,7 @@ mod tests {
     #[test]
     fn fast_path_matches_the_general_reader() {
         let ring = Path::new("tests/data/splat/ring.ply");
-        let fast = read_fast(ring)
+        let fast = read_fast(ring, &|_, _| {})
             .unwrap()
             .expect("plyfile's float32 PLY takes the fast path");
         let general = crate::io::ply::parse_splat_ply(&std::fs::read(ring).unwrap()).unwrap();
@@ -222,14 +223,23 @@ mod tests {
         let big = dir.join("sh3.ply");
         let scene = crate::scene::synthetic::synthetic_scene(70_000, 4);
         crate::io::ply::write_splat_ply(&big, &scene).unwrap();
-        let fast = read_fast(&big).unwrap().unwrap();
+        let heard = std::sync::Mutex::new(Vec::new());
+        let fast = read_fast(&big, &|done, all| heard.lock().unwrap().push((done, all)))
+            .unwrap()
+            .unwrap();
+        // Progress comes chunk by chunk, grows, and ends at the file's size.
+        let heard = heard.into_inner().unwrap();
+        let size = std::fs::metadata(&big).unwrap().len();
+        assert!(heard.len() >= 2, "{heard:?}");
+        assert!(heard.windows(2).all(|w| w[0].0 < w[1].0 && w[0].1 == size));
+        assert_eq!(heard.last(), Some(&(size, size)));
         let general = crate::io::ply::parse_splat_ply(&std::fs::read(&big).unwrap()).unwrap();
         assert_eq!(fast, general);
         // Cut short: the header claims more rows than the file holds.
         let bytes = std::fs::read(&big).unwrap();
         let cut = dir.join("cut.ply");
         std::fs::write(&cut, &bytes[..bytes.len() - 10]).unwrap();
-        assert!(read_fast(&cut)
+        assert!(read_fast(&cut, &|_, _| {})
             .unwrap_err()
             .to_string()
             .contains("more than the file holds"));
@@ -243,7 +253,7 @@ mod tests {
         nan[body..body + 4].copy_from_slice(&f32::NAN.to_le_bytes());
         let bad = dir.join("nan.ply");
         std::fs::write(&bad, nan).unwrap();
-        assert!(read_fast(&bad)
+        assert!(read_fast(&bad, &|_, _| {})
             .unwrap_err()
             .to_string()
             .contains("Gaussian 0"));
@@ -254,7 +264,7 @@ mod tests {
             b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nend_header\n",
         )
         .unwrap();
-        assert!(read_fast(&ascii).unwrap().is_none());
+        assert!(read_fast(&ascii, &|_, _| {}).unwrap().is_none());
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -121,14 +121,21 @@ impl SceneFormat {
 /// Reads a 3DGS scene: a PLY by its `ply` magic (whatever the extension),
 /// else a `.splat` by its extension (the format has no header to recognise).
 pub fn read_scene(path: &Path) -> Result<SplatScene> {
+    read_scene_with(path, &|_, _| {})
+}
+
+/// [`read_scene`], telling `progress` how many bytes of the file it has read
+/// (the fast PLY path reports every chunk; the other readers, which take the
+/// file whole, report once at the end).
+pub fn read_scene_with(path: &Path, progress: super::Progress) -> Result<SplatScene> {
     let mut magic = [0u8; 3];
     let is_ply = std::fs::File::open(path)
         .and_then(|mut f| std::io::Read::read(&mut f, &mut magic))
         .map_err(|e| FileError::access("read", path, e))?
         == 3
         && &magic == b"ply";
-    if is_ply {
-        super::ply::read_splat_ply(path)
+    let scene = if is_ply {
+        super::ply::read_splat_ply_with(path, progress)
     } else if SceneFormat::of(path).ok() == Some(SceneFormat::Splat) {
         read_splat(path)
     } else {
@@ -136,7 +143,11 @@ pub fn read_scene(path: &Path) -> Result<SplatScene> {
             "{}: neither a PLY (no 'ply' header) nor a .splat file",
             path.display()
         )))
+    }?;
+    if let Ok(meta) = std::fs::metadata(path) {
+        progress(meta.len(), meta.len());
     }
+    Ok(scene)
 }
 
 /// Writes a 3DGS scene in the format its extension names.

@@ -151,10 +151,19 @@ impl Composer {
     }
 }
 
-/// One renderer drawing composers' posed composites.
+/// What a painter's renderer holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Uploaded {
+    /// A composer's Gaussians of this generation.
+    Composite(u64),
+    /// A world-space scene (a painter draws one scene for its lifetime).
+    Scene,
+}
+
+/// One renderer drawing composers' posed composites (or one scene).
 pub struct Painter {
     renderer: SplatRenderer,
-    uploaded: Option<u64>,
+    uploaded: Option<Uploaded>,
 }
 
 impl Painter {
@@ -178,12 +187,38 @@ impl Painter {
 
     /// Uploads the composer's Gaussians unless this painter has them already.
     pub fn upload(&mut self, composer: &Composer) -> Result<()> {
-        if self.uploaded != Some(composer.generation()) {
+        let generation = Uploaded::Composite(composer.generation());
+        if self.uploaded != Some(generation) {
             self.renderer
                 .set_gaussians(&composer.composite().gaussians)?;
-            self.uploaded = Some(composer.generation());
+            self.uploaded = Some(generation);
         }
         Ok(())
+    }
+
+    /// Draws a world-space scene, uploading it on the first call (a painter
+    /// that draws a scene draws only that scene).
+    pub fn render_scene(
+        &mut self,
+        scene: &SplatScene,
+        camera: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<RgbImage> {
+        if self.uploaded != Some(Uploaded::Scene) {
+            self.renderer.set_world_scene(scene)?;
+            self.uploaded = Some(Uploaded::Scene);
+        }
+        self.renderer.render_world(camera, settings)
+    }
+
+    /// Gaussians drawn in the last frame, where the renderer counts them.
+    pub fn visible(&self) -> Option<usize> {
+        self.renderer.visible()
+    }
+
+    /// Stage timings of the last frame.
+    pub fn stage_timings(&self) -> crate::render::settings::StageTimings {
+        self.renderer.timings()
     }
 
     /// Draws the composer's posed composite.

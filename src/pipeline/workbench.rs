@@ -1,8 +1,9 @@
 //! The workbench turns recipes into pictures: it keeps the engine, the current
 //! composite and a renderer, updates the composite incrementally from the
 //! recipe (only what a change touches), poses the frame and renders it (or the
-//! mesh, in the debug view). The editor, replay and `bench terminal` draw
-//! through it.
+//! mesh, in the debug view). A workbench on a scene file (`visage view`) draws
+//! the scene's Gaussians as they are. The editor, replay and `bench terminal`
+//! draw through it.
 
 use std::path::Path;
 use std::time::Instant;
@@ -10,6 +11,7 @@ use std::time::Instant;
 use glam::Vec3;
 
 use super::composer::{Composer, Painter};
+use super::subject::ViewedScene;
 use crate::compose::engine::Engine;
 use crate::compose::recipe::Recipe;
 use crate::compose::state_hash;
@@ -31,6 +33,8 @@ pub struct DebugView {
     pub mesh: bool,
     /// Tint the selected group's regions in the mesh view.
     pub highlight: bool,
+    /// Highest SH degree drawn (the file's own degree caps it).
+    pub sh_degree: u8,
 }
 
 impl Default for DebugView {
@@ -39,6 +43,7 @@ impl Default for DebugView {
             scale: 1.0,
             mesh: false,
             highlight: false,
+            sh_degree: 3,
         }
     }
 }
@@ -78,18 +83,30 @@ pub struct FrameResult {
     pub image: RgbImage,
     /// Timings.
     pub timings: FrameTimings,
-    /// Gaussians in the composite (border extras included).
+    /// Gaussians in the composite (border extras included) or the scene.
     pub gaussians: usize,
+    /// Gaussians that survived culling and were drawn (CPU renderer only).
+    pub visible: Option<usize>,
+    /// The renderer's stage timings.
+    pub stages: crate::render::settings::StageTimings,
     /// Border-smoothing extras among them.
     pub extras: usize,
     /// State hash of the rendered recipe.
     pub state_hash: String,
 }
 
+/// What a workbench draws.
+enum Content {
+    /// A composite kept up to date with the recipe.
+    Composite(Box<Composer>),
+    /// A scene file's Gaussians; only the recipe's camera applies.
+    Scene(Box<ViewedScene>),
+}
+
 /// The editor's composer and painter: a composite kept up to date with the
-/// recipe and drawn with one renderer.
+/// recipe (or a scene) and drawn with one renderer.
 pub struct Workbench {
-    composer: Composer,
+    content: Content,
     painter: Painter,
 }
 
@@ -97,14 +114,33 @@ impl Workbench {
     /// A workbench on an engine with a renderer of the given kind.
     pub fn new(engine: Engine, backend: Backend) -> Result<Self> {
         Ok(Self {
-            composer: Composer::new(engine),
+            content: Content::Composite(Box::new(Composer::new(engine))),
             painter: Painter::open(backend)?,
         })
     }
 
-    /// The engine.
-    pub fn engine(&self) -> &Engine {
-        self.composer.engine()
+    /// A workbench viewing a scene with a renderer of the given kind.
+    pub fn for_scene(scene: ViewedScene, backend: Backend) -> Result<Self> {
+        Ok(Self {
+            content: Content::Scene(Box::new(scene)),
+            painter: Painter::open(backend)?,
+        })
+    }
+
+    /// The engine, when the workbench composes avatars.
+    pub fn engine(&self) -> Option<&Engine> {
+        match &self.content {
+            Content::Composite(c) => Some(c.engine()),
+            Content::Scene(_) => None,
+        }
+    }
+
+    /// The scene, when the workbench views one.
+    pub fn scene(&self) -> Option<&ViewedScene> {
+        match &self.content {
+            Content::Scene(s) => Some(s),
+            Content::Composite(_) => None,
+        }
     }
 
     /// What renders.
@@ -112,32 +148,36 @@ impl Workbench {
         self.painter.description()
     }
 
-    /// The state hash of `recipe` on this database (nothing is composed or rendered).
+    /// The state hash of `recipe` on this database (nothing is composed or
+    /// rendered); for a scene, of the file's name and size and the camera.
     pub fn state_hash(&self, recipe: &Recipe) -> Result<String> {
-        let db = self.composer.engine().database();
-        Ok(state_hash(db, &recipe.resolve(db)?))
+        match &self.content {
+            Content::Composite(composer) => {
+                let db = composer.engine().database();
+                Ok(state_hash(db, &recipe.resolve(db)?))
+            }
+            Content::Scene(viewed) => Ok(scene_view_hash(viewed, &recipe.camera)),
+        }
     }
 
     /// Renders a request.
     pub fn render(&mut self, request: &FrameRequest) -> Result<FrameResult> {
-        let (resolved, timings) = self.composer.update(&request.recipe)?;
+        let settings = settings_for(request);
+        let Content::Composite(composer) = &mut self.content else {
+            return self.render_scene(request, &settings);
+        };
+        let (resolved, timings) = composer.update(&request.recipe)?;
         let camera = resolved
             .camera
             .camera(request.width.max(1), request.height.max(1));
         let t = Instant::now();
         let image = if request.debug.mesh {
-            self.mesh_view(&camera, request)
+            mesh_view(composer, &camera, request)
         } else {
-            let mut settings = if request.exact {
-                RenderSettings::default()
-            } else {
-                RenderSettings::interactive()
-            };
-            settings.scale_modifier = request.debug.scale;
-            self.painter.render(&self.composer, &camera, &settings)?
+            self.painter.render(composer, &camera, &settings)?
         };
         let render = t.elapsed().as_secs_f64() * 1e3;
-        let composite = self.composer.composite();
+        let composite = composer.composite();
         let extras = composite
             .blocks
             .iter()
@@ -152,43 +192,60 @@ impl Workbench {
                 render,
             },
             gaussians: composite.gaussians.len(),
+            visible: (!request.debug.mesh)
+                .then(|| self.painter.visible())
+                .flatten(),
+            stages: self.painter.stage_timings(),
             extras,
-            state_hash: state_hash(self.composer.engine().database(), &resolved),
+            state_hash: state_hash(composer.engine().database(), &resolved),
         })
     }
 
-    fn mesh_view(&self, camera: &crate::scene::camera::Camera, request: &FrameRequest) -> RgbImage {
-        let model = &self.composer.engine().database().model;
-        let colours: Vec<[u8; 3]> = model
-            .triangle_regions
-            .iter()
-            .map(|r| {
-                if !request.debug.highlight {
-                    region_colour(*r)
-                } else if r.group() == request.group {
-                    [255, 200, 40]
-                } else {
-                    [110, 110, 120]
-                }
-            })
-            .collect();
-        render_mesh(
-            &self.composer.posed().vertices,
-            &model.triangles,
-            &colours,
-            camera.view_projection(),
-            camera.eye,
-            camera.width,
-            camera.height,
-        )
+    fn render_scene(
+        &mut self,
+        request: &FrameRequest,
+        settings: &RenderSettings,
+    ) -> Result<FrameResult> {
+        let Content::Scene(viewed) = &self.content else {
+            unreachable!("called for scenes only");
+        };
+        let camera = request
+            .recipe
+            .camera
+            .camera(request.width.max(1), request.height.max(1));
+        let t = Instant::now();
+        let image = self
+            .painter
+            .render_scene(&viewed.scene, &camera, settings)?;
+        Ok(FrameResult {
+            image,
+            timings: FrameTimings {
+                render: t.elapsed().as_secs_f64() * 1e3,
+                ..FrameTimings::default()
+            },
+            gaussians: viewed.scene.len(),
+            visible: self.painter.visible(),
+            stages: self.painter.stage_timings(),
+            extras: 0,
+            state_hash: scene_view_hash(viewed, &request.recipe.camera),
+        })
     }
 
-    /// Writes the current frame as a standard 3DGS PLY.
+    /// Writes the current frame as a standard 3DGS PLY (a scene: in the
+    /// format the path's extension names).
     pub fn export_ply(&mut self, recipe: &Recipe, path: &Path) -> Result<usize> {
-        self.composer.update(recipe)?;
-        let scene = self.composer.scene();
-        write_splat_ply(path, &scene)?;
-        Ok(scene.len())
+        match &mut self.content {
+            Content::Composite(composer) => {
+                composer.update(recipe)?;
+                let scene = composer.scene();
+                write_splat_ply(path, &scene)?;
+                Ok(scene.len())
+            }
+            Content::Scene(viewed) => {
+                crate::io::splat::write_scene(path, &viewed.scene)?;
+                Ok(viewed.scene.len())
+            }
+        }
     }
 
     /// Renders an exact still and writes it as PNG.
@@ -201,6 +258,56 @@ impl Workbench {
         frame.image.save_png(path)?;
         Ok(frame.image)
     }
+}
+
+/// The renderer settings a request asks for.
+fn settings_for(request: &FrameRequest) -> RenderSettings {
+    let mut settings = if request.exact {
+        RenderSettings::default()
+    } else {
+        RenderSettings::interactive()
+    };
+    settings.scale_modifier = request.debug.scale;
+    settings.sh_degree = request.debug.sh_degree;
+    settings
+}
+
+/// A scene view's state hash: the file's name and size and the camera.
+fn scene_view_hash(viewed: &ViewedScene, camera: &crate::scene::camera::Orbit) -> String {
+    let mut h = blake3::Hasher::new();
+    h.update(format!("{} {} {camera:?}", viewed.name, viewed.scene.len()).as_bytes());
+    h.finalize().to_hex()[..16].to_string()
+}
+
+/// The composite's mesh, coloured by region (the debug view).
+fn mesh_view(
+    composer: &Composer,
+    camera: &crate::scene::camera::Camera,
+    request: &FrameRequest,
+) -> RgbImage {
+    let model = &composer.engine().database().model;
+    let colours: Vec<[u8; 3]> = model
+        .triangle_regions
+        .iter()
+        .map(|r| {
+            if !request.debug.highlight {
+                region_colour(*r)
+            } else if r.group() == request.group {
+                [255, 200, 40]
+            } else {
+                [110, 110, 120]
+            }
+        })
+        .collect();
+    render_mesh(
+        &composer.posed().vertices,
+        &model.triangles,
+        &colours,
+        camera.view_projection(),
+        camera.eye,
+        camera.width,
+        camera.height,
+    )
 }
 
 /// The mean skin colour of each source (for the source strip's swatches).

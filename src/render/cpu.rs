@@ -101,6 +101,11 @@ impl CpuRenderer {
         &self.keys
     }
 
+    /// Gaussians that survived culling in the last frame.
+    pub fn visible(&self) -> usize {
+        self.keys.par_iter().filter(|k| k[3] == 1).count()
+    }
+
     /// Keeps the Gaussians to render (call when the selection changes).
     pub fn set_gaussians(&mut self, set: &GaussianSet) {
         self.prepared = (0..set.len())

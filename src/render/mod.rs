@@ -126,6 +126,15 @@ impl SplatRenderer {
         }
     }
 
+    /// Gaussians that survived culling in the last frame (the CPU renderer
+    /// counts them; the GPU one does not read the count back).
+    pub fn visible(&self) -> Option<usize> {
+        match self {
+            SplatRenderer::Gpu(_) => None,
+            SplatRenderer::Cpu(c) => Some(c.visible()),
+        }
+    }
+
     /// What renders: adapter name or "CPU".
     pub fn description(&self) -> String {
         match self {

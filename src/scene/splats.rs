@@ -4,6 +4,7 @@ use glam::{Quat, Vec3};
 
 use crate::avatar::binding::{local_to_world, normalize_quat, TriangleFrame};
 use crate::avatar::gaussians::{logit, sh_coefficients, sigmoid, GaussianSet};
+use crate::scene::camera::{Orbit, UpAxis};
 
 /// Share of the opacity-weighted means left out on each side of each axis
 /// when framing a scene ([`SplatScene::robust_bounds`]).
@@ -129,6 +130,20 @@ impl SplatScene {
             .filter(|p| p.cmpge(core_lo).all() && p.cmple(core_hi).all());
         let first = inside.clone().next()?;
         Some(inside.fold((first, first), |(a, b), p| (a.min(p), b.max(p))))
+    }
+
+    /// The camera a scene opens with: a field of view of `fov_deg` (40° when
+    /// None) from the front of the orbit's frame, with `up` on screen, framing
+    /// the subject without its floaters ([`SplatScene::robust_bounds`]). None
+    /// for a scene without a finite mean.
+    pub fn home_orbit(&self, fov_deg: Option<f32>, up: UpAxis) -> Option<Orbit> {
+        let (lo, hi) = self.robust_bounds()?;
+        let start = Orbit {
+            fov_deg: fov_deg.unwrap_or(40.0),
+            up,
+            ..Orbit::STUDY
+        };
+        Some(start.framing(lo, hi))
     }
 
     /// The scene as Gaussians bound to one identity frame ([`IDENTITY_FRAME`]), so a

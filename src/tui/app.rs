@@ -10,7 +10,9 @@ use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
-use crossterm::event::{self, Event, KeyCode, KeyEventKind};
+use crossterm::event::{
+    self, Event, KeyCode, KeyEventKind, MouseButton, MouseEvent, MouseEventKind,
+};
 use crossterm::{cursor, execute, terminal};
 use ratatui::backend::CrosstermBackend;
 use ratatui::Terminal;
@@ -21,7 +23,6 @@ use super::graphics::{
 };
 use super::keymap::Keymap;
 use super::view::{draw, layout, InfoPanel, ViewModel};
-use crate::compose::engine::Engine;
 use crate::editor::command::{complete, Command};
 use crate::editor::pacing::next_scale;
 use crate::editor::replay::replay_commands;
@@ -32,15 +33,15 @@ use crate::error::{Error, Result};
 use crate::pipeline::workbench::{
     check_parent, source_swatches, FrameRequest, FrameResult, Workbench,
 };
-use crate::pipeline::DatabaseSpec;
+use crate::pipeline::Subject;
 use crate::render::image::RgbImage;
 use crate::render::Backend;
 
-/// Options of `visage edit`.
+/// Options of `visage edit` and `visage view`.
 #[derive(Clone, Debug)]
 pub struct EditOptions {
-    /// Database.
-    pub db: DatabaseSpec,
+    /// The database to compose from, or the scene to view.
+    pub subject: Subject,
     /// Session to resume.
     pub session: Option<PathBuf>,
     /// Journal to record to.
@@ -203,7 +204,12 @@ fn restore_terminal(kitty: bool) {
         let _ = out.write_all(&kitty_delete());
     }
     let _ = out.write_all(SYNC_END);
-    let _ = execute!(out, terminal::LeaveAlternateScreen, cursor::Show);
+    let _ = execute!(
+        out,
+        event::DisableMouseCapture,
+        terminal::LeaveAlternateScreen,
+        cursor::Show
+    );
     let _ = terminal::disable_raw_mode();
     let _ = out.flush();
 }
@@ -222,15 +228,18 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
         check_parent(r)?;
     }
     let resume = options.session.as_deref().map(Session::load).transpose()?;
-    let db_args = match &resume {
-        Some(s) => s.header.database(),
-        None => options.db.clone(),
+    let subject = match &resume {
+        Some(s) => s.header.subject(),
+        None => options.subject.clone(),
     };
-    eprintln!("visage: opening the {} database…", db_args.db);
-    let (db, _) = db_args.load()?;
-    let engine = Engine::new(db)?;
-    let swatches = source_swatches(&engine);
-    let mut editor = Editor::for_engine(&engine);
+    let keymap = match subject {
+        Subject::Avatars(_) => keymap,
+        Subject::Scene(_) => Keymap::load_viewer(options.keymap.as_deref())?,
+    };
+    eprintln!("visage: opening {}…", subject.describe());
+    let bench = open_with_progress(&subject, options.renderer)?;
+    let swatches = bench.engine().map(source_swatches).unwrap_or_default();
+    let mut editor = Editor::for_bench(&bench);
     if let Some(session) = &resume {
         let failed = replay_commands(session, &mut editor);
         editor.state.status = format!(
@@ -239,14 +248,13 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
             editor.tick()
         );
     }
-    let bench = Workbench::new(engine, options.renderer)?;
     let renderer_name = bench.renderer_description();
     let graphics = detect(options.graphics);
     let size = terminal::size().unwrap_or((120, 40));
     let mut recorder = match &options.record {
         Some(path) => Some(Recorder::open(
             path,
-            &SessionHeader::new(&db_args, size, graphics.protocol),
+            &SessionHeader::for_subject(&subject, size, graphics.protocol),
         )?),
         None => None,
     };
@@ -272,6 +280,7 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
     execute!(
         std::io::stdout(),
         terminal::EnterAlternateScreen,
+        event::EnableMouseCapture,
         cursor::Hide
     )
     .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
@@ -304,6 +313,7 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
         fps_clock: Instant::now(),
         last_exact: false,
         edit_time: None,
+        drag_from: None,
     };
     for command in options.initial {
         app.run(command);
@@ -318,6 +328,39 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
     recorder = app.recorder.take();
     drop(recorder);
     result
+}
+
+/// Opens the subject, with a progress bar on standard error while a scene
+/// file loads (big scenes take a while to read from a slow disk).
+fn open_with_progress(subject: &Subject, renderer: Backend) -> Result<Workbench> {
+    let bar = indicatif::ProgressBar::new(0).with_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} reading {bytes}/{total_bytes} [{bar:30}] {bytes_per_sec}, {eta} left",
+        )
+        .expect("the template is valid")
+        .progress_chars("=> "),
+    );
+    let progress = |done: u64, all: u64| {
+        bar.set_length(all);
+        bar.set_position(done);
+    };
+    let bench = subject.open(renderer, &progress);
+    bar.finish_and_clear();
+    bench
+}
+
+/// The camera command for a drag of `delta` cells with a button (a cell is
+/// about twice as tall as wide, so rows count double).
+fn drag_command(button: MouseButton, delta: (f32, f32)) -> Option<Command> {
+    let (dx, dy) = (delta.0, 2.0 * delta.1);
+    if dx == 0.0 && dy == 0.0 {
+        return None;
+    }
+    Some(match button {
+        MouseButton::Left => Command::Orbit(-1.5 * dx, 1.5 * dy),
+        MouseButton::Right => Command::Look(dx, -dy),
+        MouseButton::Middle => Command::Fly(0.0, -0.01 * dx, 0.01 * dy),
+    })
 }
 
 /// Reads terminal events on their own thread. crossterm's `poll` can spin
@@ -377,6 +420,8 @@ struct App {
     fps_clock: Instant,
     last_exact: bool,
     edit_time: Option<(u64, Instant)>,
+    /// Where the mouse was at the last drag event.
+    drag_from: Option<(f32, f32)>,
 }
 
 impl App {
@@ -399,6 +444,7 @@ impl App {
                 .min(Duration::from_millis(10));
             match input.recv_timeout(timeout) {
                 Ok(Event::Key(k)) if k.kind != KeyEventKind::Release => self.on_key(k),
+                Ok(Event::Mouse(m)) => self.on_mouse(m),
                 Ok(Event::Resize(..)) => {
                     self.version += 1;
                     self.image_dirty = true;
@@ -474,6 +520,34 @@ impl App {
             return;
         }
         if let Some(c) = self.keymap.lookup(&key).cloned() {
+            self.run(c);
+        }
+    }
+
+    /// Mouse drags move the camera (left orbits, right looks, middle pans) and
+    /// the wheel zooms, each as the command a key would run, so sessions
+    /// journal them.
+    fn on_mouse(&mut self, event: MouseEvent) {
+        let at = (event.column as f32, event.row as f32);
+        let command = match event.kind {
+            MouseEventKind::Down(_) => {
+                self.drag_from = Some(at);
+                None
+            }
+            MouseEventKind::Up(_) => {
+                self.drag_from = None;
+                None
+            }
+            MouseEventKind::Drag(button) => {
+                let from = self.drag_from.replace(at).unwrap_or(at);
+                drag_command(button, (at.0 - from.0, at.1 - from.1))
+            }
+            MouseEventKind::ScrollUp => Some(Command::Zoom(0.9)),
+            MouseEventKind::ScrollDown => Some(Command::Zoom(1.0 / 0.9)),
+            _ => None,
+        };
+        if let Some(c) = command {
+            self.last_input = Instant::now();
             self.run(c);
         }
     }
@@ -583,6 +657,8 @@ impl App {
                     }
                     self.info = InfoPanel {
                         gaussians: result.gaussians,
+                        visible: result.visible,
+                        stages: result.stages,
                         extras: result.extras,
                         timings: result.timings,
                         encode_ms,
@@ -649,5 +725,31 @@ impl App {
             .write_all(&out)
             .and_then(|_| stdout.flush())
             .map_err(|e| Error::terminal(format!("cannot write to the terminal: {e}")))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Drags move the camera the way the hand moves: dragging right turns the
+    /// subject to the right (the camera orbits left), dragging down shows it
+    /// from above; a right drag turns the view with the hand; a middle drag
+    /// grabs the scene.
+    #[test]
+    fn drags_become_camera_commands() {
+        assert_eq!(
+            drag_command(MouseButton::Left, (2.0, 1.0)),
+            Some(Command::Orbit(-3.0, 3.0))
+        );
+        assert_eq!(
+            drag_command(MouseButton::Right, (3.0, -1.0)),
+            Some(Command::Look(3.0, 2.0))
+        );
+        assert_eq!(
+            drag_command(MouseButton::Middle, (100.0, 0.0)),
+            Some(Command::Fly(0.0, -1.0, 0.0))
+        );
+        assert_eq!(drag_command(MouseButton::Left, (0.0, 0.0)), None);
     }
 }

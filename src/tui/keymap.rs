@@ -2,7 +2,9 @@
 //! order — the built-in `keymaps/default.toml`, the user's
 //! `$XDG_CONFIG_HOME/visage/keymap.toml` (or `~/.config/visage/keymap.toml`), then
 //! `--keymap FILE` — a later layer's binding replaces an earlier one, and `""`
-//! removes it. Every error names the file and line.
+//! removes it. Every error names the file and line. A file's `[keys]` table
+//! binds the avatar editor's keys, its `[viewer]` table the scene viewer's
+//! (built in: `keymaps/viewer.toml`, WASD free flight).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -16,6 +18,8 @@ use crate::error::{Error, Result};
 
 /// The built-in keymap.
 pub const DEFAULT_KEYMAP: &str = include_str!("../../keymaps/default.toml");
+/// The built-in keymap of the scene viewer.
+pub const VIEWER_KEYMAP: &str = include_str!("../../keymaps/viewer.toml");
 
 /// A key with modifiers, in a normalised form (letters carry shift in their case).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -207,12 +211,16 @@ impl std::fmt::Display for KeyCombo {
 struct KeymapFile {
     #[serde(default)]
     keys: BTreeMap<Spanned<String>, Spanned<String>>,
+    #[serde(default)]
+    viewer: BTreeMap<Spanned<String>, Spanned<String>>,
 }
 
 /// Key bindings: key → command line.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Keymap {
     bindings: BTreeMap<KeyCombo, (String, Command)>,
+    /// Binds the scene viewer (files' `[viewer]` tables) rather than the editor.
+    viewer: bool,
 }
 
 fn line_of(text: &str, offset: usize) -> usize {
@@ -228,16 +236,36 @@ impl Keymap {
         k
     }
 
+    /// The scene viewer's built-in keymap alone.
+    pub fn builtin_viewer() -> Keymap {
+        let mut k = Keymap {
+            viewer: true,
+            ..Keymap::default()
+        };
+        k.merge_text(VIEWER_KEYMAP, "keymaps/viewer.toml")
+            .expect("the built-in viewer keymap is valid");
+        k
+    }
+
     /// The built-in keymap, the user's config file if present, then `extra`.
     pub fn load(extra: Option<&Path>) -> Result<Keymap> {
-        let mut k = Keymap::builtin();
+        Keymap::builtin().with_layers(extra)
+    }
+
+    /// The scene viewer's keymap: built in, the user's `[viewer]` table, then
+    /// `extra`'s.
+    pub fn load_viewer(extra: Option<&Path>) -> Result<Keymap> {
+        Keymap::builtin_viewer().with_layers(extra)
+    }
+
+    fn with_layers(mut self, extra: Option<&Path>) -> Result<Keymap> {
         if let Some(user) = user_keymap_path().filter(|p| p.exists()) {
-            k.merge_file(&user)?;
+            self.merge_file(&user)?;
         }
         if let Some(path) = extra {
-            k.merge_file(path)?;
+            self.merge_file(path)?;
         }
-        Ok(k)
+        Ok(self)
     }
 
     /// Applies a keymap file over this one.
@@ -253,7 +281,8 @@ impl Keymap {
             let line = e.span().map_or(1, |s| line_of(text, s.start));
             Error::input(format!("keymap {name}:{line}: {}", e.message().trim()))
         })?;
-        for (key, command) in file.keys {
+        let table = if self.viewer { file.viewer } else { file.keys };
+        for (key, command) in table {
             let line = line_of(text, key.span().start);
             let combo = KeyCombo::parse(key.get_ref()).ok_or_else(|| {
                 Error::input(format!(
@@ -379,7 +408,7 @@ mod tests {
             "{e}"
         );
         let e = k
-            .merge_text("[keys]\n\n\"x\" = \"fly\"\n", "mine.toml")
+            .merge_text("[keys]\n\n\"x\" = \"soar\"\n", "mine.toml")
             .unwrap_err()
             .to_string();
         assert!(

@@ -11,7 +11,7 @@ use ratatui::Frame;
 
 use super::graphics::{draw_halfblocks, reserve_cells, Protocol};
 use super::keymap::Keymap;
-use crate::editor::state::{Catalog, EditorState};
+use crate::editor::state::{Catalog, EditorState, SceneSummary};
 use crate::model::regions::Group;
 use crate::pipeline::workbench::FrameTimings;
 use crate::render::image::RgbImage;
@@ -22,8 +22,12 @@ pub const MIN_SIZE: (u16, u16) = (50, 14);
 /// Figures for the info panel.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct InfoPanel {
-    /// Gaussians in the composite.
+    /// Gaussians in the composite or scene.
     pub gaussians: usize,
+    /// Gaussians drawn after culling, where the renderer counts them.
+    pub visible: Option<usize>,
+    /// The renderer's stage timings.
+    pub stages: crate::render::settings::StageTimings,
     /// Border extras among them.
     pub extras: usize,
     /// Timings of the last frame.
@@ -107,12 +111,21 @@ pub fn draw(frame: &mut Frame, vm: &ViewModel) {
         frame.render_widget(Paragraph::new(msg).wrap(Wrap { trim: true }), area);
         return;
     };
-    draw_sources(frame, areas.sources, vm);
-    draw_viewport(frame, areas, vm);
-    draw_panel(frame, areas.panel, vm);
+    match &vm.catalog.scene {
+        Some(scene) => {
+            draw_scene_title(frame, areas.sources, scene, vm.keymap);
+            draw_viewport(frame, areas, vm);
+            draw_scene_panel(frame, areas.panel, scene, vm);
+        }
+        None => {
+            draw_sources(frame, areas.sources, vm);
+            draw_viewport(frame, areas, vm);
+            draw_panel(frame, areas.panel, vm);
+        }
+    }
     draw_status(frame, areas.status, vm);
     if vm.state.help {
-        draw_help(frame, area, vm.keymap);
+        draw_help(frame, area, vm.keymap, vm.catalog.scene.is_some());
     }
 }
 
@@ -266,6 +279,73 @@ fn draw_panel(frame: &mut Frame, area: Rect, vm: &ViewModel) {
     frame.render_widget(Paragraph::new(lines).block(block), area);
 }
 
+/// The scene viewer's top line: the file and the movement keys.
+fn draw_scene_title(frame: &mut Frame, area: Rect, scene: &SceneSummary, keymap: &Keymap) {
+    let key = |line: &str| keymap.key_for(line).unwrap_or_else(|| "-".into());
+    let hint = format!(
+        " {}/{}/{}/{} fly, arrows look, {} SH, drag: orbit (left) look (right) pan (middle) ",
+        key("fly 0.05 0 0"),
+        key("fly 0 -0.05 0"),
+        key("fly -0.05 0 0"),
+        key("fly 0 0.05 0"),
+        key("sh-degree"),
+    );
+    let block = Block::default()
+        .borders(Borders::ALL)
+        .title(format!(" {} ", scene.name));
+    frame.render_widget(Paragraph::new(hint).block(block), area);
+}
+
+/// The scene viewer's panel: the scene, the camera, appearance and figures.
+fn draw_scene_panel(frame: &mut Frame, area: Rect, scene: &SceneSummary, vm: &ViewModel) {
+    let s = vm.state;
+    let c = &s.recipe.camera;
+    let i = vm.info;
+    let [tx, ty, tz] = c.target;
+    let visible = i.visible.map_or_else(|| "-".to_string(), |v| v.to_string());
+    let lines = vec![
+        heading("scene"),
+        Line::raw(format!(" {} Gaussians", scene.gaussians)),
+        Line::raw(format!(" SH degree {}", scene.sh_degree)),
+        heading("camera"),
+        Line::raw(format!(
+            " yaw {:.0}° pitch {:.0}° fov {:.1}° up {}",
+            c.yaw_deg,
+            c.pitch_deg,
+            c.fov_deg,
+            c.up.name()
+        )),
+        Line::raw(format!(
+            " r {:.3}  target {tx:.2},{ty:.2},{tz:.2}",
+            c.radius
+        )),
+        heading("appearance"),
+        Line::raw(format!(
+            " SH {} of {}  scale {:.2}",
+            s.debug.sh_degree.min(scene.sh_degree),
+            scene.sh_degree,
+            s.debug.scale
+        )),
+        heading("info"),
+        Line::raw(format!(" {visible} of {} drawn", i.gaussians)),
+        Line::raw(format!(
+            " project {:.1} sort {:.1} raster {:.1} ms",
+            i.stages.project, i.stages.sort, i.stages.rasterize
+        )),
+        Line::raw(format!(
+            " render {:.1} enc {:.1} ms",
+            i.timings.render, i.encode_ms
+        )),
+        Line::raw(format!(
+            " {:.1} FPS at {}x{} px",
+            i.fps, i.image_size.0, i.image_size.1
+        )),
+        Line::raw(format!(" {}", i.renderer)),
+    ];
+    let block = Block::default().borders(Borders::ALL).title(" scene ");
+    frame.render_widget(Paragraph::new(lines).block(block), area);
+}
+
 fn draw_status(frame: &mut Frame, area: Rect, vm: &ViewModel) {
     let line = match &vm.state.prompt {
         Some(text) => Line::from(vec![
@@ -293,7 +373,7 @@ fn draw_status(frame: &mut Frame, area: Rect, vm: &ViewModel) {
 }
 
 /// The help overlay: every binding of the keymap, in columns.
-fn draw_help(frame: &mut Frame, area: Rect, keymap: &Keymap) {
+fn draw_help(frame: &mut Frame, area: Rect, keymap: &Keymap, scene: bool) {
     let popup = Rect {
         x: area.x + 2,
         y: area.y + 1,
@@ -312,7 +392,7 @@ fn draw_help(frame: &mut Frame, area: Rect, keymap: &Keymap) {
     entries.extend(
         crate::editor::command::COMMANDS
             .iter()
-            .filter(|c| !bound.contains(&c.name))
+            .filter(|c| !(bound.contains(&c.name) || scene && c.avatar))
             .map(|c| format!("{:>11}  {} {}", ":", c.name, c.synopsis)),
     );
     let inner_h = popup.height.saturating_sub(2).max(1) as usize;

@@ -1,0 +1,195 @@
+//! The scene viewer without a terminal: sessions of camera commands on a
+//! scene file replay headless, show what `visage render --ply` shows for the
+//! same camera, and refuse avatar commands; bad files fail cleanly.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{temp_path, visage};
+use visage::render::image::{psnr, RgbImage};
+
+/// A 20k-Gaussian SH-3 scene with floaters, written as a PLY.
+fn scene_file(name: &str) -> PathBuf {
+    let path = temp_path("view", name);
+    let scene = visage::scene::synthetic::synthetic_scene(20_000, 8);
+    visage::io::ply::write_splat_ply(&path, &scene).unwrap();
+    path
+}
+
+fn write_session(name: &str, scene: &Path, body: &str) -> PathBuf {
+    let path = temp_path("view", name);
+    let text = format!(
+        "visage-session 1\nscene \"{}\" up=+y\nrender 96x64\n---\n{body}",
+        scene.display()
+    );
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn png(path: &Path) -> RgbImage {
+    RgbImage::load_png(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn replay_json(session: &Path, out: &Path) -> serde_json::Value {
+    let o = visage(&[
+        "replay",
+        session.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+#[test]
+fn camera_sessions_on_a_scene_replay_like_render() {
+    let scene = scene_file("garden.ply");
+    let session = write_session(
+        "camera.vsg",
+        &scene,
+        "0 snapshot home.png\n\
+         0 set-camera yaw=25 pitch=-10 radius=3\n\
+         0 snapshot orbit.png\n\
+         0 sh-degree 0\n\
+         0 snapshot dc.png\n\
+         0 sh-degree 3\n\
+         0 fly 0.2 0.1 0\n\
+         0 look -10 5\n\
+         0 snapshot flown.png\n\
+         0 set-gaussians nose ada\n\
+         0 debug-scale 0.5\n\
+         0 snapshot thin.png\n",
+    );
+    let out = temp_path("view", "out");
+    std::fs::create_dir_all(&out).unwrap();
+    let report = replay_json(&session, &out);
+    assert_eq!(report["snapshots"].as_array().unwrap().len(), 5);
+    let failures = report["failures"].as_array().unwrap();
+    assert_eq!(failures.len(), 1, "{failures:?}");
+    assert!(failures[0].as_str().unwrap().contains("scene view"));
+
+    // The opening view is render's framing; set-camera is render's flags.
+    let reference = |name: &str, flags: &[&str]| {
+        let path = out.join(name);
+        let mut args = vec![
+            "render",
+            "--ply",
+            scene.to_str().unwrap(),
+            "--renderer",
+            "cpu",
+            "--size",
+            "96x64",
+            "-o",
+            path.to_str().unwrap(),
+        ];
+        args.extend_from_slice(flags);
+        let o = visage(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        png(&path)
+    };
+    let home = png(&out.join("home.png"));
+    assert_eq!(home.pixels, reference("home-ref.png", &[]).pixels);
+    let orbit = png(&out.join("orbit.png"));
+    let orbit_ref = reference(
+        "orbit-ref.png",
+        &["--yaw", "25", "--pitch", "-10", "--radius", "3"],
+    );
+    assert_eq!(orbit.pixels, orbit_ref.pixels);
+    // The SH degree and the scale change the picture; flying moves it.
+    let changed = |a: &RgbImage, b: &RgbImage| psnr(a, b).unwrap_or(f64::INFINITY) < 45.0;
+    assert!(changed(&png(&out.join("dc.png")), &orbit));
+    assert!(changed(&png(&out.join("flown.png")), &orbit));
+    assert!(changed(
+        &png(&out.join("thin.png")),
+        &png(&out.join("flown.png"))
+    ));
+
+    // Deterministic: a second replay writes the same pictures.
+    let again = temp_path("view", "again");
+    std::fs::create_dir_all(&again).unwrap();
+    let second = replay_json(&session, &again);
+    assert_eq!(second["state_hash"], report["state_hash"]);
+    for name in ["flown.png", "thin.png"] {
+        assert_eq!(png(&out.join(name)).pixels, png(&again.join(name)).pixels);
+    }
+    std::fs::remove_dir_all(&out).ok();
+    std::fs::remove_dir_all(&again).ok();
+    std::fs::remove_file(&scene).ok();
+}
+
+/// A y-down capture (COLMAP / INRIA convention) opened with up=-y shows what
+/// `render --up -y` shows: the subject the right way up.
+#[test]
+fn y_down_scenes_open_upright() {
+    let scene = scene_file("ydown.ply");
+    let session = temp_path("view", "ydown.vsg");
+    std::fs::write(
+        &session,
+        format!(
+            "visage-session 1\nscene \"{}\" up=-y\nrender 80x60\n---\n0 snapshot v.png\n",
+            scene.display()
+        ),
+    )
+    .unwrap();
+    let out = temp_path("view", "ydown-out");
+    std::fs::create_dir_all(&out).unwrap();
+    replay_json(&session, &out);
+    let reference = out.join("ref.png");
+    let o = visage(&[
+        "render",
+        "--ply",
+        scene.to_str().unwrap(),
+        "--renderer",
+        "cpu",
+        "--up",
+        "-y",
+        "--size",
+        "80x60",
+        "-o",
+        reference.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(png(&out.join("v.png")).pixels, png(&reference).pixels);
+    std::fs::remove_dir_all(&out).ok();
+    std::fs::remove_file(&scene).ok();
+}
+
+#[test]
+fn bad_scene_files_fail_with_one_line_and_exit_2() {
+    let garbage = temp_path("view", "garbage.ply");
+    std::fs::write(
+        &garbage,
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 5\n",
+    )
+    .unwrap();
+    let empty_splat = temp_path("view", "odd.splat");
+    std::fs::write(&empty_splat, [0u8; 33]).unwrap();
+    let missing = temp_path("view", "missing.ply");
+    for (file, needle) in [
+        (&garbage, "garbage.ply"),
+        (&empty_splat, "32-byte"),
+        (&missing, "not a file"),
+    ] {
+        // Replay opens the file before any terminal is needed.
+        let session = write_session("bad.vsg", file, "0 orbit 5 0\n");
+        let o = visage(&["replay", session.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{}: {err}", file.display());
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        if file != &missing {
+            assert!(err.contains(needle), "{err}");
+        }
+        // The viewer itself refuses before touching the terminal.
+        let o = visage(&["view", file.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains(needle) || err.contains("needs a terminal"),
+            "{err}"
+        );
+    }
+    std::fs::remove_file(&garbage).ok();
+    std::fs::remove_file(&empty_splat).ok();
+}
