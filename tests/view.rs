@@ -193,3 +193,46 @@ fn bad_scene_files_fail_with_one_line_and_exit_2() {
     std::fs::remove_file(&garbage).ok();
     std::fs::remove_file(&empty_splat).ok();
 }
+
+/// Files other tools wrote open in the viewer and show what `render` shows:
+/// plyfile's PLY, ply2splat's .splat and splat-transform's compressed PLY.
+#[test]
+fn files_from_other_tools_open_in_the_viewer() {
+    let out = temp_path("view", "tools");
+    std::fs::create_dir_all(&out).unwrap();
+    for name in ["ring.ply", "ring.splat", "ring.compressed.ply", "ring3.ply"] {
+        let file = std::fs::canonicalize(Path::new("tests/data/splat").join(name)).unwrap();
+        let snap = format!("{}.png", name.replace('.', "-"));
+        let session = write_session(
+            &format!("{name}.vsg"),
+            &file,
+            &format!("0 orbit 30 10\n0 snapshot {snap}\n"),
+        );
+        let report = replay_json(&session, &out);
+        assert!(report["failures"].as_array().unwrap().is_empty(), "{name}");
+        let shown = png(&out.join(&snap));
+        let reference = out.join(format!("ref-{snap}"));
+        let o = visage(&[
+            "render",
+            "--ply",
+            file.to_str().unwrap(),
+            "--renderer",
+            "cpu",
+            "--yaw",
+            "30",
+            "--pitch",
+            "10",
+            "--size",
+            "96x64",
+            "-o",
+            reference.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(shown.pixels, png(&reference).pixels, "{name}");
+        assert!(
+            shown.pixels.iter().any(|&p| p > 40),
+            "{name} shows something"
+        );
+    }
+    std::fs::remove_dir_all(&out).ok();
+}
