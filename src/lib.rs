@@ -18,4 +18,5 @@ pub mod pipeline;
 pub mod render;
 pub mod scene;
 pub mod text;
+pub mod train;
 pub mod tui;

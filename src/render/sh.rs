@@ -25,51 +25,63 @@ pub const C3: [f64; 7] = [
     -0.590_043_589_926_643_5,
 ];
 
-/// Defines an SH basis function for one float type (f64 for the reference,
-/// f32 for the CPU renderer): the same polynomials, written once.
+/// Defines an SH basis function for one number type (f64 for the reference,
+/// f32 for the CPU renderer, the trainer's dual numbers): the same
+/// polynomials, written once. `$constant` turns an f64 constant into the type.
 macro_rules! sh_basis {
-    ($(#[doc = $doc:expr])* $name:ident, $t:ty) => {
+    ($(#[doc = $doc:expr])* $name:ident, $t:ty, $constant:expr) => {
         $(#[doc = $doc])*
-        #[allow(clippy::unnecessary_cast)]
+        #[allow(clippy::unnecessary_cast, clippy::redundant_closure_call)]
         pub fn $name(degree: u8, d: [$t; 3]) -> [$t; 16] {
+            let k = $constant;
             let [x, y, z] = d;
-            let (c1, c2, c3) = (C1 as $t, C2.map(|c| c as $t), C3.map(|c| c as $t));
-            let mut b = [0.0; 16];
-            b[0] = C0 as $t;
+            let (c2, c3) = (
+                $crate::render::sh::C2.map(k),
+                $crate::render::sh::C3.map(k),
+            );
+            let c1 = k($crate::render::sh::C1);
+            let mut b = [k(0.0); 16];
+            b[0] = k($crate::render::sh::C0);
             if degree >= 1 {
-                b[1] = -c1 * y;
+                b[1] = -(c1 * y);
                 b[2] = c1 * z;
-                b[3] = -c1 * x;
+                b[3] = -(c1 * x);
             }
             if degree >= 2 {
                 let (xx, yy, zz) = (x * x, y * y, z * z);
+                let (two, three, four) = (k(2.0), k(3.0), k(4.0));
                 b[4] = c2[0] * x * y;
                 b[5] = c2[1] * y * z;
-                b[6] = c2[2] * (2.0 * zz - xx - yy);
+                b[6] = c2[2] * (two * zz - xx - yy);
                 b[7] = c2[3] * x * z;
                 b[8] = c2[4] * (xx - yy);
                 if degree >= 3 {
-                    b[9] = c3[0] * y * (3.0 * xx - yy);
+                    b[9] = c3[0] * y * (three * xx - yy);
                     b[10] = c3[1] * x * y * z;
-                    b[11] = c3[2] * y * (4.0 * zz - xx - yy);
-                    b[12] = c3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
-                    b[13] = c3[4] * x * (4.0 * zz - xx - yy);
+                    b[11] = c3[2] * y * (four * zz - xx - yy);
+                    b[12] = c3[3] * z * (two * zz - three * xx - three * yy);
+                    b[13] = c3[4] * x * (four * zz - xx - yy);
                     b[14] = c3[5] * z * (xx - yy);
-                    b[15] = c3[6] * x * (xx - 3.0 * yy);
+                    b[15] = c3[6] * x * (xx - three * yy);
                 }
             }
             b
         }
     };
 }
+pub(crate) use sh_basis;
 
 sh_basis!(
     /// The SH basis functions for direction `d` (unit), up to `degree`.
-    basis, f64
+    basis,
+    f64,
+    |c: f64| c
 );
 sh_basis!(
     /// [`basis`] in f32.
-    basis_f32, f32
+    basis_f32,
+    f32,
+    |c: f64| c as f32
 );
 
 /// Colour of a Gaussian seen along `d`, from its coefficient-major SH (`[coef][rgb]`).

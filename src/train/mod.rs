@@ -1,0 +1,11 @@
+//! Making source avatars: a GaussianAvatars-style trainer. This layer holds
+//! the differentiable renderer — dual-number geometry ([`dual`], [`project`]),
+//! a tile rasteriser with its backward pass ([`raster`]) and the parameter
+//! bookkeeping that joins them ([`model`]). It sits above `render` because it
+//! shares the renderers' numerics (projection constants, SH basis) and is
+//! checked against them.
+
+pub mod dual;
+pub mod model;
+pub mod project;
+pub mod raster;

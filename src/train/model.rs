@@ -1,0 +1,424 @@
+//! A trainable avatar's parameters and the differentiable render of them:
+//! project every Gaussian through its triangle's frame ([`project`]),
+//! rasterise ([`raster`]), and on the way back combine the rasteriser's
+//! per-splat gradients with each projection's Jacobian into gradients for the
+//! stored parameters — local position, log-scale, raw quaternion, opacity
+//! logit and SH coefficients.
+
+use rayon::prelude::*;
+
+use super::project::{project, Geometry, Projected, TrainCamera, GEOMETRY};
+use super::raster::{self, Rasterized, Splat};
+use crate::avatar::binding::TriangleFrame;
+use crate::avatar::gaussians::GaussianSet;
+
+/// SH coefficients stored per Gaussian (degree 3, 16 × RGB), whatever degree
+/// is active.
+pub const SH_STRIDE: usize = 48;
+
+/// Triangle-bound Gaussians in f64, as the optimiser changes them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Trainable {
+    /// Parent triangle of each Gaussian.
+    pub binding: Vec<u32>,
+    /// Geometry per Gaussian.
+    pub geometry: Vec<Geometry>,
+    /// Opacity before the sigmoid.
+    pub opacity_logit: Vec<f64>,
+    /// SH coefficients, [`SH_STRIDE`] per Gaussian, coefficient-major.
+    pub sh: Vec<f64>,
+    /// The SH degree drawn (raised during training).
+    pub sh_degree: u8,
+}
+
+/// ∂loss/∂ every stored parameter, plus the screen-space gradient norms
+/// densification reads.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Gradients {
+    /// Per Gaussian: position (3), log-scale (3), quaternion (4).
+    pub geometry: Vec<[f64; GEOMETRY]>,
+    /// Per Gaussian.
+    pub opacity_logit: Vec<f64>,
+    /// Same layout as [`Trainable::sh`].
+    pub sh: Vec<f64>,
+    /// Per Gaussian: |∂loss/∂ projected centre| (0 when not drawn).
+    pub screen: Vec<f64>,
+}
+
+impl Trainable {
+    /// Gaussians in the set, degree-3 storage.
+    pub fn from_set(set: &GaussianSet) -> Self {
+        let stride = set.sh_stride();
+        let mut sh = vec![0.0; set.len() * SH_STRIDE];
+        for i in 0..set.len() {
+            for (k, &c) in set.sh[i * stride..(i + 1) * stride].iter().enumerate() {
+                sh[i * SH_STRIDE + k] = c as f64;
+            }
+        }
+        Self {
+            binding: set.binding.clone(),
+            geometry: (0..set.len())
+                .map(|i| {
+                    let q = set.rotation[i];
+                    Geometry {
+                        position: set.position[i].as_dvec3().to_array(),
+                        log_scale: set.log_scale[i].as_dvec3().to_array(),
+                        rotation: [q.w, q.x, q.y, q.z].map(f64::from),
+                    }
+                })
+                .collect(),
+            opacity_logit: set.opacity_logit.iter().map(|&o| o as f64).collect(),
+            sh,
+            sh_degree: set.sh_degree,
+        }
+    }
+
+    /// The Gaussians as a set of the given SH degree (f32, for export and the
+    /// renderers).
+    pub fn to_set(&self, sh_degree: u8) -> GaussianSet {
+        let stride = 3 * (sh_degree as usize + 1).pow(2);
+        let mut set = GaussianSet::with_degree(sh_degree);
+        set.binding = self.binding.clone();
+        for (i, g) in self.geometry.iter().enumerate() {
+            set.position.push(glam::DVec3::from(g.position).as_vec3());
+            set.log_scale.push(glam::DVec3::from(g.log_scale).as_vec3());
+            let [w, x, y, z] = g.rotation.map(|c| c as f32);
+            set.rotation.push(glam::Quat::from_xyzw(x, y, z, w));
+            set.opacity_logit.push(self.opacity_logit[i] as f32);
+            set.sh.extend(
+                self.sh[i * SH_STRIDE..i * SH_STRIDE + stride]
+                    .iter()
+                    .map(|&c| c as f32),
+            );
+        }
+        set
+    }
+
+    /// Number of Gaussians.
+    pub fn len(&self) -> usize {
+        self.binding.len()
+    }
+
+    /// True when there are none.
+    pub fn is_empty(&self) -> bool {
+        self.binding.is_empty()
+    }
+}
+
+/// A differentiable render: the image and what its backward pass needs.
+pub struct Render {
+    projected: Vec<Projected>,
+    /// Gaussian index of each drawn splat.
+    drawn: Vec<u32>,
+    splats: Vec<Splat>,
+    raster: Rasterized,
+}
+
+fn sigmoid(x: f64) -> f64 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+impl Render {
+    /// Renders `model` on the posed triangle `frames` from `camera`.
+    pub fn new(
+        model: &Trainable,
+        frames: &[TriangleFrame],
+        camera: &TrainCamera,
+        background: [f64; 3],
+    ) -> Self {
+        let last = frames.len().saturating_sub(1);
+        let projected: Vec<(u32, Projected)> = (0..model.len())
+            .into_par_iter()
+            .with_min_len(256)
+            .filter_map(|i| {
+                let opacity = sigmoid(model.opacity_logit[i]);
+                if opacity.is_nan() || opacity <= 0.0 || frames.is_empty() {
+                    return None;
+                }
+                let frame = &frames[(model.binding[i] as usize).min(last)];
+                let sh = &model.sh[i * SH_STRIDE..(i + 1) * SH_STRIDE];
+                project(&model.geometry[i], sh, model.sh_degree, frame, camera)
+                    .map(|p| (i as u32, p))
+            })
+            .collect();
+        let (drawn, projected): (Vec<u32>, Vec<Projected>) = projected.into_iter().unzip();
+        let splats: Vec<Splat> = drawn
+            .iter()
+            .zip(&projected)
+            .map(|(&i, p)| Splat {
+                center: p.center.map(|c| c.v),
+                conic: p.conic.map(|c| c.v),
+                opacity: sigmoid(model.opacity_logit[i as usize]).min(1.0),
+                rgb: p.drawn_rgb(),
+                radius: p.radius,
+                depth: p.depth,
+            })
+            .collect();
+        let raster = raster::forward(&splats, camera.size, background);
+        Self {
+            projected,
+            drawn,
+            splats,
+            raster,
+        }
+    }
+
+    /// The image: RGB, row-major, f64 (not clamped).
+    pub fn image(&self) -> &[f64] {
+        &self.raster.image
+    }
+
+    /// Pixels the splats cover (almost) completely: transmittance below 1 %.
+    pub fn saturated_pixels(&self) -> usize {
+        self.raster.saturated_pixels()
+    }
+
+    /// Gaussians drawn (not culled).
+    pub fn drawn(&self) -> usize {
+        self.drawn.len()
+    }
+
+    /// ∂loss/∂ every parameter of `model`, given ∂loss/∂ the image.
+    pub fn backward(&self, model: &Trainable, d_image: &[f64]) -> Gradients {
+        let screen = raster::backward(&self.splats, &self.raster, d_image);
+        let n = model.len();
+        let mut grads = Gradients {
+            geometry: vec![[0.0; GEOMETRY]; n],
+            opacity_logit: vec![0.0; n],
+            sh: vec![0.0; n * SH_STRIDE],
+            screen: vec![0.0; n],
+        };
+        let coefficients = (model.sh_degree as usize + 1).pow(2);
+        for ((&i, p), g) in self.drawn.iter().zip(&self.projected).zip(&screen) {
+            let i = i as usize;
+            let geometry = &mut grads.geometry[i];
+            let mut add = |weight: f64, d: &[f64; GEOMETRY]| {
+                for (out, x) in geometry.iter_mut().zip(d) {
+                    *out += weight * x;
+                }
+            };
+            for k in 0..2 {
+                add(g.center[k], &p.center[k].d);
+            }
+            for k in 0..3 {
+                add(g.conic[k], &p.conic[k].d);
+            }
+            for ch in 0..3 {
+                if p.rgb[ch].v < 0.0 {
+                    continue; // clamped at 0: no gradient
+                }
+                add(g.rgb[ch], &p.rgb[ch].d);
+                for j in 0..coefficients {
+                    grads.sh[i * SH_STRIDE + j * 3 + ch] += g.rgb[ch] * p.basis[j];
+                }
+            }
+            let o = sigmoid(model.opacity_logit[i]);
+            grads.opacity_logit[i] = g.opacity * o * (1.0 - o);
+            grads.screen[i] = (g.center[0] * g.center[0] + g.center[1] * g.center[1]).sqrt();
+        }
+        grads
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::camera::Orbit;
+    use glam::{Mat3, Quat, Vec3};
+
+    fn frames() -> Vec<TriangleFrame> {
+        [(0.0f32, 0.09f32), (0.7, 0.12), (-0.4, 0.05)]
+            .iter()
+            .enumerate()
+            .map(|(k, &(angle, scale))| {
+                let rotation = Mat3::from_quat(Quat::from_euler(
+                    glam::EulerRot::XYZ,
+                    angle,
+                    0.3 * k as f32,
+                    -angle,
+                ));
+                TriangleFrame {
+                    center: Vec3::new(0.04 * k as f32 - 0.04, 0.02 * k as f32, 0.0),
+                    rotation,
+                    quat: Quat::from_mat3(&rotation),
+                    scale,
+                }
+            })
+            .collect()
+    }
+
+    /// Ordinary Gaussians plus the hard cases: one close to the near plane,
+    /// one tiny (the dilation dominates), one huge, a zero quaternion, and an
+    /// opaque stack that saturates pixels (α clamped, transmittance stop).
+    fn model() -> Trainable {
+        let mut m = Trainable {
+            sh_degree: 3,
+            ..Trainable::default()
+        };
+        let mut push = |b: u32, position: [f64; 3], log_scale: [f64; 3], q: [f64; 4], o: f64| {
+            let i = m.binding.len();
+            m.binding.push(b);
+            m.geometry.push(Geometry {
+                position,
+                log_scale,
+                rotation: q,
+            });
+            m.opacity_logit.push(o);
+            m.sh.extend((0..SH_STRIDE).map(|k| {
+                let x = ((i * 31 + k * 7) % 23) as f64 / 23.0 - 0.5;
+                if k < 3 {
+                    x + 0.3
+                } else {
+                    0.15 * x
+                }
+            }));
+        };
+        push(
+            0,
+            [0.1, 0.2, -0.1],
+            [-0.7, -0.9, -1.2],
+            [0.9, 0.2, -0.1, 0.3],
+            0.2,
+        );
+        push(
+            1,
+            [-0.3, 0.1, 0.2],
+            [-1.0, -0.4, -0.8],
+            [0.5, -0.5, 0.4, 0.1],
+            -0.5,
+        );
+        push(
+            2,
+            [0.2, -0.2, 0.4],
+            [-0.6, -1.1, -0.5],
+            [0.2, 0.9, 0.3, -0.2],
+            1.0,
+        );
+        push(
+            0,
+            [0.5, 0.0, -0.3],
+            [-9.0, -9.5, -8.5],
+            [1.0, 0.0, 0.1, 0.0],
+            0.8,
+        ); // tiny
+        push(
+            1,
+            [0.0, 0.1, 0.0],
+            [0.6, 0.4, 0.5],
+            [0.7, 0.1, 0.6, 0.2],
+            -2.5,
+        ); // huge
+        push(
+            2,
+            [-0.1, 0.3, 0.1],
+            [-1.0, -1.0, -1.0],
+            [0.0, 0.0, 0.0, 0.0],
+            0.3,
+        ); // zero q
+           // Opaque stack.
+        for k in 0..4 {
+            push(
+                0,
+                [-0.4, -0.3, 0.1 * k as f64],
+                [-0.2, -0.3, -0.25],
+                [0.95, 0.05, 0.0, 0.1],
+                4.0 + k as f64,
+            );
+        }
+        // Close to the camera: 0.02 in front of it (the near plane is at 0.004).
+        let cam = camera();
+        let forward = -glam::DVec3::from(cam.rotation[2]);
+        let world =
+            glam::DVec3::from(cam.eye) + 0.02 * forward + glam::DVec3::new(0.001, -0.002, 0.0);
+        let frame = frames()[1];
+        let local = frame.rotation.as_dmat3().transpose()
+            * ((world - frame.center.as_dvec3()) / frame.scale as f64);
+        push(
+            1,
+            local.to_array(),
+            [-3.5, -3.6, -3.4],
+            [0.8, 0.3, 0.1, 0.2],
+            0.0,
+        );
+        m
+    }
+
+    fn camera() -> TrainCamera {
+        TrainCamera::from_camera(
+            &Orbit {
+                yaw_deg: 15.0,
+                pitch_deg: 10.0,
+                radius: 0.4,
+                fov_deg: 40.0,
+                target: [0.0, 0.0, 0.0],
+                ..Orbit::STUDY
+            }
+            .camera(40, 32),
+        )
+    }
+
+    /// Every parameter's gradient against central differences of the f64
+    /// forward (h = 1e-6), through the binding, for Σ w·image.
+    #[test]
+    fn parameter_gradients_match_central_differences() {
+        let (frames, camera, model) = (frames(), camera(), model());
+        let background = [0.05, 0.1, 0.2];
+        let render = Render::new(&model, &frames, &camera, background);
+        assert!(render.drawn() >= 10, "{} drawn", render.drawn());
+        let weights: Vec<f64> = (0..render.image().len())
+            .map(|i| ((i * 13) % 29) as f64 / 29.0 - 0.45)
+            .collect();
+        let loss = |m: &Trainable| -> f64 {
+            Render::new(m, &frames, &camera, background)
+                .image()
+                .iter()
+                .zip(&weights)
+                .map(|(a, b)| a * b)
+                .sum()
+        };
+        let grads = render.backward(&model, &weights);
+        let h = 1e-6;
+        let mut checked = 0;
+        let mut check = |analytic: f64, change: &dyn Fn(&mut Trainable, f64), what: String| {
+            let mut plus = model.clone();
+            change(&mut plus, h);
+            let mut minus = model.clone();
+            change(&mut minus, -h);
+            let numeric = (loss(&plus) - loss(&minus)) / (2.0 * h);
+            let error = (analytic - numeric).abs() / numeric.abs().max(1e-2);
+            assert!(
+                error < 1e-4,
+                "{what}: analytic {analytic} numeric {numeric}"
+            );
+            checked += 1;
+        };
+        for i in 0..model.len() {
+            for k in 0..GEOMETRY {
+                check(
+                    grads.geometry[i][k],
+                    &|m, e| match k {
+                        0..3 => m.geometry[i].position[k] += e,
+                        3..6 => m.geometry[i].log_scale[k - 3] += e,
+                        _ => m.geometry[i].rotation[k - 6] += e,
+                    },
+                    format!("Gaussian {i} geometry {k}"),
+                );
+            }
+            check(
+                grads.opacity_logit[i],
+                &|m, e| m.opacity_logit[i] += e,
+                format!("Gaussian {i} opacity"),
+            );
+            for k in [0, 1, 2, 5, 13, 47] {
+                check(
+                    grads.sh[i * SH_STRIDE + k],
+                    &|m, e| m.sh[i * SH_STRIDE + k] += e,
+                    format!("Gaussian {i} sh {k}"),
+                );
+            }
+        }
+        assert_eq!(checked, model.len() * (GEOMETRY + 7));
+        // The opaque stack saturates pixels.
+        assert!(render.saturated_pixels() > 0);
+    }
+}

@@ -1,0 +1,331 @@
+//! The tile rasteriser, forward and backward, in f64: the renderers' rules
+//! (`render::projection`: a splat covers the pixel centres inside its square
+//! footprint; α = min(0.99, o·exp(power)), skipped when power > 0 or α < 1/255;
+//! front to back in depth order; a pixel stops before the splat that would take
+//! its transmittance below 1e-4). The backward pass walks each pixel's splats
+//! back to front, rebuilding the transmittance by division as 3DGS does, and
+//! returns ∂loss/∂(centre, conic, opacity, colour) per splat. Tiles run in
+//! parallel and their gradients are summed in a fixed order, so training is
+//! deterministic.
+
+use rayon::prelude::*;
+
+use crate::render::projection::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
+
+/// Tile edge in pixels.
+const TILE: u32 = 16;
+
+/// A splat as the rasteriser sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Splat {
+    /// Centre in pixels.
+    pub center: [f64; 2],
+    /// Inverse 2D covariance (a, b, c).
+    pub conic: [f64; 3],
+    /// Opacity in [0, 1].
+    pub opacity: f64,
+    /// Colour (already clamped at 0).
+    pub rgb: [f64; 3],
+    /// Footprint half-size in pixels.
+    pub radius: f64,
+    /// Sort key: distance along the viewing axis.
+    pub depth: f64,
+}
+
+/// ∂loss/∂ a splat's screen quantities.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SplatGrad {
+    /// Centre.
+    pub center: [f64; 2],
+    /// Conic (a, b, c).
+    pub conic: [f64; 3],
+    /// Opacity.
+    pub opacity: f64,
+    /// Colour.
+    pub rgb: [f64; 3],
+}
+
+impl SplatGrad {
+    fn add(&mut self, o: &SplatGrad) {
+        for i in 0..2 {
+            self.center[i] += o.center[i];
+        }
+        for i in 0..3 {
+            self.conic[i] += o.conic[i];
+            self.rgb[i] += o.rgb[i];
+        }
+        self.opacity += o.opacity;
+    }
+}
+
+/// The forward pass's image and what the backward pass needs.
+#[derive(Clone, Debug)]
+pub struct Rasterized {
+    /// Width and height.
+    pub size: [u32; 2],
+    /// RGB, row-major, f64 (not clamped or quantised).
+    pub image: Vec<f64>,
+    /// Background colour.
+    pub background: [f64; 3],
+    /// Splat indices per tile, front to back.
+    lists: Vec<Vec<u32>>,
+    /// Per pixel: transmittance after its last contributing splat.
+    final_t: Vec<f64>,
+    /// Per pixel: how many entries of its tile's list it walked.
+    walked: Vec<u32>,
+}
+
+impl Rasterized {
+    /// Pixels whose transmittance ended below 1 %.
+    pub fn saturated_pixels(&self) -> usize {
+        self.final_t.iter().filter(|&&t| t < 0.01).count()
+    }
+}
+
+/// The pixels a splat's footprint covers, clamped to the image (inclusive).
+fn pixel_rect(s: &Splat, size: [u32; 2]) -> Option<[u32; 4]> {
+    let x0 = (s.center[0] - s.radius - 0.5).ceil().max(0.0);
+    let x1 = (s.center[0] + s.radius - 0.5)
+        .floor()
+        .min(size[0] as f64 - 1.0);
+    let y0 = (s.center[1] - s.radius - 0.5).ceil().max(0.0);
+    let y1 = (s.center[1] + s.radius - 0.5)
+        .floor()
+        .min(size[1] as f64 - 1.0);
+    (x0 <= x1 && y0 <= y1).then_some([x0 as u32, y0 as u32, x1 as u32, y1 as u32])
+}
+
+/// The splat's α at a pixel centre and, when it contributes and is not
+/// clamped, e^power (∂α/∂opacity); None when it does not contribute.
+fn alpha_at(s: &Splat, px: f64, py: f64) -> Option<(f64, f64, [f64; 2])> {
+    let d = [px - s.center[0], py - s.center[1]];
+    if d[0].abs() > s.radius || d[1].abs() > s.radius {
+        return None;
+    }
+    let [a, b, c] = s.conic;
+    let power = -0.5 * (a * d[0] * d[0] + c * d[1] * d[1]) - b * d[0] * d[1];
+    if power > 0.0 {
+        return None;
+    }
+    let gauss = power.exp();
+    let alpha = (s.opacity * gauss).min(MAX_ALPHA);
+    (alpha >= MIN_ALPHA).then_some((alpha, gauss, d))
+}
+
+/// Tiles of an image, and the splats (sorted by depth, then index) in each.
+fn bin(splats: &[Splat], size: [u32; 2]) -> Vec<Vec<u32>> {
+    let tiles = [size[0].div_ceil(TILE), size[1].div_ceil(TILE)];
+    let mut order: Vec<u32> = (0..splats.len() as u32).collect();
+    order.sort_by(|&i, &j| {
+        splats[i as usize]
+            .depth
+            .total_cmp(&splats[j as usize].depth)
+            .then(i.cmp(&j))
+    });
+    let mut lists = vec![Vec::new(); (tiles[0] * tiles[1]) as usize];
+    for i in order {
+        let Some([x0, y0, x1, y1]) = pixel_rect(&splats[i as usize], size) else {
+            continue;
+        };
+        for ty in y0 / TILE..=y1 / TILE {
+            for tx in x0 / TILE..=x1 / TILE {
+                lists[(ty * tiles[0] + tx) as usize].push(i);
+            }
+        }
+    }
+    lists
+}
+
+/// The pixels of tile `t`, as (x, y).
+fn tile_pixels(t: usize, size: [u32; 2]) -> impl Iterator<Item = (u32, u32)> {
+    let across = size[0].div_ceil(TILE);
+    let (ox, oy) = ((t as u32 % across) * TILE, (t as u32 / across) * TILE);
+    let (w, h) = ((size[0] - ox).min(TILE), (size[1] - oy).min(TILE));
+    (0..h).flat_map(move |y| (0..w).map(move |x| (ox + x, oy + y)))
+}
+
+/// One pixel's forward result: index, colour, final transmittance, entries walked.
+type PixelResult = (usize, [f64; 3], f64, u32);
+
+/// Draws the splats over `background`.
+pub fn forward(splats: &[Splat], size: [u32; 2], background: [f64; 3]) -> Rasterized {
+    let lists = bin(splats, size);
+    let pixels = (size[0] * size[1]) as usize;
+    let mut image = vec![0.0; pixels * 3];
+    let mut final_t = vec![1.0; pixels];
+    let mut walked = vec![0u32; pixels];
+    let per_tile: Vec<Vec<PixelResult>> = lists
+        .par_iter()
+        .enumerate()
+        .map(|(t, list)| {
+            tile_pixels(t, size)
+                .map(|(x, y)| {
+                    let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+                    let mut colour = [0.0; 3];
+                    let mut transmittance = 1.0;
+                    let mut count = 0u32;
+                    for (k, &i) in list.iter().enumerate() {
+                        let s = &splats[i as usize];
+                        let Some((alpha, _, _)) = alpha_at(s, px, py) else {
+                            continue;
+                        };
+                        let next = transmittance * (1.0 - alpha);
+                        if next < MIN_TRANSMITTANCE {
+                            break;
+                        }
+                        for (c, rgb) in colour.iter_mut().zip(s.rgb) {
+                            *c += rgb * alpha * transmittance;
+                        }
+                        transmittance = next;
+                        count = k as u32 + 1;
+                    }
+                    let p = (y * size[0] + x) as usize;
+                    let rgb = std::array::from_fn(|ch| colour[ch] + transmittance * background[ch]);
+                    (p, rgb, transmittance, count)
+                })
+                .collect()
+        })
+        .collect();
+    for (p, rgb, t, count) in per_tile.into_iter().flatten() {
+        image[p * 3..p * 3 + 3].copy_from_slice(&rgb);
+        final_t[p] = t;
+        walked[p] = count;
+    }
+    Rasterized {
+        size,
+        image,
+        background,
+        lists,
+        final_t,
+        walked,
+    }
+}
+
+/// ∂loss/∂ every splat, given ∂loss/∂ the image (same layout as `image`).
+pub fn backward(splats: &[Splat], raster: &Rasterized, d_image: &[f64]) -> Vec<SplatGrad> {
+    let size = raster.size;
+    let per_tile: Vec<Vec<(u32, SplatGrad)>> = raster
+        .lists
+        .par_iter()
+        .enumerate()
+        .map(|(t, list)| {
+            let mut local: Vec<SplatGrad> = vec![SplatGrad::default(); list.len()];
+            for (x, y) in tile_pixels(t, size) {
+                let p = (y * size[0] + x) as usize;
+                let dc = [d_image[p * 3], d_image[p * 3 + 1], d_image[p * 3 + 2]];
+                if dc == [0.0; 3] {
+                    continue;
+                }
+                let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+                let mut t_after = raster.final_t[p];
+                // The colour behind the current splat, as seen through it.
+                let mut behind = raster.background;
+                for k in (0..raster.walked[p] as usize).rev() {
+                    let s = &splats[list[k] as usize];
+                    let Some((alpha, gauss, d)) = alpha_at(s, px, py) else {
+                        continue;
+                    };
+                    let t_before = t_after / (1.0 - alpha);
+                    let g = &mut local[k];
+                    let mut d_alpha = 0.0;
+                    for ch in 0..3 {
+                        g.rgb[ch] += dc[ch] * alpha * t_before;
+                        d_alpha += dc[ch] * t_before * (s.rgb[ch] - behind[ch]);
+                    }
+                    for (ch, b) in behind.iter_mut().enumerate() {
+                        *b = s.rgb[ch] * alpha + (1.0 - alpha) * *b;
+                    }
+                    t_after = t_before;
+                    if s.opacity * gauss > MAX_ALPHA {
+                        continue; // clamped: α does not move with the splat
+                    }
+                    // α = o·e^power.
+                    g.opacity += d_alpha * gauss;
+                    let d_power = d_alpha * alpha;
+                    let [a, b, c] = s.conic;
+                    g.conic[0] += d_power * -0.5 * d[0] * d[0];
+                    g.conic[1] += d_power * -d[0] * d[1];
+                    g.conic[2] += d_power * -0.5 * d[1] * d[1];
+                    // d = pixel − centre.
+                    g.center[0] += d_power * (a * d[0] + b * d[1]);
+                    g.center[1] += d_power * (c * d[1] + b * d[0]);
+                }
+            }
+            list.iter().copied().zip(local).collect()
+        })
+        .collect();
+    let mut grads = vec![SplatGrad::default(); splats.len()];
+    for (i, g) in per_tile.iter().flatten() {
+        grads[*i as usize].add(g);
+    }
+    grads
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scene() -> Vec<Splat> {
+        let mut out = Vec::new();
+        for i in 0..12 {
+            let f = i as f64;
+            out.push(Splat {
+                center: [6.0 + 2.3 * f % 20.0, 5.0 + 1.7 * (f * 1.3) % 12.0],
+                conic: [0.2 + 0.02 * f, 0.03 * (f - 5.0) / 5.0, 0.3 - 0.01 * f],
+                opacity: 0.3 + 0.05 * f,
+                rgb: [0.2 + 0.05 * f, 0.9 - 0.06 * f, 0.5],
+                radius: 7.0,
+                depth: 1.0 + (f * 0.37) % 1.0,
+            });
+        }
+        out
+    }
+
+    /// The loss Σ w·image for fixed weights: its gradient is w, so the
+    /// backward pass is checked against central differences of the forward.
+    #[test]
+    fn gradients_match_central_differences() {
+        let size = [26, 21];
+        let background = [0.1, 0.2, 0.3];
+        let weights: Vec<f64> = (0..(size[0] * size[1] * 3) as usize)
+            .map(|i| ((i * 37) % 17) as f64 / 17.0 - 0.4)
+            .collect();
+        let loss = |s: &[Splat]| -> f64 {
+            forward(s, size, background)
+                .image
+                .iter()
+                .zip(&weights)
+                .map(|(a, b)| a * b)
+                .sum()
+        };
+        let splats = scene();
+        let grads = backward(&splats, &forward(&splats, size, background), &weights);
+        let h = 1e-6;
+        let mut worst: f64 = 0.0;
+        for i in 0..splats.len() {
+            let mut check = |analytic: f64, set: &dyn Fn(&mut Splat, f64)| {
+                let mut plus = splats.clone();
+                set(&mut plus[i], h);
+                let mut minus = splats.clone();
+                set(&mut minus[i], -h);
+                let numeric = (loss(&plus) - loss(&minus)) / (2.0 * h);
+                let error = (analytic - numeric).abs() / numeric.abs().max(1e-3);
+                worst = worst.max(error);
+                assert!(
+                    error < 1e-4,
+                    "splat {i}: analytic {analytic} numeric {numeric}"
+                );
+            };
+            let g = grads[i];
+            check(g.opacity, &|s, e| s.opacity += e);
+            for k in 0..2 {
+                check(g.center[k], &|s, e| s.center[k] += e);
+            }
+            for k in 0..3 {
+                check(g.conic[k], &|s, e| s.conic[k] += e);
+                check(g.rgb[k], &|s, e| s.rgb[k] += e);
+            }
+        }
+        assert!(worst < 1e-4, "{worst}");
+    }
+}
