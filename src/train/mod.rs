@@ -5,7 +5,9 @@
 //! shares the renderers' numerics (projection constants, SH basis) and is
 //! checked against them.
 
+pub mod adam;
 pub mod dual;
+pub mod loss;
 pub mod model;
 pub mod project;
 pub mod raster;

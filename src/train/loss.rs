@@ -1,0 +1,220 @@
+//! The photometric loss of 3DGS and GaussianAvatars, with its gradient:
+//! (1 − λ)·L1 + λ·(1 − SSIM), λ = 0.2, SSIM with an 11 × 11 Gaussian window
+//! (σ = 1.5) per channel, zero padding, C1 = 0.01², C2 = 0.03², averaged over
+//! pixels and channels. Images are RGB, row-major, f64 in [0, 1].
+
+/// Weight of the D-SSIM term.
+pub const LAMBDA_DSSIM: f64 = 0.2;
+const WINDOW: usize = 11;
+const SIGMA: f64 = 1.5;
+const C1: f64 = 0.01 * 0.01;
+const C2: f64 = 0.03 * 0.03;
+
+/// The loss's value and parts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LossValue {
+    /// The weighted total.
+    pub total: f64,
+    /// Mean absolute error.
+    pub l1: f64,
+    /// Mean SSIM.
+    pub ssim: f64,
+}
+
+/// The normalised 1-D Gaussian window.
+fn window() -> [f64; WINDOW] {
+    let half = (WINDOW / 2) as f64;
+    let mut w: [f64; WINDOW] =
+        std::array::from_fn(|i| (-((i as f64 - half).powi(2)) / (2.0 * SIGMA * SIGMA)).exp());
+    let sum: f64 = w.iter().sum();
+    w.iter_mut().for_each(|x| *x /= sum);
+    w
+}
+
+/// One channel of an image convolved with the window (separable, zero padding).
+fn blur(plane: &[f64], width: usize, height: usize, w: &[f64; WINDOW]) -> Vec<f64> {
+    let half = WINDOW / 2;
+    let mut rows = vec![0.0; plane.len()];
+    for y in 0..height {
+        for x in 0..width {
+            let mut acc = 0.0;
+            for (k, wk) in w.iter().enumerate() {
+                let xx = x as isize + k as isize - half as isize;
+                if (0..width as isize).contains(&xx) {
+                    acc += wk * plane[y * width + xx as usize];
+                }
+            }
+            rows[y * width + x] = acc;
+        }
+    }
+    let mut out = vec![0.0; plane.len()];
+    for y in 0..height {
+        for x in 0..width {
+            let mut acc = 0.0;
+            for (k, wk) in w.iter().enumerate() {
+                let yy = y as isize + k as isize - half as isize;
+                if (0..height as isize).contains(&yy) {
+                    acc += wk * rows[yy as usize * width + x];
+                }
+            }
+            out[y * width + x] = acc;
+        }
+    }
+    out
+}
+
+fn channel(image: &[f64], ch: usize) -> Vec<f64> {
+    image.iter().skip(ch).step_by(3).copied().collect()
+}
+
+/// SSIM of one channel and, when asked, ∂(Σ SSIM map)/∂x.
+fn ssim_channel(x: &[f64], y: &[f64], width: usize, height: usize, grad: bool) -> (f64, Vec<f64>) {
+    let w = window();
+    let product = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(p, q)| p * q).collect::<Vec<_>>();
+    let mu_x = blur(x, width, height, &w);
+    let mu_y = blur(y, width, height, &w);
+    let m_xx = blur(&product(x, x), width, height, &w);
+    let m_yy = blur(&product(y, y), width, height, &w);
+    let m_xy = blur(&product(x, y), width, height, &w);
+    let n = x.len();
+    let mut sum = 0.0;
+    let (mut d_mu, mut d_m2, mut d_mxy) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    for p in 0..n {
+        let (mx, my) = (mu_x[p], mu_y[p]);
+        let sxx = m_xx[p] - mx * mx;
+        let syy = m_yy[p] - my * my;
+        let sxy = m_xy[p] - mx * my;
+        let a = 2.0 * mx * my + C1;
+        let b = 2.0 * sxy + C2;
+        let c = mx * mx + my * my + C1;
+        let d = sxx + syy + C2;
+        let s = a * b / (c * d);
+        sum += s;
+        if grad {
+            let ds_dmx = 2.0 * my * b / (c * d) - s * 2.0 * mx / c;
+            let ds_dsxy = 2.0 * a / (c * d);
+            let ds_dsxx = -s / d;
+            // sxx = m_xx − μx², sxy = m_xy − μx μy.
+            d_mu[p] = ds_dmx - 2.0 * mx * ds_dsxx - my * ds_dsxy;
+            d_m2[p] = ds_dsxx;
+            d_mxy[p] = ds_dsxy;
+        }
+    }
+    if !grad {
+        return (sum, Vec::new());
+    }
+    // The window is symmetric and zero padding makes the blur its own transpose.
+    let (b_mu, b_m2, b_mxy) = (
+        blur(&d_mu, width, height, &w),
+        blur(&d_m2, width, height, &w),
+        blur(&d_mxy, width, height, &w),
+    );
+    let g = (0..n)
+        .map(|p| b_mu[p] + 2.0 * x[p] * b_m2[p] + y[p] * b_mxy[p])
+        .collect();
+    (sum, g)
+}
+
+/// The loss of `image` against `target` (both `width × height` RGB) and, when
+/// `grad` is set, its gradient with respect to `image`.
+pub fn photometric_loss(
+    image: &[f64],
+    target: &[f64],
+    width: usize,
+    height: usize,
+    grad: bool,
+) -> (LossValue, Vec<f64>) {
+    let count = image.len() as f64;
+    let l1 = image
+        .iter()
+        .zip(target)
+        .map(|(a, b)| (a - b).abs())
+        .sum::<f64>()
+        / count;
+    let mut ssim_sum = 0.0;
+    let mut gradient = if grad {
+        image
+            .iter()
+            .zip(target)
+            .map(|(a, b)| {
+                // The subgradient 0 where they agree (signum(0.0) is 1).
+                let sign = if a == b { 0.0 } else { (a - b).signum() };
+                (1.0 - LAMBDA_DSSIM) * sign / count
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    for ch in 0..3 {
+        let (x, y) = (channel(image, ch), channel(target, ch));
+        let (s, g) = ssim_channel(&x, &y, width, height, grad);
+        ssim_sum += s;
+        for (p, gp) in g.iter().enumerate() {
+            gradient[p * 3 + ch] -= LAMBDA_DSSIM * gp / count;
+        }
+    }
+    let ssim = ssim_sum / count;
+    (
+        LossValue {
+            total: (1.0 - LAMBDA_DSSIM) * l1 + LAMBDA_DSSIM * (1.0 - ssim),
+            l1,
+            ssim,
+        },
+        gradient,
+    )
+}
+
+/// PSNR in dB of two images in [0, 1] (values clamped first), infinite when equal.
+pub fn psnr(image: &[f64], target: &[f64]) -> f64 {
+    let mse = image
+        .iter()
+        .zip(target)
+        .map(|(a, b)| (a.clamp(0.0, 1.0) - b.clamp(0.0, 1.0)).powi(2))
+        .sum::<f64>()
+        / image.len().max(1) as f64;
+    -10.0 * mse.log10()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn images(w: usize, h: usize) -> (Vec<f64>, Vec<f64>) {
+        let a = (0..w * h * 3)
+            .map(|i| (((i * 7919) % 101) as f64 / 101.0) * 0.8 + 0.1)
+            .collect();
+        let b = (0..w * h * 3)
+            .map(|i| (((i * 104_729) % 97) as f64 / 97.0) * 0.9 + 0.05)
+            .collect();
+        (a, b)
+    }
+
+    #[test]
+    fn ssim_of_an_image_with_itself_is_one_and_the_loss_zero() {
+        let (a, _) = images(20, 15);
+        let (v, g) = photometric_loss(&a, &a, 20, 15, true);
+        assert!((v.ssim - 1.0).abs() < 1e-12 && v.l1 == 0.0 && v.total.abs() < 1e-12);
+        assert!(g.iter().all(|x| x.abs() < 1e-12), "a minimum");
+        assert!(psnr(&a, &a).is_infinite());
+    }
+
+    /// The gradient against central differences in f64, pixel by pixel.
+    #[test]
+    fn gradient_matches_central_differences() {
+        let (w, h) = (17, 13);
+        let (a, b) = images(w, h);
+        let (_, g) = photometric_loss(&a, &b, w, h, true);
+        let step = 1e-6;
+        for p in (0..a.len()).step_by(7) {
+            let mut plus = a.clone();
+            plus[p] += step;
+            let mut minus = a.clone();
+            minus[p] -= step;
+            let numeric = (photometric_loss(&plus, &b, w, h, false).0.total
+                - photometric_loss(&minus, &b, w, h, false).0.total)
+                / (2.0 * step);
+            let error = (g[p] - numeric).abs() / numeric.abs().max(1e-6);
+            assert!(error < 1e-4, "{p}: {} vs {numeric}", g[p]);
+        }
+    }
+}
