@@ -529,6 +529,30 @@ fn place_gaussians(
     set
 }
 
+/// The opaque surface of built-in source `index` as a camera sees it (what
+/// `visage capture` draws): the procedural colour of the point at template
+/// position `texel` in `region`, under the baked studio light for `normal` and
+/// ambient `occlusion`. The grain noise is a function of the texel, so every
+/// camera sees the same surface.
+pub fn surface_radiance(
+    index: usize,
+    region: Region,
+    texel: Vec3,
+    normal: Vec3,
+    occlusion: f32,
+) -> [f32; 3] {
+    let cell = (texel / 0.0005).round().as_ivec3();
+    let seed = (cell.x as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+        ^ (cell.y as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f)
+        ^ (cell.z as u64).wrapping_mul(0x1656_67b1_9e37_79f9);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let look = &LOOKS[index % LOOKS.len()];
+    scale(
+        surface_colour(look, region, texel, &mut rng),
+        baked_light(normal, occlusion),
+    )
+}
+
 /// Direction of the studio key light baked into the synthetic captures.
 const KEY_LIGHT: Vec3 = Vec3::new(0.35, 0.55, 0.76);
 
@@ -541,7 +565,7 @@ fn baked_light(normal: Vec3, occlusion: f32) -> f32 {
 
 /// Per-vertex ambient occlusion estimated from concavity: how far the vertex
 /// lies below the centroid of its neighbours, relative to the local edge length.
-fn cavity_occlusion(positions: &[Vec3], normals: &[Vec3], triangles: &[[u32; 3]]) -> Vec<f32> {
+pub fn cavity_occlusion(positions: &[Vec3], normals: &[Vec3], triangles: &[[u32; 3]]) -> Vec<f32> {
     let mut sum = vec![Vec3::ZERO; positions.len()];
     let mut count = vec![0u32; positions.len()];
     for t in triangles {

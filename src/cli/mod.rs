@@ -6,6 +6,7 @@ mod bench_render;
 mod bench_scene;
 mod bench_terminal;
 mod camera;
+mod capture;
 mod compose;
 mod convert;
 mod db;
@@ -50,6 +51,8 @@ enum Command {
     Render(render::RenderArgs),
     /// Convert a 3DGS scene between INRIA PLY and .splat, reporting the error.
     Convert(convert::ConvertArgs),
+    /// Capture a multi-view dataset (GaussianAvatars layout) of a built-in source.
+    Capture(capture::CaptureArgs),
     /// Measure speed beside error.
     Bench(bench::BenchArgs),
     /// Write test fixtures in the real formats (FLAME-layout model and masks
@@ -80,6 +83,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Render(args)) => render::run(&args),
         Some(Command::Convert(args)) => convert::run(&args),
         Some(Command::Bench(args)) => bench::run(&args),
+        Some(Command::Capture(args)) => capture::run(&args),
         Some(Command::Fixtures(args)) => run_fixtures(&args),
         Some(Command::Edit(args)) => edit::run_edit(&args),
         Some(Command::Replay(args)) => edit::run_replay(&args),

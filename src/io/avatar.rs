@@ -128,8 +128,34 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> super::Result<S
         )
         .into());
     }
-    let npz_path = dir.join("flame_param.npz");
-    let arrays = read_npz(&npz_path)?;
+    let params = read_flame_params(&dir.join("flame_param.npz"), name, model)?;
+    Ok(SourceAvatar {
+        name: name.to_string(),
+        shape: params.shape,
+        static_offset: params.static_offset,
+        motion: params.motion,
+        gaussians,
+    })
+}
+
+/// A `flame_param.npz`'s contents: identity and per-frame expression and pose.
+pub struct FlameParams {
+    /// Shape coefficients (as many as the model uses).
+    pub shape: Vec<f32>,
+    /// Static per-vertex offset (zero when the file has none).
+    pub static_offset: Vec<DVec3>,
+    /// Expression and pose per frame, named `name`.
+    pub motion: Motion,
+}
+
+/// Reads FLAME parameters as GaussianAvatars stores them (an avatar's
+/// `flame_param.npz`, or one timestep of a dataset's `flame_param/`).
+pub fn read_flame_params(
+    npz_path: &Path,
+    name: &str,
+    model: &HeadModel,
+) -> super::Result<FlameParams> {
+    let arrays = read_npz(npz_path)?;
     let label = |e: String| format!("{}: {e}", npz_path.display());
     let shape = field(&arrays, "shape").map_err(label)?;
     if shape.shape.last().copied().unwrap_or(0) < model.shape_basis.len().min(SHAPE_PARAMS)
@@ -231,12 +257,10 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> super::Result<S
     if motion.frames() == 0 {
         return Err(label("'expr' has no frames".into()).into());
     }
-    Ok(SourceAvatar {
-        name: name.to_string(),
+    Ok(FlameParams {
         shape: shape_coeffs,
         static_offset,
         motion,
-        gaussians,
     })
 }
 
@@ -343,9 +367,16 @@ pub fn write_avatar(
     gaussians: &GaussianSet,
     params: &AvatarParams,
 ) -> super::Result<()> {
-    let frames = params.frames;
     std::fs::create_dir_all(dir).map_err(|e| super::FileError::access("create", dir, e))?;
     write_bound_ply(&dir.join("point_cloud.ply"), gaussians)?;
+    write_flame_params(&dir.join("flame_param.npz"), params)
+}
+
+/// Writes FLAME parameters as GaussianAvatars stores them: shape (300),
+/// expr (T, 100), rotation / neck_pose / jaw_pose / translation (T, 3),
+/// eyes_pose (T, 6), static_offset (1, V, 3), dynamic_offset (T, V, 3) zero.
+pub fn write_flame_params(path: &Path, params: &AvatarParams) -> super::Result<()> {
+    let frames = params.frames;
     let t = frames.len().max(1);
     let mut expr = vec![0.0f32; t * EXPRESSION_PARAMS];
     let (mut rotation, mut neck, mut jaw, mut eyes, mut translation) =
@@ -406,7 +437,7 @@ pub fn write_avatar(
         ),
     ];
     let named: Vec<(&str, Vec<u8>)> = arrays.into_iter().collect();
-    write_npz(&dir.join("flame_param.npz"), &named, true)
+    write_npz(path, &named, true)
 }
 
 #[cfg(test)]

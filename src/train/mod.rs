@@ -6,6 +6,7 @@
 //! checked against them.
 
 pub mod adam;
+pub mod capture;
 pub mod dual;
 pub mod loss;
 pub mod model;
