@@ -51,9 +51,11 @@ pub fn run(args: &CaptureArgs) -> Result<()> {
     };
     let (db, _) = spec.load()?;
     let bar = indicatif::ProgressBar::new(0).with_style(
-        indicatif::ProgressStyle::with_template("{spinner} capturing {pos}/{len} images [{bar:30}] {eta} left")
-            .expect("the template is valid")
-            .progress_chars("=> "),
+        indicatif::ProgressStyle::with_template(
+            "{spinner} capturing {pos}/{len} images [{bar:30}] {eta} left",
+        )
+        .expect("the template is valid")
+        .progress_chars("=> "),
     );
     let summary = capture(
         &db,

@@ -13,6 +13,7 @@ mod db;
 mod edit;
 mod info;
 mod render;
+mod train;
 
 use std::process::ExitCode;
 
@@ -53,6 +54,10 @@ enum Command {
     Convert(convert::ConvertArgs),
     /// Capture a multi-view dataset (GaussianAvatars layout) of a built-in source.
     Capture(capture::CaptureArgs),
+    /// Train a GaussianAvatars avatar from a multi-view dataset.
+    Train(train::TrainArgs),
+    /// PSNR / SSIM of an avatar on a dataset's held-out views.
+    Eval(train::EvalArgs),
     /// Measure speed beside error.
     Bench(bench::BenchArgs),
     /// Write test fixtures in the real formats (FLAME-layout model and masks
@@ -84,6 +89,8 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Convert(args)) => convert::run(&args),
         Some(Command::Bench(args)) => bench::run(&args),
         Some(Command::Capture(args)) => capture::run(&args),
+        Some(Command::Train(args)) => train::run_train(&args),
+        Some(Command::Eval(args)) => train::run_eval(&args),
         Some(Command::Fixtures(args)) => run_fixtures(&args),
         Some(Command::Edit(args)) => edit::run_edit(&args),
         Some(Command::Replay(args)) => edit::run_replay(&args),

@@ -133,8 +133,8 @@ impl Surface<'_> {
                     }
                 }
                 let p = (y * w + x) as usize;
-                for ch in 0..3 {
-                    image.pixels[p * 3 + ch] = (sum[ch] / samples * 255.0).round() as u8;
+                for (out, total) in image.pixels[p * 3..p * 3 + 3].iter_mut().zip(sum) {
+                    *out = (total / samples * 255.0).round() as u8;
                 }
                 mask[p] = (covered / samples * 255.0).round() as u8;
             }
@@ -208,7 +208,11 @@ fn rasterize(
         for y in y0..=y1 as u32 {
             for x in x0..=x1 as u32 {
                 let p = [x as f64 + 0.5, y as f64 + 0.5, 0.0];
-                let screen = [edge(b, c, p) / area, edge(c, a, p) / area, edge(a, b, p) / area];
+                let screen = [
+                    edge(b, c, p) / area,
+                    edge(c, a, p) / area,
+                    edge(a, b, p) / area,
+                ];
                 if screen.iter().any(|&s| s < 0.0) {
                     continue;
                 }
@@ -255,7 +259,11 @@ pub fn capture(
             Error::input(format!(
                 "unknown source '{}' (sources: {})",
                 crate::text::printable(&options.source),
-                db.sources.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", ")
+                db.sources
+                    .iter()
+                    .map(|s| s.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ))
         })?;
     let motion = db
@@ -266,7 +274,11 @@ pub fn capture(
             Error::input(format!(
                 "unknown motion '{}' (motions: {})",
                 crate::text::printable(&options.motion),
-                db.motions.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join(", ")
+                db.motions
+                    .iter()
+                    .map(|m| m.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ))
         })?;
     if options.cameras == 0 || options.frames == 0 {

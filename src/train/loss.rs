@@ -3,6 +3,8 @@
 //! (σ = 1.5) per channel, zero padding, C1 = 0.01², C2 = 0.03², averaged over
 //! pixels and channels. Images are RGB, row-major, f64 in [0, 1].
 
+use rayon::prelude::*;
+
 /// Weight of the D-SSIM term.
 pub const LAMBDA_DSSIM: f64 = 0.2;
 const WINDOW: usize = 11;
@@ -145,9 +147,14 @@ pub fn photometric_loss(
     } else {
         Vec::new()
     };
-    for ch in 0..3 {
-        let (x, y) = (channel(image, ch), channel(target, ch));
-        let (s, g) = ssim_channel(&x, &y, width, height, grad);
+    let channels: Vec<(f64, Vec<f64>)> = (0..3)
+        .into_par_iter()
+        .map(|ch| {
+            let (x, y) = (channel(image, ch), channel(target, ch));
+            ssim_channel(&x, &y, width, height, grad)
+        })
+        .collect();
+    for (ch, (s, g)) in channels.into_iter().enumerate() {
         ssim_sum += s;
         for (p, gp) in g.iter().enumerate() {
             gradient[p * 3 + ch] -= LAMBDA_DSSIM * gp / count;

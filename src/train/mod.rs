@@ -7,8 +7,10 @@
 
 pub mod adam;
 pub mod capture;
+pub mod dataset;
 pub mod dual;
 pub mod loss;
 pub mod model;
 pub mod project;
 pub mod raster;
+pub mod trainer;

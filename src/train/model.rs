@@ -41,8 +41,8 @@ pub struct Gradients {
     pub opacity_logit: Vec<f64>,
     /// Same layout as [`Trainable::sh`].
     pub sh: Vec<f64>,
-    /// Per Gaussian: |∂loss/∂ projected centre| (0 when not drawn).
-    pub screen: Vec<f64>,
+    /// Per Gaussian: ∂loss/∂ projected centre in pixels (0 when not drawn).
+    pub screen_xy: Vec<[f64; 2]>,
 }
 
 impl Trainable {
@@ -173,6 +173,16 @@ impl Render {
         self.raster.saturated_pixels()
     }
 
+    /// The Gaussians drawn, in drawing order of [`Render::radii`].
+    pub fn drawn_indices(&self) -> &[u32] {
+        &self.drawn
+    }
+
+    /// Footprint radii (pixels) of the drawn Gaussians.
+    pub fn radii(&self) -> impl Iterator<Item = f64> + '_ {
+        self.splats.iter().map(|s| s.radius)
+    }
+
     /// Gaussians drawn (not culled).
     pub fn drawn(&self) -> usize {
         self.drawn.len()
@@ -186,7 +196,7 @@ impl Render {
             geometry: vec![[0.0; GEOMETRY]; n],
             opacity_logit: vec![0.0; n],
             sh: vec![0.0; n * SH_STRIDE],
-            screen: vec![0.0; n],
+            screen_xy: vec![[0.0; 2]; n],
         };
         let coefficients = (model.sh_degree as usize + 1).pow(2);
         for ((&i, p), g) in self.drawn.iter().zip(&self.projected).zip(&screen) {
@@ -214,7 +224,7 @@ impl Render {
             }
             let o = sigmoid(model.opacity_logit[i]);
             grads.opacity_logit[i] = g.opacity * o * (1.0 - o);
-            grads.screen[i] = (g.center[0] * g.center[0] + g.center[1] * g.center[1]).sqrt();
+            grads.screen_xy[i] = g.center;
         }
         grads
     }

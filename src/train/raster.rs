@@ -136,16 +136,95 @@ fn bin(splats: &[Splat], size: [u32; 2]) -> Vec<Vec<u32>> {
     lists
 }
 
-/// The pixels of tile `t`, as (x, y).
-fn tile_pixels(t: usize, size: [u32; 2]) -> impl Iterator<Item = (u32, u32)> {
+/// A tile's pixel range: origin and size.
+fn tile_bounds(t: usize, size: [u32; 2]) -> ([u32; 2], [u32; 2]) {
     let across = size[0].div_ceil(TILE);
-    let (ox, oy) = ((t as u32 % across) * TILE, (t as u32 / across) * TILE);
-    let (w, h) = ((size[0] - ox).min(TILE), (size[1] - oy).min(TILE));
-    (0..h).flat_map(move |y| (0..w).map(move |x| (ox + x, oy + y)))
+    let origin = [(t as u32 % across) * TILE, (t as u32 / across) * TILE];
+    let extent = [
+        (size[0] - origin[0]).min(TILE),
+        (size[1] - origin[1]).min(TILE),
+    ];
+    (origin, extent)
 }
 
-/// One pixel's forward result: index, colour, final transmittance, entries walked.
-type PixelResult = (usize, [f64; 3], f64, u32);
+/// The pixels of `s`'s footprint inside the tile, as tile-local (x, y) ranges.
+fn footprint_in_tile(
+    s: &Splat,
+    size: [u32; 2],
+    origin: [u32; 2],
+    extent: [u32; 2],
+) -> Option<(std::ops::Range<u32>, std::ops::Range<u32>)> {
+    let [x0, y0, x1, y1] = pixel_rect(s, size)?;
+    let (lx0, ly0) = (x0.max(origin[0]), y0.max(origin[1]));
+    let (lx1, ly1) = (
+        x1.min(origin[0] + extent[0] - 1),
+        y1.min(origin[1] + extent[1] - 1),
+    );
+    (lx0 <= lx1 && ly0 <= ly1).then(|| {
+        (
+            lx0 - origin[0]..lx1 - origin[0] + 1,
+            ly0 - origin[1]..ly1 - origin[1] + 1,
+        )
+    })
+}
+
+/// One tile's forward result: per pixel colour, final transmittance and
+/// entries walked (row-major within the tile).
+struct TileForward {
+    colour: Vec<[f64; 3]>,
+    transmittance: Vec<f64>,
+    walked: Vec<u32>,
+}
+
+/// Blends one tile front to back, splat by splat over each footprint (the
+/// CPU renderer's order; per pixel the result is the same as walking the
+/// pixel's list).
+fn forward_tile(splats: &[Splat], list: &[u32], size: [u32; 2], t: usize) -> TileForward {
+    let (origin, extent) = tile_bounds(t, size);
+    let n = (extent[0] * extent[1]) as usize;
+    let mut out = TileForward {
+        colour: vec![[0.0; 3]; n],
+        transmittance: vec![1.0; n],
+        walked: vec![0; n],
+    };
+    let mut done = vec![false; n];
+    let mut remaining = n;
+    for (k, &i) in list.iter().enumerate() {
+        let s = &splats[i as usize];
+        let Some((xs, ys)) = footprint_in_tile(s, size, origin, extent) else {
+            continue;
+        };
+        for ly in ys {
+            let py = (origin[1] + ly) as f64 + 0.5;
+            for lx in xs.clone() {
+                let p = (ly * extent[0] + lx) as usize;
+                if done[p] {
+                    continue;
+                }
+                let px = (origin[0] + lx) as f64 + 0.5;
+                let Some((alpha, _, _)) = alpha_at(s, px, py) else {
+                    continue;
+                };
+                let t_before = out.transmittance[p];
+                let next = t_before * (1.0 - alpha);
+                if next < MIN_TRANSMITTANCE {
+                    done[p] = true;
+                    remaining -= 1;
+                    continue;
+                }
+                for (c, rgb) in out.colour[p].iter_mut().zip(s.rgb) {
+                    *c += rgb * alpha * t_before;
+                }
+                out.transmittance[p] = next;
+                out.walked[p] = k as u32 + 1;
+            }
+        }
+        if remaining == 0 {
+            break;
+        }
+    }
+    out
+}
 
 /// Draws the splats over `background`.
 pub fn forward(splats: &[Splat], size: [u32; 2], background: [f64; 3]) -> Rasterized {
@@ -154,42 +233,24 @@ pub fn forward(splats: &[Splat], size: [u32; 2], background: [f64; 3]) -> Raster
     let mut image = vec![0.0; pixels * 3];
     let mut final_t = vec![1.0; pixels];
     let mut walked = vec![0u32; pixels];
-    let per_tile: Vec<Vec<PixelResult>> = lists
+    let tiles: Vec<TileForward> = lists
         .par_iter()
         .enumerate()
-        .map(|(t, list)| {
-            tile_pixels(t, size)
-                .map(|(x, y)| {
-                    let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
-                    let mut colour = [0.0; 3];
-                    let mut transmittance = 1.0;
-                    let mut count = 0u32;
-                    for (k, &i) in list.iter().enumerate() {
-                        let s = &splats[i as usize];
-                        let Some((alpha, _, _)) = alpha_at(s, px, py) else {
-                            continue;
-                        };
-                        let next = transmittance * (1.0 - alpha);
-                        if next < MIN_TRANSMITTANCE {
-                            break;
-                        }
-                        for (c, rgb) in colour.iter_mut().zip(s.rgb) {
-                            *c += rgb * alpha * transmittance;
-                        }
-                        transmittance = next;
-                        count = k as u32 + 1;
-                    }
-                    let p = (y * size[0] + x) as usize;
-                    let rgb = std::array::from_fn(|ch| colour[ch] + transmittance * background[ch]);
-                    (p, rgb, transmittance, count)
-                })
-                .collect()
-        })
+        .map(|(t, list)| forward_tile(splats, list, size, t))
         .collect();
-    for (p, rgb, t, count) in per_tile.into_iter().flatten() {
-        image[p * 3..p * 3 + 3].copy_from_slice(&rgb);
-        final_t[p] = t;
-        walked[p] = count;
+    for (t, tile) in tiles.iter().enumerate() {
+        let (origin, extent) = tile_bounds(t, size);
+        for ly in 0..extent[1] {
+            for lx in 0..extent[0] {
+                let q = (ly * extent[0] + lx) as usize;
+                let p = ((origin[1] + ly) * size[0] + origin[0] + lx) as usize;
+                for ch in 0..3 {
+                    image[p * 3 + ch] = tile.colour[q][ch] + tile.transmittance[q] * background[ch];
+                }
+                final_t[p] = tile.transmittance[q];
+                walked[p] = tile.walked[q];
+            }
+        }
     }
     Rasterized {
         size,
@@ -202,6 +263,8 @@ pub fn forward(splats: &[Splat], size: [u32; 2], background: [f64; 3]) -> Raster
 }
 
 /// ∂loss/∂ every splat, given ∂loss/∂ the image (same layout as `image`).
+/// Each tile walks its list back to front, splat by splat over each
+/// footprint; a pixel takes part for the entries it walked forward.
 pub fn backward(splats: &[Splat], raster: &Rasterized, d_image: &[f64]) -> Vec<SplatGrad> {
     let size = raster.size;
     let per_tile: Vec<Vec<(u32, SplatGrad)>> = raster
@@ -209,49 +272,72 @@ pub fn backward(splats: &[Splat], raster: &Rasterized, d_image: &[f64]) -> Vec<S
         .par_iter()
         .enumerate()
         .map(|(t, list)| {
-            let mut local: Vec<SplatGrad> = vec![SplatGrad::default(); list.len()];
-            for (x, y) in tile_pixels(t, size) {
-                let p = (y * size[0] + x) as usize;
-                let dc = [d_image[p * 3], d_image[p * 3 + 1], d_image[p * 3 + 2]];
-                if dc == [0.0; 3] {
-                    continue;
-                }
-                let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
-                let mut t_after = raster.final_t[p];
-                // The colour behind the current splat, as seen through it.
-                let mut behind = raster.background;
-                for k in (0..raster.walked[p] as usize).rev() {
-                    let s = &splats[list[k] as usize];
-                    let Some((alpha, gauss, d)) = alpha_at(s, px, py) else {
-                        continue;
-                    };
-                    let t_before = t_after / (1.0 - alpha);
-                    let g = &mut local[k];
-                    let mut d_alpha = 0.0;
-                    for ch in 0..3 {
-                        g.rgb[ch] += dc[ch] * alpha * t_before;
-                        d_alpha += dc[ch] * t_before * (s.rgb[ch] - behind[ch]);
-                    }
-                    for (ch, b) in behind.iter_mut().enumerate() {
-                        *b = s.rgb[ch] * alpha + (1.0 - alpha) * *b;
-                    }
-                    t_after = t_before;
-                    if s.opacity * gauss > MAX_ALPHA {
-                        continue; // clamped: α does not move with the splat
-                    }
-                    // α = o·e^power.
-                    g.opacity += d_alpha * gauss;
-                    let d_power = d_alpha * alpha;
-                    let [a, b, c] = s.conic;
-                    g.conic[0] += d_power * -0.5 * d[0] * d[0];
-                    g.conic[1] += d_power * -d[0] * d[1];
-                    g.conic[2] += d_power * -0.5 * d[1] * d[1];
-                    // d = pixel − centre.
-                    g.center[0] += d_power * (a * d[0] + b * d[1]);
-                    g.center[1] += d_power * (c * d[1] + b * d[0]);
+            let (origin, extent) = tile_bounds(t, size);
+            let n = (extent[0] * extent[1]) as usize;
+            let global = |lx: u32, ly: u32| ((origin[1] + ly) * size[0] + origin[0] + lx) as usize;
+            let mut t_after = vec![0.0; n];
+            let mut behind = vec![raster.background; n];
+            let mut walked = vec![0u32; n];
+            let mut d_colour = vec![[0.0; 3]; n];
+            for ly in 0..extent[1] {
+                for lx in 0..extent[0] {
+                    let (q, p) = ((ly * extent[0] + lx) as usize, global(lx, ly));
+                    t_after[q] = raster.final_t[p];
+                    walked[q] = raster.walked[p];
+                    d_colour[q] = [d_image[p * 3], d_image[p * 3 + 1], d_image[p * 3 + 2]];
                 }
             }
-            list.iter().copied().zip(local).collect()
+            let mut out = Vec::new();
+            for k in (0..list.len()).rev() {
+                let s = &splats[list[k] as usize];
+                let Some((xs, ys)) = footprint_in_tile(s, size, origin, extent) else {
+                    continue;
+                };
+                let mut g = SplatGrad::default();
+                let mut touched = false;
+                for ly in ys {
+                    let py = (origin[1] + ly) as f64 + 0.5;
+                    for lx in xs.clone() {
+                        let q = (ly * extent[0] + lx) as usize;
+                        if k as u32 >= walked[q] {
+                            continue;
+                        }
+                        let px = (origin[0] + lx) as f64 + 0.5;
+                        let Some((alpha, gauss, d)) = alpha_at(s, px, py) else {
+                            continue;
+                        };
+                        touched = true;
+                        let dc = d_colour[q];
+                        let t_before = t_after[q] / (1.0 - alpha);
+                        let mut d_alpha = 0.0;
+                        for ch in 0..3 {
+                            g.rgb[ch] += dc[ch] * alpha * t_before;
+                            d_alpha += dc[ch] * t_before * (s.rgb[ch] - behind[q][ch]);
+                        }
+                        for (ch, b) in behind[q].iter_mut().enumerate() {
+                            *b = s.rgb[ch] * alpha + (1.0 - alpha) * *b;
+                        }
+                        t_after[q] = t_before;
+                        if s.opacity * gauss > MAX_ALPHA {
+                            continue; // clamped: α does not move with the splat
+                        }
+                        // α = o·e^power.
+                        g.opacity += d_alpha * gauss;
+                        let d_power = d_alpha * alpha;
+                        let [a, b, c] = s.conic;
+                        g.conic[0] += d_power * -0.5 * d[0] * d[0];
+                        g.conic[1] += d_power * -d[0] * d[1];
+                        g.conic[2] += d_power * -0.5 * d[1] * d[1];
+                        // d = pixel − centre.
+                        g.center[0] += d_power * (a * d[0] + b * d[1]);
+                        g.center[1] += d_power * (c * d[1] + b * d[0]);
+                    }
+                }
+                if touched {
+                    out.push((list[k], g));
+                }
+            }
+            out
         })
         .collect();
     let mut grads = vec![SplatGrad::default(); splats.len()];

@@ -1,0 +1,240 @@
+//! `visage train` (a GaussianAvatars avatar from a dataset) and `visage eval`
+//! (its PSNR / SSIM on the dataset's held-out views, and a picture grid).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::Args;
+use serde_json::json;
+
+use super::render::parse_size;
+use crate::error::{Error, Result};
+use crate::model::head::HeadModel;
+use crate::render::image::RgbImage;
+use crate::train::dataset::Dataset;
+use crate::train::model::Trainable;
+use crate::train::trainer::{evaluate_view, timestep_frames, TrainOptions, Trainer};
+
+/// The FLAME files a dataset or avatar needs (none for the built-in head).
+#[derive(Args, Debug, Clone, Default)]
+pub struct HeadArgs {
+    /// FLAME model pickle (not needed for datasets `visage capture` made).
+    #[arg(long, value_name = "FILE")]
+    flame: Option<PathBuf>,
+    /// FLAME masks pickle (with --flame).
+    #[arg(long, value_name = "FILE")]
+    masks: Option<PathBuf>,
+}
+
+impl HeadArgs {
+    /// The head model: the user's FLAME, or the built-in head when the dataset
+    /// was captured from it (or nothing was given).
+    fn load(&self, dataset: Option<&Dataset>) -> Result<HeadModel> {
+        match (&self.flame, &self.masks) {
+            (Some(f), Some(m)) => Ok(crate::io::flame::load_flame(f, m)?),
+            (None, None) => {
+                if let Some(d) = dataset.filter(|d| d.builtin_source.is_none()) {
+                    return Err(Error::input(format!(
+                        "{} was not captured from the built-in head: give --flame and --masks",
+                        d.root.display()
+                    )));
+                }
+                Ok(crate::model::builtin::build_head())
+            }
+            _ => Err(Error::input("--flame and --masks go together")),
+        }
+    }
+}
+
+/// Arguments of `visage train`.
+#[derive(Args, Debug, Clone)]
+pub struct TrainArgs {
+    /// Dataset folder (transforms_{train,val,test}.json, images, FLAME parameters).
+    dataset: PathBuf,
+    #[command(flatten)]
+    head: HeadArgs,
+    /// Avatar folder to write (point_cloud.ply + flame_param.npz).
+    #[arg(short, long, value_name = "DIR")]
+    output: PathBuf,
+    /// Iterations (one training view each).
+    #[arg(long, default_value_t = 3000)]
+    iterations: usize,
+    /// Seed (initial colours, view order, split sampling).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Train at this resolution (images are resized); default: as stored.
+    #[arg(long, value_parser = parse_size, value_name = "WxH")]
+    size: Option<(u32, u32)>,
+    /// Composite masked images over white instead of black.
+    #[arg(long)]
+    white_background: bool,
+}
+
+/// Runs `visage train`.
+pub fn run_train(args: &TrainArgs) -> Result<()> {
+    let dataset = Dataset::load(&args.dataset)?;
+    let head = args.head.load(Some(&dataset))?;
+    // Fail on an unwritable output before training, not after.
+    std::fs::create_dir_all(&args.output)
+        .map_err(|e| Error::input(format!("cannot create {}: {e}", args.output.display())))?;
+    let background = if args.white_background {
+        [1.0; 3]
+    } else {
+        [0.0; 3]
+    };
+    let start = Instant::now();
+    let mut trainer = Trainer::new(
+        &dataset,
+        head,
+        TrainOptions {
+            iterations: args.iterations,
+            seed: args.seed,
+            size: args.size.map(|(w, h)| [w, h]),
+            background,
+        },
+    )?;
+    let bar = indicatif::ProgressBar::new(args.iterations as u64).with_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [{bar:25}] {pos}/{len} {per_sec} {msg} ({eta} left)",
+        )
+        .expect("the template is valid")
+        .progress_chars("=> "),
+    );
+    let mut smoothed: Option<(f64, f64)> = None;
+    for _ in 0..args.iterations {
+        let r = trainer.step();
+        let (loss, psnr) = smoothed.map_or((r.loss, r.psnr), |(l, p)| {
+            (0.6 * l + 0.4 * r.loss, 0.6 * p + 0.4 * r.psnr)
+        });
+        smoothed = Some((loss, psnr));
+        if r.iteration % 10 == 0 || r.iteration == args.iterations {
+            bar.set_message(format!(
+                "loss {loss:.4} PSNR {psnr:.1} dB {} Gaussians",
+                r.gaussians
+            ));
+        }
+        bar.set_position(r.iteration as u64);
+    }
+    bar.finish_and_clear();
+    trainer.export(&args.output)?;
+    eprintln!(
+        "visage: trained {} Gaussians in {:.1} s ({:.1} it/s, training PSNR {:.2} dB); wrote {}",
+        trainer.model.len(),
+        start.elapsed().as_secs_f64(),
+        args.iterations as f64 / start.elapsed().as_secs_f64(),
+        smoothed.map_or(0.0, |s| s.1),
+        args.output.display()
+    );
+    Ok(())
+}
+
+/// Arguments of `visage eval`.
+#[derive(Args, Debug, Clone)]
+pub struct EvalArgs {
+    /// Avatar folder (point_cloud.ply + flame_param.npz).
+    avatar: PathBuf,
+    /// Dataset folder.
+    dataset: PathBuf,
+    #[command(flatten)]
+    head: HeadArgs,
+    /// Side-by-side grid (render | ground truth) of the first views, as PNG.
+    #[arg(long, value_name = "PNG")]
+    grid: Option<PathBuf>,
+    /// Composite masked images over white instead of black.
+    #[arg(long)]
+    white_background: bool,
+    /// Print one JSON document.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs `visage eval`.
+pub fn run_eval(args: &EvalArgs) -> Result<()> {
+    let dataset = Dataset::load(&args.dataset)?;
+    let head = args.head.load(Some(&dataset))?;
+    let avatar = crate::io::avatar::read_avatar(&args.avatar, "avatar", &head)?;
+    let model = Trainable::from_set(&avatar.gaussians);
+    let background = if args.white_background {
+        [1.0; 3]
+    } else {
+        [0.0; 3]
+    };
+    let mut rows = Vec::new();
+    let mut grid: Vec<RgbImage> = Vec::new();
+    for (split, views) in [("val", &dataset.val), ("test", &dataset.test)] {
+        if views.is_empty() {
+            continue;
+        }
+        let (mut psnr_sum, mut ssim_sum) = (0.0, 0.0);
+        for (k, view) in views.iter().enumerate() {
+            let frames = timestep_frames(&dataset, &head, view.timestep)?;
+            let (image, goal, psnr, ssim) = evaluate_view(&model, &frames, view, background)?;
+            psnr_sum += psnr;
+            ssim_sum += ssim;
+            if k < 4 {
+                let [w, h] = view.camera.size;
+                grid.push(to_image(&image, w, h));
+                grid.push(to_image(&goal, w, h));
+            }
+        }
+        let n = views.len() as f64;
+        rows.push(json!({
+            "split": split,
+            "views": views.len(),
+            "psnr_db": psnr_sum / n,
+            "ssim": ssim_sum / n,
+        }));
+    }
+    if let Some(path) = &args.grid {
+        write_grid(&grid, path)?;
+    }
+    if args.json {
+        println!(
+            "{}",
+            json!({ "avatar": args.avatar.display().to_string(), "splits": rows })
+        );
+    } else {
+        for r in &rows {
+            println!(
+                "{:<5} {:>4} views  PSNR {:6.2} dB  SSIM {:.4}",
+                r["split"].as_str().unwrap_or(""),
+                r["views"],
+                r["psnr_db"].as_f64().unwrap_or(0.0),
+                r["ssim"].as_f64().unwrap_or(0.0)
+            );
+        }
+    }
+    Ok(())
+}
+
+fn to_image(values: &[f64], w: u32, h: u32) -> RgbImage {
+    RgbImage {
+        width: w,
+        height: h,
+        pixels: values
+            .iter()
+            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect(),
+    }
+}
+
+/// Pairs (render, truth) side by side, one pair per row.
+fn write_grid(images: &[RgbImage], path: &Path) -> Result<()> {
+    let Some(first) = images.first() else {
+        return Ok(());
+    };
+    let (w, h) = (first.width, first.height);
+    let rows = images.len().div_ceil(2) as u32;
+    let mut out = RgbImage::new(2 * w, rows * h, [0, 0, 0]);
+    for (k, img) in images.iter().enumerate() {
+        let (ox, oy) = ((k as u32 % 2) * w, (k as u32 / 2) * h);
+        for y in 0..img.height.min(h) {
+            for x in 0..img.width.min(w) {
+                let src = ((y * img.width + x) * 3) as usize;
+                let dst = (((oy + y) * out.width + ox + x) * 3) as usize;
+                out.pixels[dst..dst + 3].copy_from_slice(&img.pixels[src..src + 3]);
+            }
+        }
+    }
+    out.save_png(path).map_err(Error::input)
+}

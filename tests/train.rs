@@ -1,0 +1,274 @@
+//! Making a source: `visage capture` writes a dataset GaussianAvatars' reader
+//! accepts, `visage train` fits an avatar to it (the loss falls, the PSNR
+//! rises, the same seed gives the same avatar), `visage eval` scores it, and
+//! the avatar composes beside built-in sources. Malformed datasets fail with
+//! one line and exit 2.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{temp_path, visage};
+
+/// A small capture: 64×64, 4 cameras, 3 timesteps.
+fn small_capture(tag: &str) -> PathBuf {
+    let dir = temp_path("train", tag);
+    std::fs::remove_dir_all(&dir).ok();
+    let o = visage(&[
+        "capture",
+        "--size",
+        "64x64",
+        "--cameras",
+        "4",
+        "--frames",
+        "3",
+        "-o",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    dir
+}
+
+fn python() -> String {
+    std::env::var("VISAGE_TEST_PYTHON").unwrap_or_else(|_| {
+        if Path::new("/usr/bin/python3").exists() {
+            "/usr/bin/python3".into()
+        } else {
+            "python3".into()
+        }
+    })
+}
+
+/// GaussianAvatars' reader takes the capture, and its camera puts a point
+/// where ours does.
+#[test]
+fn captures_load_in_gaussian_avatars_reader_with_the_same_cameras() {
+    let dir = small_capture("ga");
+    let point = [0.02, -0.03, 0.05];
+    let out = Command::new(python())
+        .arg("tests/data/check_transforms.py")
+        .arg(&dir)
+        .args(point.map(|x| x.to_string()))
+        .output()
+        .expect("python3 with numpy (bash .ci/setup installs it)");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(summary["train"]["frames"], 8, "{summary}");
+    assert_eq!(summary["train"]["timesteps"], 2);
+    assert_eq!(summary["val"]["frames"], 2);
+    assert_eq!(summary["test"]["timesteps"], 1);
+    let dataset = visage::train::dataset::Dataset::load(&dir).unwrap();
+    assert_eq!(dataset.builtin_source.as_deref(), Some("ada"));
+    let camera = dataset.train[0].camera;
+    let p = glam::DVec3::from(point);
+    let r = camera.rotation;
+    let view: [f64; 3] = std::array::from_fn(|i| {
+        r[i][0] * p.x + r[i][1] * p.y + r[i][2] * p.z + camera.translation[i]
+    });
+    let ours = [
+        camera.principal[0] + camera.focal[0] * view[0] / -view[2],
+        camera.principal[1] - camera.focal[1] * view[1] / -view[2],
+    ];
+    let theirs = summary["first_train_pixel"].as_array().unwrap();
+    for k in 0..2 {
+        let t = theirs[k].as_f64().unwrap();
+        assert!((ours[k] - t).abs() < 1e-6, "{ours:?} vs {theirs:?}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Training lowers the loss and raises the PSNR, and a seed fixes the result.
+#[test]
+fn training_fits_the_capture_and_is_deterministic() {
+    use visage::train::dataset::Dataset;
+    use visage::train::trainer::{TrainOptions, Trainer};
+    let dir = small_capture("fit");
+    let dataset = Dataset::load(&dir).unwrap();
+    let options = TrainOptions {
+        iterations: 120,
+        seed: 3,
+        size: Some([48, 48]),
+        background: [0.0; 3],
+    };
+    let run = || {
+        let mut trainer = Trainer::new(
+            &dataset,
+            visage::model::builtin::build_head(),
+            options.clone(),
+        )
+        .unwrap();
+        let reports: Vec<_> = (0..options.iterations).map(|_| trainer.step()).collect();
+        (trainer, reports)
+    };
+    let (trainer, reports) = run();
+    let mean = |r: &[visage::train::trainer::StepReport],
+                f: fn(&visage::train::trainer::StepReport) -> f64| {
+        r.iter().map(f).sum::<f64>() / r.len() as f64
+    };
+    let (early, late) = (&reports[..20], &reports[reports.len() - 20..]);
+    assert!(
+        mean(late, |r| r.loss) < 0.7 * mean(early, |r| r.loss),
+        "loss {} → {}",
+        mean(early, |r| r.loss),
+        mean(late, |r| r.loss)
+    );
+    assert!(
+        mean(late, |r| r.psnr) > mean(early, |r| r.psnr) + 2.0,
+        "PSNR {} → {}",
+        mean(early, |r| r.psnr),
+        mean(late, |r| r.psnr)
+    );
+    let (again, _) = run();
+    assert_eq!(
+        trainer.model, again.model,
+        "the same seed trains the same avatar"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The command line end to end: train, eval (JSON and a grid), then the
+/// avatar composes beside an exported built-in source.
+#[test]
+fn train_eval_and_compose_from_the_command_line() {
+    let dir = small_capture("cli");
+    let db = temp_path("train", "db");
+    std::fs::remove_dir_all(&db).ok();
+    let avatar = db.join("trained");
+    let o = visage(&[
+        "train",
+        dir.to_str().unwrap(),
+        "-o",
+        avatar.to_str().unwrap(),
+        "--iterations",
+        "40",
+        "--size",
+        "32x32",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(avatar.join("point_cloud.ply").is_file());
+    let grid = temp_path("train", "grid.png");
+    let o = visage(&[
+        "eval",
+        avatar.to_str().unwrap(),
+        dir.to_str().unwrap(),
+        "--json",
+        "--grid",
+        grid.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let splits = report["splits"].as_array().unwrap();
+    assert_eq!(splits.len(), 2, "{report}");
+    for s in splits {
+        let psnr = s["psnr_db"].as_f64().unwrap();
+        assert!(psnr > 8.0 && psnr.is_finite(), "{report}");
+    }
+    let picture = image::image_dimensions(&grid).unwrap();
+    assert_eq!(picture.0, 128, "render | truth, 64 px each");
+    // A built-in source exported beside it: the folder database composes both.
+    let recipe = temp_path("train", "recipe.toml");
+    std::fs::write(&recipe, "base = \"bram\"\n").unwrap();
+    let o = visage(&[
+        "export",
+        "--recipe",
+        recipe.to_str().unwrap(),
+        "--gaussians-per-avatar",
+        "3000",
+        "--format",
+        "gaussian-avatars",
+        "--output",
+        db.join("bram").to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::write(
+        &recipe,
+        "base = \"trained\"\n[groups.nose]\ngaussians = \"bram\"\n",
+    )
+    .unwrap();
+    let o = visage(&[
+        "compose",
+        "--db",
+        db.to_str().unwrap(),
+        "--recipe",
+        recipe.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for p in [&dir, &db] {
+        std::fs::remove_dir_all(p).ok();
+    }
+    std::fs::remove_file(&grid).ok();
+    std::fs::remove_file(&recipe).ok();
+}
+
+#[test]
+fn malformed_datasets_fail_with_one_line_and_exit_2() {
+    let dir = small_capture("bad");
+    let original = std::fs::read_to_string(dir.join("transforms_train.json")).unwrap();
+    let cases: [(&str, &str, &str); 6] = [
+        (
+            "\"transform_matrix\": [",
+            "\"transform_matrix\": [[1,2],",
+            "4x4",
+        ),
+        (
+            "\"timestep_index\"",
+            "\"timestep_indexx\"",
+            "timestep_index",
+        ),
+        (
+            "images/00000_00.png",
+            "images/missing.png",
+            "does not exist",
+        ),
+        ("\"frames\"", "\"framez\"", "no 'frames'"),
+        ("\"fl_x\"", "\"fl_q\"", ""),
+        ("{", "{{", "not valid JSON"),
+    ];
+    for (from, to, needle) in cases {
+        std::fs::write(
+            dir.join("transforms_train.json"),
+            original.replacen(from, to, 1),
+        )
+        .unwrap();
+        let o = visage(&[
+            "train",
+            dir.to_str().unwrap(),
+            "-o",
+            dir.join("out").to_str().unwrap(),
+            "--iterations",
+            "1",
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        if needle.is_empty() {
+            // Without fl_x the top-level intrinsics still give the camera.
+            assert!(o.status.success(), "{err}");
+            continue;
+        }
+        assert_eq!(o.status.code(), Some(2), "{to}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(
+            err.contains(needle) && err.contains("transforms_train.json"),
+            "{err}"
+        );
+    }
+    // A dataset not captured from the built-in head needs FLAME files.
+    std::fs::write(
+        dir.join("transforms_train.json"),
+        original.replace("visage_builtin_head", "something_else"),
+    )
+    .unwrap();
+    let o = visage(&[
+        "train",
+        dir.to_str().unwrap(),
+        "-o",
+        dir.join("o").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--flame and --masks"));
+    std::fs::remove_dir_all(&dir).ok();
+}
