@@ -272,3 +272,52 @@ fn malformed_datasets_fail_with_one_line_and_exit_2() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("--flame and --masks"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Ctrl-C stops at an iteration boundary with a checkpoint and the avatar so
+/// far; `--resume` continues from there.
+#[test]
+fn ctrl_c_checkpoints_and_resume_continues() {
+    let dir = small_capture("sigint");
+    let out = dir.join("avatar");
+    let stopped_at = |resume: Option<&Path>| -> usize {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_visage"));
+        cmd.args(["train", dir.to_str().unwrap(), "-o", out.to_str().unwrap()])
+            .args([
+                "--iterations",
+                "1000000",
+                "--size",
+                "16x16",
+                "--checkpoint-every",
+                "0",
+            ])
+            .stderr(std::process::Stdio::piped());
+        if let Some(r) = resume {
+            cmd.arg("--resume").arg(r);
+        }
+        let child = cmd.spawn().unwrap();
+        std::thread::sleep(std::time::Duration::from_secs(3));
+        Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .unwrap();
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        let line = err
+            .lines()
+            .find(|l| l.contains("stopped at iteration"))
+            .unwrap_or_else(|| panic!("{err}"));
+        line.split_whitespace()
+            .skip_while(|w| *w != "iteration")
+            .nth(1)
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let first = stopped_at(None);
+    let checkpoint = out.join("checkpoint.npz");
+    assert!(checkpoint.is_file() && out.join("point_cloud.ply").is_file());
+    let second = stopped_at(Some(&checkpoint));
+    assert!(second > first, "resumed from {first}, stopped at {second}");
+    std::fs::remove_dir_all(&dir).ok();
+}

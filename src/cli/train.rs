@@ -68,10 +68,27 @@ pub struct TrainArgs {
     /// Composite masked images over white instead of black.
     #[arg(long)]
     white_background: bool,
+    /// Write OUTPUT/checkpoint.npz every N iterations (0: only on Ctrl-C).
+    #[arg(long, default_value_t = 500, value_name = "N")]
+    checkpoint_every: usize,
+    /// Continue a run from its checkpoint (its seed and iteration count).
+    #[arg(long, value_name = "CHECKPOINT")]
+    resume: Option<PathBuf>,
 }
 
 /// Runs `visage train`.
 pub fn run_train(args: &TrainArgs) -> Result<()> {
+    // Ctrl-C or a hang-up stops at the end of an iteration with a checkpoint
+    // (installed first, so a signal while loading is no crash either).
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for signal in [
+        signal_hook::consts::SIGINT,
+        signal_hook::consts::SIGTERM,
+        signal_hook::consts::SIGHUP,
+    ] {
+        signal_hook::flag::register(signal, std::sync::Arc::clone(&stop))
+            .map_err(|e| Error::input(format!("cannot install a signal handler: {e}")))?;
+    }
     let dataset = Dataset::load(&args.dataset)?;
     let head = args.head.load(Some(&dataset))?;
     // Fail on an unwritable output before training, not after.
@@ -83,31 +100,50 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
         [0.0; 3]
     };
     let start = Instant::now();
-    let mut trainer = Trainer::new(
-        &dataset,
-        head,
-        TrainOptions {
-            iterations: args.iterations,
-            seed: args.seed,
-            size: args.size.map(|(w, h)| [w, h]),
-            background,
-        },
-    )?;
-    let bar = indicatif::ProgressBar::new(args.iterations as u64).with_style(
+    let options = TrainOptions {
+        iterations: args.iterations,
+        seed: args.seed,
+        size: args.size.map(|(w, h)| [w, h]),
+        background,
+    };
+    let mut trainer = match &args.resume {
+        Some(path) => Trainer::resume(&dataset, head, options, path)?,
+        None => Trainer::new(&dataset, head, options)?,
+    };
+    let iterations = trainer.iterations();
+    let checkpoint = args.output.join("checkpoint.npz");
+    let first = trainer.iteration();
+    let bar = indicatif::ProgressBar::new(iterations as u64).with_style(
         indicatif::ProgressStyle::with_template(
             "{spinner} [{bar:25}] {pos}/{len} {per_sec} {msg} ({eta} left)",
         )
         .expect("the template is valid")
         .progress_chars("=> "),
     );
+    bar.set_position(first as u64);
     let mut smoothed: Option<(f64, f64)> = None;
-    for _ in 0..args.iterations {
+    while trainer.iteration() < iterations {
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            bar.finish_and_clear();
+            trainer.save_checkpoint(&checkpoint)?;
+            trainer.export(&args.output)?;
+            eprintln!(
+                "visage: stopped at iteration {} of {iterations}; the avatar so far is in {}; continue with --resume {}",
+                trainer.iteration(),
+                args.output.display(),
+                checkpoint.display()
+            );
+            return Ok(());
+        }
         let r = trainer.step();
+        if args.checkpoint_every > 0 && r.iteration % args.checkpoint_every == 0 {
+            trainer.save_checkpoint(&checkpoint)?;
+        }
         let (loss, psnr) = smoothed.map_or((r.loss, r.psnr), |(l, p)| {
             (0.6 * l + 0.4 * r.loss, 0.6 * p + 0.4 * r.psnr)
         });
         smoothed = Some((loss, psnr));
-        if r.iteration % 10 == 0 || r.iteration == args.iterations {
+        if r.iteration % 10 == 0 || r.iteration == iterations {
             bar.set_message(format!(
                 "loss {loss:.4} PSNR {psnr:.1} dB {} Gaussians",
                 r.gaussians
@@ -121,7 +157,7 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
         "visage: trained {} Gaussians in {:.1} s ({:.1} it/s, training PSNR {:.2} dB); wrote {}",
         trainer.model.len(),
         start.elapsed().as_secs_f64(),
-        args.iterations as f64 / start.elapsed().as_secs_f64(),
+        (iterations - first) as f64 / start.elapsed().as_secs_f64(),
         smoothed.map_or(0.0, |s| s.1),
         args.output.display()
     );

@@ -72,6 +72,32 @@ impl AdamGroup {
         self.v.resize(self.v.len() + count * self.width, 0.0);
     }
 
+    /// The moments and the step count (for checkpoints).
+    pub fn state(&self) -> (&[f64], &[f64], i32) {
+        (&self.m, &self.v, self.t)
+    }
+
+    /// Restores moments and step count saved by [`AdamGroup::state`] for
+    /// `count` Gaussians.
+    pub fn restore(
+        &mut self,
+        m: Vec<f64>,
+        v: Vec<f64>,
+        t: i32,
+        count: usize,
+    ) -> Result<(), String> {
+        if m.len() != v.len() || m.len() != count * self.width {
+            return Err(format!(
+                "optimiser state of {} and {} values does not fit groups of {}",
+                m.len(),
+                v.len(),
+                self.width
+            ));
+        }
+        (self.m, self.v, self.t) = (m, v, t);
+        Ok(())
+    }
+
     /// Zeroes the moments of one value (after an opacity reset, the reference
     /// trainer restarts the reset values' moments).
     pub fn reset_values(&mut self, range: std::ops::Range<usize>) {
