@@ -321,3 +321,32 @@ fn ctrl_c_checkpoints_and_resume_continues() {
     assert!(second > first, "resumed from {first}, stopped at {second}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `visage bench train` measures a short run on a fresh capture: speed, a
+/// held-out curve, and the gradient error within the bound.
+#[test]
+fn bench_train_reports_speed_quality_and_gradient_error() {
+    let o = visage(&[
+        "bench",
+        "train",
+        "--capture-size",
+        "32x32",
+        "--iterations",
+        "20",
+        "--eval-every",
+        "10",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(r["iterations_per_s"].as_f64().unwrap() > 0.0);
+    assert!(
+        r["gradient_max_relative_error"].as_f64().unwrap() < 1e-4,
+        "{r}"
+    );
+    let curve = r["curve"].as_array().unwrap();
+    assert_eq!(curve.len(), 2, "{r}");
+    assert!(curve
+        .iter()
+        .all(|row| row["held_out_psnr_db"].as_f64().unwrap() > 5.0));
+}

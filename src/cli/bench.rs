@@ -33,6 +33,8 @@ enum BenchWhat {
     Render(super::bench_render::RenderBenchArgs),
     /// Encode time, bytes and end-to-end FPS per terminal graphics protocol.
     Terminal(super::bench_terminal::TerminalBenchArgs),
+    /// Training speed, held-out PSNR against time, gradient error.
+    Train(super::bench_train::TrainBenchArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -59,6 +61,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         BenchWhat::Engine(a) => engine_bench(a),
         BenchWhat::Render(a) => super::bench_render::run(a),
         BenchWhat::Terminal(a) => super::bench_terminal::run(a),
+        BenchWhat::Train(a) => super::bench_train::run(a),
     }
 }
 

@@ -5,6 +5,7 @@ mod bench;
 mod bench_render;
 mod bench_scene;
 mod bench_terminal;
+mod bench_train;
 mod camera;
 mod capture;
 mod compose;

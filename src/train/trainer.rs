@@ -927,14 +927,15 @@ mod tests {
     #[test]
     fn a_resumed_run_matches_an_uninterrupted_one() {
         let dir = std::env::temp_dir().join(format!("visage-ckpt-{}", std::process::id()));
-        let db = crate::pipeline::DatabaseSpec {
-            gaussians_per_avatar: 1,
-            source_count: 2,
-            ..Default::default()
-        }
-        .load()
-        .unwrap()
-        .0;
+        let db = crate::avatar::synthetic::builtin_database(
+            crate::model::builtin::build_head(),
+            crate::avatar::synthetic::SyntheticOptions {
+                seed: 1,
+                sources: 2,
+                gaussians_per_avatar: 1,
+            },
+        )
+        .unwrap();
         let options = CaptureOptions {
             source: "ada".into(),
             size: [40, 40],

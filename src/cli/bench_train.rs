@@ -1,0 +1,140 @@
+//! `visage bench train`: training speed beside quality — iterations per
+//! second and held-out PSNR against wall time (a short curve), peak memory,
+//! and the gradient error against central differences.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+use serde_json::json;
+
+use super::bench_scene::peak_rss_mb;
+use super::render::parse_size;
+use crate::error::Result;
+use crate::pipeline::DatabaseSpec;
+use crate::train::capture::{capture, CaptureOptions};
+use crate::train::dataset::Dataset;
+use crate::train::trainer::{evaluate_view, timestep_frames, TrainOptions, Trainer};
+
+/// Arguments of `visage bench train`.
+#[derive(Args, Debug, Clone)]
+pub struct TrainBenchArgs {
+    /// Dataset to train on (default: a fresh capture of the built-in `ada`,
+    /// 16 cameras, 20 frames of `talk`, at --capture-size).
+    #[arg(long, value_name = "DIR")]
+    dataset: Option<PathBuf>,
+    /// Size of the default capture.
+    #[arg(long, value_parser = parse_size, default_value = "128x128", value_name = "WxH")]
+    capture_size: (u32, u32),
+    /// Iterations.
+    #[arg(long, default_value_t = 600)]
+    iterations: usize,
+    /// Evaluate the held-out views every this many iterations.
+    #[arg(long, default_value_t = 100)]
+    eval_every: usize,
+    /// Print one JSON document.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs `visage bench train`.
+pub fn run(args: &TrainBenchArgs) -> Result<()> {
+    let (gradient_error, checked) = crate::train::model::gradient_check::worst_relative_error();
+    let scratch = std::env::temp_dir().join(format!("visage-bench-train-{}", std::process::id()));
+    let root = match &args.dataset {
+        Some(d) => d.clone(),
+        None => {
+            let (db, _) = DatabaseSpec {
+                gaussians_per_avatar: 1,
+                ..DatabaseSpec::default()
+            }
+            .load()?;
+            let options = CaptureOptions {
+                source: "ada".into(),
+                size: [args.capture_size.0, args.capture_size.1],
+                cameras: 16,
+                frames: 20,
+                motion: "talk".into(),
+                ring: false,
+            };
+            capture(&db, &options, &scratch, &|_, _| {})?;
+            scratch.clone()
+        }
+    };
+    let dataset = Dataset::load(&root)?;
+    let head = crate::model::builtin::build_head();
+    let held_out: Vec<_> = dataset.val.iter().chain(&dataset.test).cloned().collect();
+    let mut frames = std::collections::BTreeMap::new();
+    for v in &held_out {
+        if let std::collections::btree_map::Entry::Vacant(e) = frames.entry(v.timestep) {
+            e.insert(timestep_frames(&dataset, &head, v.timestep)?);
+        }
+    }
+    let mut trainer = Trainer::new(
+        &dataset,
+        head,
+        TrainOptions {
+            iterations: args.iterations,
+            seed: 1,
+            size: None,
+            background: [0.0; 3],
+        },
+    )?;
+    let mut curve = Vec::new();
+    let mut training_s = 0.0;
+    while trainer.iteration() < args.iterations {
+        let t = Instant::now();
+        for _ in 0..args.eval_every.max(1) {
+            if trainer.iteration() >= args.iterations {
+                break;
+            }
+            trainer.step();
+        }
+        training_s += t.elapsed().as_secs_f64();
+        let mut psnr = 0.0;
+        for v in &held_out {
+            psnr += evaluate_view(&trainer.model, &frames[&v.timestep], v, [0.0; 3])?.2;
+        }
+        curve.push(json!({
+            "iteration": trainer.iteration(),
+            "train_s": training_s,
+            "held_out_psnr_db": psnr / held_out.len().max(1) as f64,
+            "gaussians": trainer.model.len(),
+        }));
+    }
+    if args.dataset.is_none() {
+        std::fs::remove_dir_all(&scratch).ok();
+    }
+    let report = json!({
+        "renderer": "cpu (f64, rayon)",
+        "threads": rayon::current_num_threads(),
+        "iterations_per_s": args.iterations as f64 / training_s,
+        "gradient_max_relative_error": gradient_error,
+        "gradient_parameters_checked": checked,
+        "peak_rss_mb": peak_rss_mb(),
+        "curve": curve,
+    });
+    if args.json {
+        println!("{report}");
+        return Ok(());
+    }
+    println!(
+        "training on {} ({} threads): {:.2} iterations/s; gradient error {:.1e} (max relative, {checked} parameters); peak memory {:.0} MiB",
+        root.display(),
+        rayon::current_num_threads(),
+        report["iterations_per_s"].as_f64().unwrap_or(0.0),
+        gradient_error,
+        peak_rss_mb().unwrap_or(0.0)
+    );
+    println!("  iteration  train s  held-out PSNR dB  Gaussians");
+    for row in &curve {
+        println!(
+            "  {:>9}  {:>7.1}  {:>16.2}  {:>9}",
+            row["iteration"],
+            row["train_s"].as_f64().unwrap_or(0.0),
+            row["held_out_psnr_db"].as_f64().unwrap_or(0.0),
+            row["gaussians"]
+        );
+    }
+    Ok(())
+}
