@@ -235,6 +235,17 @@ fn edge(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> f64 {
     (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
 }
 
+/// The position of `name` among `names`, or an error listing them.
+fn find(names: &[&str], name: &str, what: &str) -> Result<usize> {
+    names.iter().position(|n| *n == name).ok_or_else(|| {
+        Error::input(format!(
+            "unknown {what} '{}' ({what}s: {})",
+            crate::text::printable(name),
+            names.join(", ")
+        ))
+    })
+}
+
 /// What a capture wrote.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CaptureSummary {
@@ -251,36 +262,10 @@ pub fn capture(
     out: &Path,
     progress: &dyn Fn(u64, u64),
 ) -> Result<CaptureSummary> {
-    let source = db
-        .sources
-        .iter()
-        .position(|s| s.name == options.source)
-        .ok_or_else(|| {
-            Error::input(format!(
-                "unknown source '{}' (sources: {})",
-                crate::text::printable(&options.source),
-                db.sources
-                    .iter()
-                    .map(|s| s.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-        })?;
-    let motion = db
-        .motions
-        .iter()
-        .find(|m| m.name == options.motion)
-        .ok_or_else(|| {
-            Error::input(format!(
-                "unknown motion '{}' (motions: {})",
-                crate::text::printable(&options.motion),
-                db.motions
-                    .iter()
-                    .map(|m| m.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-        })?;
+    let source_names: Vec<&str> = db.sources.iter().map(|s| s.name.as_str()).collect();
+    let source = find(&source_names, &options.source, "source")?;
+    let motion_names: Vec<&str> = db.motions.iter().map(|m| m.name.as_str()).collect();
+    let motion = &db.motions[find(&motion_names, &options.motion, "motion")?];
     if options.cameras == 0 || options.frames == 0 {
         return Err(Error::input("--cameras and --frames must be at least 1"));
     }

@@ -35,31 +35,31 @@ fn window() -> [f64; WINDOW] {
 
 /// One channel of an image convolved with the window (separable, zero padding).
 fn blur(plane: &[f64], width: usize, height: usize, w: &[f64; WINDOW]) -> Vec<f64> {
-    let half = WINDOW / 2;
-    let mut rows = vec![0.0; plane.len()];
-    for y in 0..height {
-        for x in 0..width {
-            let mut acc = 0.0;
-            for (k, wk) in w.iter().enumerate() {
-                let xx = x as isize + k as isize - half as isize;
-                if (0..width as isize).contains(&xx) {
-                    acc += wk * plane[y * width + xx as usize];
-                }
-            }
-            rows[y * width + x] = acc;
-        }
-    }
+    let rows = blur_along(plane, width, height, w, (1, width));
+    blur_along(&rows, height, width, w, (width, 1))
+}
+
+/// A 1-D pass of the window along lines of `length` samples `step.0` apart,
+/// `count` lines `step.1` apart.
+fn blur_along(
+    plane: &[f64],
+    length: usize,
+    count: usize,
+    w: &[f64; WINDOW],
+    step: (usize, usize),
+) -> Vec<f64> {
+    let half = (WINDOW / 2) as isize;
     let mut out = vec![0.0; plane.len()];
-    for y in 0..height {
-        for x in 0..width {
+    for line in 0..count {
+        for i in 0..length {
             let mut acc = 0.0;
             for (k, wk) in w.iter().enumerate() {
-                let yy = y as isize + k as isize - half as isize;
-                if (0..height as isize).contains(&yy) {
-                    acc += wk * rows[yy as usize * width + x];
+                let j = i as isize + k as isize - half;
+                if (0..length as isize).contains(&j) {
+                    acc += wk * plane[line * step.1 + j as usize * step.0];
                 }
             }
-            out[y * width + x] = acc;
+            out[line * step.1 + i * step.0] = acc;
         }
     }
     out
