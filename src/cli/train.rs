@@ -197,14 +197,19 @@ pub fn run_eval(args: &EvalArgs) -> Result<()> {
     };
     let mut rows = Vec::new();
     let mut grid: Vec<RgbImage> = Vec::new();
+    // Each timestep's FLAME parameters are read and posed once.
+    let mut posed = std::collections::BTreeMap::new();
     for (split, views) in [("val", &dataset.val), ("test", &dataset.test)] {
         if views.is_empty() {
             continue;
         }
         let (mut psnr_sum, mut ssim_sum) = (0.0, 0.0);
         for (k, view) in views.iter().enumerate() {
-            let frames = timestep_frames(&dataset, &head, view.timestep)?;
-            let (image, goal, psnr, ssim) = evaluate_view(&model, &frames, view, background)?;
+            if let std::collections::btree_map::Entry::Vacant(e) = posed.entry(view.timestep) {
+                e.insert(timestep_frames(&dataset, &head, view.timestep)?);
+            }
+            let frames = &posed[&view.timestep];
+            let (image, goal, psnr, ssim) = evaluate_view(&model, frames, view, background)?;
             psnr_sum += psnr;
             ssim_sum += ssim;
             if k < 4 {
