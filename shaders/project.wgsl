@@ -89,7 +89,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let mid = 0.5 * (a + c);
     let lambda = mid + sqrt(max(mid * mid - det, 0.1));
-    let radius = ceil(RADIUS_SIGMAS * sqrt(lambda));
+    // projection.rs footprint_radius: 3σ, or less where α drops below 1/255 sooner.
+    let visible = sqrt(max(2.0 * lambda * log(opacity / MIN_ALPHA), 0.0));
+    let radius = min(ceil(RADIUS_SIGMAS * sqrt(lambda)), visible * (1.0 + 1e-4) + 1e-3);
     let centre = vec2<f32>(camera.intrinsics.z + fx * p.x / depth, camera.intrinsics.w - fy * p.y / depth);
     let width = f32(camera.size.x);
     let height = f32(camera.size.y);

@@ -320,7 +320,7 @@ fn a_scene_half_outside_the_frustum_renders_like_the_reference() {
         .position
         .iter()
         .filter(|p| {
-            cull.project_covariance(**p, glam::DMat3::IDENTITY * 1e-8)
+            cull.project_covariance(**p, glam::DMat3::IDENTITY * 1e-8, 1.0)
                 .is_none()
         })
         .count();

@@ -156,7 +156,7 @@ impl CpuRenderer {
                     return;
                 }
                 let cov = prepared[i].cov_world(frame, settings.scale_modifier);
-                let Some(s) = cam.project_covariance(position, cov) else {
+                let Some(s) = cam.project_covariance(position, cov, opacity as f64) else {
                     return;
                 };
                 let Some((x0, y0, x1, y1)) = s.pixel_rect(width, height) else {

@@ -1,6 +1,7 @@
 //! Projection of 3D Gaussians to screen-space ellipses, following the reference
 //! 3DGS rasteriser (EWA splatting): 2D covariance J·W·Σ·Wᵀ·Jᵀ dilated by 0.3 px²,
-//! a square footprint of 3σ of the major axis, near-plane culling. The GPU
+//! a square footprint of 3σ of the major axis (tighter where the opacity makes
+//! α fall below 1/255 sooner: [`footprint_radius`]), near-plane culling. The GPU
 //! kernels implement the same steps in f32 (`shaders/project.wgsl`); this is the
 //! f64 version used by the reference renderer.
 //!
@@ -25,6 +26,18 @@ pub const MIN_TRANSMITTANCE: f64 = 1e-4;
 /// The Jacobian is evaluated with x/z and y/z clamped to this multiple of the
 /// half field of view (keeps off-screen Gaussians from exploding).
 pub const FRUSTUM_GUARD: f64 = 1.3;
+
+/// Footprint half-size in pixels for a splat whose 2D covariance has largest
+/// eigenvalue `lambda` and whose opacity is `opacity`: 3σ of the major axis
+/// rounded up (3DGS), or less where α = o·e^power falls below 1/255 sooner —
+/// beyond σ·√(2 ln(255·o)) along any axis it does, and such pixels are skipped
+/// anyway, so the image is the same and faint splats touch fewer pixels and
+/// tiles. The small margin keeps rounding from dropping a pixel that counts.
+pub fn footprint_radius(lambda: f64, opacity: f64) -> f64 {
+    let three_sigma = (RADIUS_SIGMAS * lambda.sqrt()).ceil();
+    let visible = (2.0 * lambda * (opacity / MIN_ALPHA).ln()).max(0.0).sqrt();
+    three_sigma.min(visible * (1.0 + 1e-4) + 1e-3)
+}
 
 /// A Gaussian projected to the image.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -85,7 +98,13 @@ impl ProjectionCamera {
 
     /// Projects one Gaussian; `None` when culled (behind the near plane, beyond the
     /// far plane, degenerate, non-finite or entirely off-screen).
-    pub fn project(&self, position: Vec3, rotation: Quat, scale: Vec3) -> Option<Splat2D> {
+    pub fn project(
+        &self,
+        position: Vec3,
+        rotation: Quat,
+        scale: Vec3,
+        opacity: f64,
+    ) -> Option<Splat2D> {
         let p = self.rotation * position.as_dvec3() + self.translation;
         let depth = -p.z;
         if !(depth >= self.near && depth <= self.far) {
@@ -97,23 +116,28 @@ impl ProjectionCamera {
             return None;
         }
         let m = r * DMat3::from_diagonal(s);
-        self.project_view(p, m * m.transpose())
+        self.project_view(p, m * m.transpose(), opacity)
     }
 
     /// Projects a Gaussian given by its centre and world covariance (for
     /// renderers that prepare covariances ahead of the frame).
-    pub fn project_covariance(&self, position: Vec3, cov_world: DMat3) -> Option<Splat2D> {
+    pub fn project_covariance(
+        &self,
+        position: Vec3,
+        cov_world: DMat3,
+        opacity: f64,
+    ) -> Option<Splat2D> {
         let p = self.rotation * position.as_dvec3() + self.translation;
         let depth = -p.z;
         if !(depth >= self.near && depth <= self.far && cov_world.is_finite()) {
             return None;
         }
-        self.project_view(p, cov_world)
+        self.project_view(p, cov_world, opacity)
     }
 
     /// The rest of the projection, from the view-space centre `p` (in front
     /// of the camera, checked) and the world covariance.
-    fn project_view(&self, p: DVec3, cov_world: DMat3) -> Option<Splat2D> {
+    fn project_view(&self, p: DVec3, cov_world: DMat3, opacity: f64) -> Option<Splat2D> {
         let depth = -p.z;
         let cov_view = self.rotation * cov_world * self.rotation.transpose();
         let lim_x = FRUSTUM_GUARD * self.tan_half_x;
@@ -132,7 +156,7 @@ impl ProjectionCamera {
         }
         let mid = 0.5 * (a + c);
         let lambda = mid + (mid * mid - det).max(0.1).sqrt();
-        let radius = (RADIUS_SIGMAS * lambda.sqrt()).ceil();
+        let radius = footprint_radius(lambda, opacity);
         let center = [
             self.cx + self.fx * p.x / depth,
             self.cy - self.fy * p.y / depth,
@@ -188,5 +212,63 @@ impl Splat2D {
             .floor()
             .min(height as f64 - 1.0);
         (x0 <= x1 && y0 <= y1).then_some((x0 as u32, y0 as u32, x1 as u32, y1 as u32))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Of the pixels the 3σ footprint covers, the tighter one drops only those
+    /// whose α is below 1/255 — ones the blend skips anyway — and it is never
+    /// wider than 3σ: sub-pixel splats,
+    /// elongated ones, faint and opaque ones, opacities under 1/255.
+    #[test]
+    fn the_footprint_keeps_every_pixel_that_counts() {
+        let mut state = 12345u64;
+        let mut uniform = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut checked = 0;
+        for _ in 0..20_000 {
+            // A 2D covariance: rotation, two variances (dilated as projected).
+            let angle = uniform() * std::f64::consts::PI;
+            let (s1, s2) = (0.3 + uniform() * 20.0, 0.3 + uniform().powi(3) * 2.0);
+            let (c, s) = (angle.cos(), angle.sin());
+            let (a, b, cc) = (
+                c * c * s1 + s * s * s2,
+                c * s * (s1 - s2),
+                s * s * s1 + c * c * s2,
+            );
+            let det = a * cc - b * b;
+            let mid = 0.5 * (a + cc);
+            let lambda = mid + (mid * mid - det).max(0.1).sqrt();
+            let opacity = uniform().powi(2);
+            let radius = footprint_radius(lambda, opacity);
+            let three_sigma = (RADIUS_SIGMAS * lambda.sqrt()).ceil();
+            assert!(radius <= three_sigma);
+            let conic = [cc / det, -b / det, a / det];
+            for _ in 0..20 {
+                let (dx, dy) = (
+                    (uniform() - 0.5) * 6.0 * radius.max(1.0),
+                    (uniform() - 0.5) * 6.0 * radius.max(1.0),
+                );
+                let inside = |r: f64| dx.abs() <= r && dy.abs() <= r;
+                // Only what 3σ kept and the tighter footprint drops.
+                if inside(radius) || !inside(three_sigma) {
+                    continue;
+                }
+                let power = -0.5 * (conic[0] * dx * dx + conic[2] * dy * dy) - conic[1] * dx * dy;
+                assert!(
+                    opacity * power.exp() < MIN_ALPHA,
+                    "a pixel at ({dx}, {dy}) outside radius {radius} counts"
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 10_000, "{checked} pixels between the footprints");
     }
 }

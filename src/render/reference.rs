@@ -36,6 +36,7 @@ pub fn render_reference_f32(
                 scene.position[i],
                 scene.rotation[i],
                 scene.scale[i] * settings.scale_modifier,
+                opacity.min(1.0),
             )?;
             let dir = (scene.position[i].as_dvec3() - cam.eye).normalize_or_zero();
             let rgb = eval_rgb(scene.sh_of(i), degree, dir.to_array());

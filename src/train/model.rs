@@ -137,8 +137,15 @@ impl Render {
                 }
                 let frame = &frames[(model.binding[i] as usize).min(last)];
                 let sh = &model.sh[i * SH_STRIDE..(i + 1) * SH_STRIDE];
-                project(&model.geometry[i], sh, model.sh_degree, frame, camera)
-                    .map(|p| (i as u32, p))
+                project(
+                    &model.geometry[i],
+                    sh,
+                    model.sh_degree,
+                    opacity.min(1.0),
+                    frame,
+                    camera,
+                )
+                .map(|p| (i as u32, p))
             })
             .collect();
         let (drawn, projected): (Vec<u32>, Vec<Projected>) = projected.into_iter().unzip();

@@ -3,7 +3,7 @@
 //! triangle's frame) → the projected centre, conic and view-dependent colour,
 //! with the same numerics as the renderers (`render::projection`: the 0.3 px²
 //! dilation, the 1.3× frustum guard on the Jacobian, 3σ square footprints,
-//! near/far culling; SH colour `max(0, 0.5 + Σ basis·coef)`). The geometry
+//! near/far culling, the opacity-aware footprint; SH colour `max(0, 0.5 + Σ basis·coef)`). The geometry
 //! runs in [`Dual`] numbers, so every output carries its derivatives with
 //! respect to the ten geometry parameters.
 
@@ -11,7 +11,7 @@ use glam::{DMat3, DVec3, Mat4};
 
 use super::dual::{dot, mat_vec, DVec, Dual};
 use crate::avatar::binding::TriangleFrame;
-use crate::render::projection::{COVARIANCE_DILATION, FRUSTUM_GUARD, RADIUS_SIGMAS};
+use crate::render::projection::{footprint_radius, COVARIANCE_DILATION, FRUSTUM_GUARD};
 use crate::scene::camera::Camera;
 
 /// Geometry parameters per Gaussian: local position (3), log-scale (3) and
@@ -158,6 +158,7 @@ pub fn project(
     geometry: &Geometry,
     sh: &[f64],
     degree: u8,
+    opacity: f64,
     frame: &TriangleFrame,
     camera: &TrainCamera,
 ) -> Option<Projected> {
@@ -222,7 +223,7 @@ pub fn project(
     }
     let mid = 0.5 * (ca.v + cc.v);
     let lambda = mid + (mid * mid - det.v).max(0.1).sqrt();
-    let radius = (RADIUS_SIGMAS * lambda.sqrt()).ceil();
+    let radius = footprint_radius(lambda, opacity);
     let center = [
         view_point[0] * fx / depth + camera.principal[0],
         -(view_point[1] * fy / depth) + camera.principal[1],
@@ -332,7 +333,7 @@ mod tests {
         let sh: Vec<f64> = (0..48)
             .map(|i| ((i * 7) % 11) as f64 * 0.03 - 0.15)
             .collect();
-        let p = project(&g, &sh, 3, &frame, &TrainCamera::from_camera(&camera)).unwrap();
+        let p = project(&g, &sh, 3, 0.7, &frame, &TrainCamera::from_camera(&camera)).unwrap();
         let local_q = Quat::from_xyzw(0.1, -0.3, 0.2, 0.9).normalize();
         let world = frame.scale * (frame.rotation * Vec3::new(0.3, -0.2, 0.5)) + frame.center;
         let reference = ProjectionCamera::new(&camera)
@@ -340,6 +341,7 @@ mod tests {
                 world,
                 frame.quat * local_q,
                 Vec3::new(-0.5f32, 0.2, -1.5).exp() * frame.scale,
+                0.7,
             )
             .unwrap();
         for i in 0..2 {
