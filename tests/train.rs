@@ -350,3 +350,64 @@ fn bench_train_reports_speed_quality_and_gradient_error() {
         .iter()
         .all(|row| row["held_out_psnr_db"].as_f64().unwrap() > 5.0));
 }
+
+/// A dataset on the user's FLAME model (here the FLAME-layout pickles
+/// `visage fixtures` writes for the built-in head) trains and evaluates with
+/// `--flame` and `--masks`.
+#[test]
+fn datasets_on_flame_files_train_with_flame_and_masks() {
+    let dir = small_capture("flame");
+    for split in ["train", "val", "test"] {
+        let path = dir.join(format!("transforms_{split}.json"));
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::write(
+            &path,
+            text.replace("visage_builtin_head", "captured_elsewhere"),
+        )
+        .unwrap();
+    }
+    let fixtures = temp_path("train", "fixtures");
+    std::fs::remove_dir_all(&fixtures).ok();
+    let o = visage(&[
+        "fixtures",
+        fixtures.to_str().unwrap(),
+        "--source-count",
+        "1",
+        "--gaussians-per-avatar",
+        "500",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (model, masks) = (
+        fixtures.join("flame/model.pkl"),
+        fixtures.join("flame/masks.pkl"),
+    );
+    let flame = [
+        "--flame",
+        model.to_str().unwrap(),
+        "--masks",
+        masks.to_str().unwrap(),
+    ];
+    let avatar = dir.join("avatar");
+    let mut args = vec![
+        "train",
+        dir.to_str().unwrap(),
+        "-o",
+        avatar.to_str().unwrap(),
+    ];
+    args.extend(["--iterations", "5", "--size", "24x24"]);
+    args.extend(flame);
+    let o = visage(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut args = vec![
+        "eval",
+        avatar.to_str().unwrap(),
+        dir.to_str().unwrap(),
+        "--json",
+    ];
+    args.extend(flame);
+    let o = visage(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for p in [&dir, &fixtures] {
+        std::fs::remove_dir_all(p).ok();
+    }
+}
