@@ -283,17 +283,10 @@ fn builtin_composites_export_and_reload_on_the_builtin_head() {
 }
 
 /// Runs tests/data/check_flame_param.py (numpy, the way GaussianAvatars loads
-/// flame_param.npz) on a file and returns its JSON summary. Uses Debian's
-/// /usr/bin/python3 (where .ci/setup installs python3-numpy) when there is one,
-/// else `python3`, or $VISAGE_TEST_PYTHON.
+/// flame_param.npz) on a file and returns its JSON summary (under
+/// [`common::python`]).
 fn gaussian_avatars_reads(npz: &Path) -> serde_json::Value {
-    let python = std::env::var("VISAGE_TEST_PYTHON").unwrap_or_else(|_| {
-        if Path::new("/usr/bin/python3").exists() {
-            "/usr/bin/python3".into()
-        } else {
-            "python3".into()
-        }
-    });
+    let python = common::python();
     let out = Command::new(&python)
         .arg("tests/data/check_flame_param.py")
         .arg(npz)

@@ -9,7 +9,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{temp_path, visage};
+use common::{python, temp_path, visage};
 
 /// A small capture: 64×64, 4 cameras, 3 timesteps.
 fn small_capture(tag: &str) -> PathBuf {
@@ -28,16 +28,6 @@ fn small_capture(tag: &str) -> PathBuf {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     dir
-}
-
-fn python() -> String {
-    std::env::var("VISAGE_TEST_PYTHON").unwrap_or_else(|_| {
-        if Path::new("/usr/bin/python3").exists() {
-            "/usr/bin/python3".into()
-        } else {
-            "python3".into()
-        }
-    })
 }
 
 /// GaussianAvatars' reader takes the capture, and its camera puts a point

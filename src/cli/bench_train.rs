@@ -14,7 +14,7 @@ use crate::error::Result;
 use crate::pipeline::DatabaseSpec;
 use crate::train::capture::{capture, CaptureOptions};
 use crate::train::dataset::Dataset;
-use crate::train::trainer::{evaluate_view, timestep_frames, TrainOptions, Trainer};
+use crate::train::trainer::{evaluate_view, load_target, timestep_frames, TrainOptions, Trainer};
 
 /// Arguments of `visage bench train`.
 #[derive(Args, Debug, Clone)]
@@ -64,12 +64,12 @@ pub fn run(args: &TrainBenchArgs) -> Result<()> {
     let dataset = Dataset::load(&root)?;
     let head = crate::model::builtin::build_head();
     let held_out: Vec<_> = dataset.val.iter().chain(&dataset.test).cloned().collect();
-    let mut frames = std::collections::BTreeMap::new();
-    for v in &held_out {
-        if let std::collections::btree_map::Entry::Vacant(e) = frames.entry(v.timestep) {
-            e.insert(timestep_frames(&dataset, &head, v.timestep)?);
-        }
-    }
+    let frames = timestep_frames(&dataset, &head, &held_out)?;
+    // Read once, evaluated at every point of the curve.
+    let targets = held_out
+        .iter()
+        .map(|v| load_target(v, None, [0.0; 3]))
+        .collect::<Result<Vec<_>>>()?;
     let mut trainer = Trainer::new(
         &dataset,
         head,
@@ -92,13 +92,14 @@ pub fn run(args: &TrainBenchArgs) -> Result<()> {
         }
         training_s += t.elapsed().as_secs_f64();
         let mut psnr = 0.0;
-        for v in &held_out {
-            psnr += evaluate_view(&trainer.model, &frames[&v.timestep], v, [0.0; 3])?.2;
+        for target in &targets {
+            let view_frames = &frames[&target.view.timestep];
+            psnr += evaluate_view(&trainer.model, view_frames, target, [0.0; 3]).1;
         }
         curve.push(json!({
             "iteration": trainer.iteration(),
             "train_s": training_s,
-            "held_out_psnr_db": psnr / held_out.len().max(1) as f64,
+            "held_out_psnr_db": psnr / targets.len().max(1) as f64,
             "gaussians": trainer.model.len(),
         }));
     }

@@ -13,7 +13,7 @@ use crate::model::head::HeadModel;
 use crate::render::image::RgbImage;
 use crate::train::dataset::Dataset;
 use crate::train::model::Trainable;
-use crate::train::trainer::{evaluate_view, timestep_frames, TrainOptions, Trainer};
+use crate::train::trainer::{evaluate_view, load_target, timestep_frames, TrainOptions, Trainer};
 
 /// The FLAME files a dataset or avatar needs (none for the built-in head).
 #[derive(Args, Debug, Clone, Default)]
@@ -197,23 +197,21 @@ pub fn run_eval(args: &EvalArgs) -> Result<()> {
     };
     let mut rows = Vec::new();
     let mut grid: Vec<RgbImage> = Vec::new();
-    // Each timestep's FLAME parameters are read and posed once.
-    let mut posed = std::collections::BTreeMap::new();
     for (split, views) in [("val", &dataset.val), ("test", &dataset.test)] {
         if views.is_empty() {
             continue;
         }
+        let frames = timestep_frames(&dataset, &head, views)?;
         let (mut psnr_sum, mut ssim_sum) = (0.0, 0.0);
         for (k, view) in views.iter().enumerate() {
-            if let std::collections::btree_map::Entry::Vacant(e) = posed.entry(view.timestep) {
-                e.insert(timestep_frames(&dataset, &head, view.timestep)?);
-            }
-            let frames = &posed[&view.timestep];
-            let (image, goal, psnr, ssim) = evaluate_view(&model, frames, view, background)?;
+            let target = load_target(view, None, background)?;
+            let (image, psnr, ssim) =
+                evaluate_view(&model, &frames[&view.timestep], &target, background);
             psnr_sum += psnr;
             ssim_sum += ssim;
             if k < 4 {
                 let [w, h] = view.camera.size;
+                let goal: Vec<f64> = target.pixels.iter().map(|&p| p as f64).collect();
                 grid.push(to_image(&image, w, h));
                 grid.push(to_image(&goal, w, h));
             }

@@ -20,7 +20,7 @@ use super::project::{Geometry, TrainCamera};
 use crate::avatar::binding::{triangle_frames, TriangleFrame};
 use crate::avatar::gaussians::GaussianSet;
 use crate::error::{Error, Result};
-use crate::io::avatar::{read_flame_params, write_avatar, AvatarParams, FrameParams};
+use crate::io::avatar::{read_flame_params, write_avatar, AvatarParams, FlameParams, FrameParams};
 use crate::model::head::HeadModel;
 
 /// How to train.
@@ -115,11 +115,14 @@ pub struct StepReport {
     pub gaussians: usize,
 }
 
-/// A target image at the training size, composited over the background.
-struct Target {
-    view: View,
-    camera: TrainCamera,
-    pixels: Vec<f32>,
+/// A view's image at the size it is used at, composited over the background.
+pub struct Target {
+    /// The view.
+    pub view: View,
+    /// Its camera, scaled to the image's size.
+    pub camera: TrainCamera,
+    /// RGB, row-major.
+    pub pixels: Vec<f32>,
 }
 
 /// A trainer over a dataset: the model, its optimiser and the posed meshes.
@@ -163,8 +166,8 @@ fn logit(p: f64) -> f64 {
     (p / (1.0 - p)).ln()
 }
 
-/// Reads an image (and its mask) as the training target.
-fn load_target(view: &View, size: Option<[u32; 2]>, background: [f64; 3]) -> Result<Target> {
+/// Reads an image (and its mask) as a target at `size` (default: as stored).
+pub fn load_target(view: &View, size: Option<[u32; 2]>, background: [f64; 3]) -> Result<Target> {
     let image = crate::render::image::RgbImage::load_png(&view.image).map_err(Error::input)?;
     if [image.width, image.height] != view.camera.size {
         return Err(Error::input(format!(
@@ -250,9 +253,8 @@ fn pose_timesteps(
     let mut flame_frames = Vec::new();
     for (&t, path) in &dataset.flame_params {
         let params = read_flame_params(path, "dataset", head)?;
+        frames.insert(t, pose(&params, head));
         let (expression, pose) = params.motion.frame(0);
-        let posed = head.forward(&params.shape, Some(&params.static_offset), expression, pose);
-        frames.insert(t, triangle_frames(&posed, &head.triangles));
         flame_frames.push(FrameParams {
             expression: expression.to_vec(),
             pose: *pose,
@@ -883,38 +885,51 @@ fn normal(rng: &mut ChaCha8Rng) -> f64 {
     (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
 }
 
-/// Renders `model` for a view at the dataset's resolution and returns it with
-/// its PSNR and SSIM against the view's image.
+/// Renders `model` for a target and returns the image with its PSNR and
+/// SSIM against the target.
 pub fn evaluate_view(
     model: &Trainable,
     frames: &[TriangleFrame],
-    view: &View,
+    target: &Target,
     background: [f64; 3],
-) -> Result<(Vec<f64>, Vec<f64>, f64, f64)> {
-    let target = load_target(view, None, background)?;
+) -> (Vec<f64>, f64, f64) {
     let render = Render::new(model, frames, &target.camera, background);
     let goal: Vec<f64> = target.pixels.iter().map(|&p| p as f64).collect();
     let [w, h] = target.camera.size;
     let (loss, _) = photometric_loss(render.image(), &goal, w as usize, h as usize, false);
     let quality = psnr(render.image(), &goal);
-    Ok((render.image().to_vec(), goal, quality, loss.ssim))
+    (render.image().to_vec(), quality, loss.ssim)
 }
 
-/// Triangle frames for a timestep of a dataset.
-pub fn timestep_frames(
-    dataset: &Dataset,
-    head: &HeadModel,
-    timestep: usize,
-) -> Result<Vec<TriangleFrame>> {
-    let path = dataset
-        .flame_params
-        .get(&timestep)
-        .ok_or_else(|| Error::input(format!("timestep {timestep} has no FLAME parameters")))?;
-    let params = read_flame_params(path, "dataset", head)?;
+/// The triangle frames of one timestep's FLAME parameters.
+fn pose(params: &FlameParams, head: &HeadModel) -> Vec<TriangleFrame> {
     let (expression, pose) = params.motion.frame(0);
     let posed: Vec<Vec3> =
         head.forward(&params.shape, Some(&params.static_offset), expression, pose);
-    Ok(triangle_frames(&posed, &head.triangles))
+    triangle_frames(&posed, &head.triangles)
+}
+
+/// Triangle frames for every timestep `views` show, each read and posed once.
+pub fn timestep_frames(
+    dataset: &Dataset,
+    head: &HeadModel,
+    views: &[View],
+) -> Result<std::collections::BTreeMap<usize, Vec<TriangleFrame>>> {
+    let mut frames = std::collections::BTreeMap::new();
+    for view in views {
+        if frames.contains_key(&view.timestep) {
+            continue;
+        }
+        let path = dataset.flame_params.get(&view.timestep).ok_or_else(|| {
+            Error::input(format!(
+                "timestep {} has no FLAME parameters",
+                view.timestep
+            ))
+        })?;
+        let params = read_flame_params(path, "dataset", head)?;
+        frames.insert(view.timestep, pose(&params, head));
+    }
+    Ok(frames)
 }
 
 #[cfg(test)]

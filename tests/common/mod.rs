@@ -19,3 +19,16 @@ pub fn visage(args: &[&str]) -> Output {
 pub fn temp_path(tag: &str, name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("visage-{tag}-{}-{name}", std::process::id()))
 }
+
+/// The Python with numpy the format checks run under: $VISAGE_TEST_PYTHON, else
+/// Debian's /usr/bin/python3 (where .ci/setup installs python3-numpy), else
+/// `python3`.
+pub fn python() -> String {
+    std::env::var("VISAGE_TEST_PYTHON").unwrap_or_else(|_| {
+        if std::path::Path::new("/usr/bin/python3").exists() {
+            "/usr/bin/python3".into()
+        } else {
+            "python3".into()
+        }
+    })
+}
