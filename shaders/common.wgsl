@@ -75,3 +75,30 @@ fn key_tiles(k: vec4<u32>, grid: vec4<u32>) -> vec4<u32> {
         min(k.z >> 16u, grid.y - 1u),
     );
 }
+
+// Parameters of the training rasteriser's kernels (train_forward, train_backward).
+struct RasterParams {
+    size: vec4<u32>,        // width, height, tiles_x, tiles_y
+    background: vec4<f32>,  // background r, g, b; transmittance at which a pixel stops
+}
+
+// A training splat is three vec4s: (centre x, centre y, depth, footprint
+// half-size), (conic a, b, c, opacity), (r, g, b, unused). Returns (α, e^power,
+// pixel − centre) when it contributes to the pixel centre, α = 0 otherwise:
+// the rules of src/render/projection.rs.
+fn splat_alpha(p0: vec4<f32>, p1: vec4<f32>, pixel: vec2<f32>) -> vec4<f32> {
+    let d = pixel - p0.xy;
+    if (abs(d.x) > p0.w || abs(d.y) > p0.w) {
+        return vec4<f32>(0.0);
+    }
+    let power = -0.5 * (p1.x * d.x * d.x + p1.z * d.y * d.y) - p1.y * d.x * d.y;
+    if (power > 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let gauss = exp(power);
+    let alpha = min(MAX_ALPHA, p1.w * gauss);
+    if (alpha < MIN_ALPHA) {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(alpha, gauss, d);
+}

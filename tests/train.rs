@@ -10,6 +10,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::{python, temp_path, visage};
+use visage::render::Backend;
+use visage::train::trainer::{StepReport, TrainOptions, Trainer};
 
 /// A small capture: 64×64, 4 cameras, 3 timesteps.
 fn small_capture(tag: &str) -> PathBuf {
@@ -76,30 +78,10 @@ fn captures_load_in_gaussian_avatars_reader_with_the_same_cameras() {
 #[test]
 fn training_fits_the_capture_and_is_deterministic() {
     use visage::train::dataset::Dataset;
-    use visage::train::trainer::{TrainOptions, Trainer};
     let dir = small_capture("fit");
     let dataset = Dataset::load(&dir).unwrap();
-    let options = TrainOptions {
-        iterations: 120,
-        seed: 3,
-        size: Some([48, 48]),
-        background: [0.0; 3],
-    };
-    let run = || {
-        let mut trainer = Trainer::new(
-            &dataset,
-            visage::model::builtin::build_head(),
-            options.clone(),
-        )
-        .unwrap();
-        let reports: Vec<_> = (0..options.iterations).map(|_| trainer.step()).collect();
-        (trainer, reports)
-    };
+    let run = || train_run(&dataset, Backend::Cpu, 120, [48, 48]);
     let (trainer, reports) = run();
-    let mean = |r: &[visage::train::trainer::StepReport],
-                f: fn(&visage::train::trainer::StepReport) -> f64| {
-        r.iter().map(f).sum::<f64>() / r.len() as f64
-    };
     let (early, late) = (&reports[..20], &reports[reports.len() - 20..]);
     assert!(
         mean(late, |r| r.loss) < 0.7 * mean(early, |r| r.loss),
@@ -119,6 +101,62 @@ fn training_fits_the_capture_and_is_deterministic() {
         "the same seed trains the same avatar"
     );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The wgpu rasteriser (lavapipe in CI) trains the same run as the CPU's to
+/// f32 rounding — the same loss and PSNR step by step — and repeats exactly.
+#[test]
+fn training_on_wgpu_follows_the_cpu_run_and_repeats() {
+    use visage::train::dataset::Dataset;
+    let dir = small_capture("fit-gpu");
+    let dataset = Dataset::load(&dir).unwrap();
+    let (cpu, cpu_reports) = train_run(&dataset, Backend::Cpu, 30, [32, 32]);
+    let (gpu, gpu_reports) = train_run(&dataset, Backend::Gpu, 30, [32, 32]);
+    for (c, g) in cpu_reports.iter().zip(&gpu_reports) {
+        assert!(
+            (c.psnr - g.psnr).abs() < 0.05 && (c.loss - g.loss).abs() < 1e-3 * c.loss,
+            "iteration {}: cpu {c:?} wgpu {g:?}",
+            c.iteration
+        );
+    }
+    assert!(cpu_reports[29].loss < cpu_reports[0].loss);
+    let difference = cpu.model.len().abs_diff(gpu.model.len());
+    assert!(
+        difference * 100 <= cpu.model.len(),
+        "{} vs {}",
+        cpu.model.len(),
+        gpu.model.len()
+    );
+    let (again, _) = train_run(&dataset, Backend::Gpu, 30, [32, 32]);
+    assert_eq!(
+        gpu.model, again.model,
+        "the same seed trains the same avatar"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A training run with seed 3 and its per-step reports.
+fn train_run(
+    dataset: &visage::train::dataset::Dataset,
+    renderer: Backend,
+    iterations: usize,
+    size: [u32; 2],
+) -> (Trainer, Vec<StepReport>) {
+    let options = TrainOptions {
+        iterations,
+        seed: 3,
+        size: Some(size),
+        background: [0.0; 3],
+        renderer,
+    };
+    let mut trainer = Trainer::new(dataset, visage::model::builtin::build_head(), options).unwrap();
+    let reports = (0..iterations).map(|_| trainer.step().unwrap()).collect();
+    (trainer, reports)
+}
+
+/// The mean of a figure over reports.
+fn mean(reports: &[StepReport], figure: fn(&StepReport) -> f64) -> f64 {
+    reports.iter().map(figure).sum::<f64>() / reports.len() as f64
 }
 
 /// The command line end to end: train, eval (JSON and a grid), then the
@@ -312,8 +350,9 @@ fn ctrl_c_checkpoints_and_resume_continues() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// `visage bench train` measures a short run on a fresh capture: speed, a
-/// held-out curve, and the gradient error within the bound.
+/// `visage bench train` measures a short run on a fresh capture per
+/// renderer: speed, a held-out curve, the gradient error against central
+/// differences, and how far the wgpu gradients are from the CPU's.
 #[test]
 fn bench_train_reports_speed_quality_and_gradient_error() {
     let o = visage(&[
@@ -325,20 +364,37 @@ fn bench_train_reports_speed_quality_and_gradient_error() {
         "20",
         "--eval-every",
         "10",
+        "--renderers",
+        "cpu,gpu",
         "--json",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert!(r["iterations_per_s"].as_f64().unwrap() > 0.0);
     assert!(
         r["gradient_max_relative_error"].as_f64().unwrap() < 1e-4,
         "{r}"
     );
-    let curve = r["curve"].as_array().unwrap();
-    assert_eq!(curve.len(), 2, "{r}");
-    assert!(curve
-        .iter()
-        .all(|row| row["held_out_psnr_db"].as_f64().unwrap() > 5.0));
+    let runs = r["renderers"].as_array().unwrap();
+    assert_eq!(runs.len(), 2, "{r}");
+    assert_eq!(runs[0]["renderer"], "cpu");
+    assert_eq!(runs[1]["renderer"], "gpu");
+    assert!(
+        runs[1]["device"].as_str().unwrap().starts_with("wgpu"),
+        "{r}"
+    );
+    for run in runs {
+        assert!(run["iterations_per_s"].as_f64().unwrap() > 0.0);
+        assert!(
+            run["gradient_difference_from_cpu"].as_f64().unwrap() < 1e-4,
+            "{r}"
+        );
+        let curve = run["curve"].as_array().unwrap();
+        assert_eq!(curve.len(), 2, "{r}");
+        assert!(curve
+            .iter()
+            .all(|row| row["held_out_psnr_db"].as_f64().unwrap() > 5.0));
+    }
+    assert_eq!(runs[0]["gradient_difference_from_cpu"], 0.0);
 }
 
 /// A dataset on the user's FLAME model (here the FLAME-layout pickles

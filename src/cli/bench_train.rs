@@ -10,11 +10,17 @@ use serde_json::json;
 
 use super::bench_scene::peak_rss_mb;
 use super::render::parse_size;
+use crate::avatar::binding::TriangleFrame;
 use crate::error::Result;
 use crate::pipeline::DatabaseSpec;
+use crate::render::Backend;
 use crate::train::capture::{capture, CaptureOptions};
 use crate::train::dataset::Dataset;
-use crate::train::trainer::{evaluate_view, load_target, timestep_frames, TrainOptions, Trainer};
+use crate::train::model::gradient_check;
+use crate::train::trainer::{
+    evaluate_view, load_target, timestep_frames, Target, TrainOptions, Trainer,
+};
+use std::collections::BTreeMap;
 
 /// Arguments of `visage bench train`.
 #[derive(Args, Debug, Clone)]
@@ -32,14 +38,91 @@ pub struct TrainBenchArgs {
     /// Evaluate the held-out views every this many iterations.
     #[arg(long, default_value_t = 100)]
     eval_every: usize,
+    /// Rasteriser(s) to train with, comma-separated: auto (a hardware GPU
+    /// through wgpu when there is one, the CPU otherwise), gpu (wgpu on any
+    /// adapter, lavapipe included), cpu.
+    #[arg(long, value_parser = Backend::parse, value_delimiter = ',', default_value = "auto")]
+    renderers: Vec<Backend>,
     /// Print one JSON document.
     #[arg(long)]
     json: bool,
 }
 
+/// Trains with one renderer, evaluating the held-out views along the way.
+fn run_one(
+    args: &TrainBenchArgs,
+    dataset: &Dataset,
+    frames: &BTreeMap<usize, Vec<TriangleFrame>>,
+    targets: &[Target],
+    renderer: Backend,
+) -> Result<serde_json::Value> {
+    let mut trainer = Trainer::new(
+        dataset,
+        crate::model::builtin::build_head(),
+        TrainOptions {
+            iterations: args.iterations,
+            seed: 1,
+            size: None,
+            background: [0.0; 3],
+            renderer,
+        },
+    )?;
+    let agreement = gradient_check::agreement_with_cpu(renderer)?;
+    let mut curve = Vec::new();
+    let mut training_s = 0.0;
+    while trainer.iteration() < args.iterations {
+        let t = Instant::now();
+        for _ in 0..args.eval_every.max(1) {
+            if trainer.iteration() >= args.iterations {
+                break;
+            }
+            trainer.step()?;
+        }
+        training_s += t.elapsed().as_secs_f64();
+        let mut psnr = 0.0;
+        for target in targets {
+            let view_frames = &frames[&target.view.timestep];
+            psnr += evaluate_view(&trainer.model, view_frames, target, [0.0; 3]).1;
+        }
+        curve.push(json!({
+            "iteration": trainer.iteration(),
+            "train_s": training_s,
+            "held_out_psnr_db": psnr / targets.len().max(1) as f64,
+            "gaussians": trainer.model.len(),
+        }));
+    }
+    Ok(json!({
+        "renderer": renderer,
+        "device": trainer.rasterizer(),
+        "iterations_per_s": args.iterations as f64 / training_s,
+        "gradient_difference_from_cpu": agreement,
+        "curve": curve,
+    }))
+}
+
+/// Prints one renderer's run as a table.
+fn print_run(run: &serde_json::Value) {
+    println!(
+        "{}: {:.2} iterations/s; gradients within {:.1e} of the CPU's (largest difference over the largest gradient)",
+        run["device"].as_str().unwrap_or("?"),
+        run["iterations_per_s"].as_f64().unwrap_or(0.0),
+        run["gradient_difference_from_cpu"].as_f64().unwrap_or(0.0),
+    );
+    println!("  iteration  train s  held-out PSNR dB  Gaussians");
+    for row in run["curve"].as_array().into_iter().flatten() {
+        println!(
+            "  {:>9}  {:>7.1}  {:>16.2}  {:>9}",
+            row["iteration"],
+            row["train_s"].as_f64().unwrap_or(0.0),
+            row["held_out_psnr_db"].as_f64().unwrap_or(0.0),
+            row["gaussians"]
+        );
+    }
+}
+
 /// Runs `visage bench train`.
 pub fn run(args: &TrainBenchArgs) -> Result<()> {
-    let (gradient_error, checked) = crate::train::model::gradient_check::worst_relative_error();
+    let (gradient_error, checked) = gradient_check::worst_relative_error();
     let scratch = std::env::temp_dir().join(format!("visage-bench-train-{}", std::process::id()));
     let root = match &args.dataset {
         Some(d) => d.clone(),
@@ -70,72 +153,33 @@ pub fn run(args: &TrainBenchArgs) -> Result<()> {
         .iter()
         .map(|v| load_target(v, None, [0.0; 3]))
         .collect::<Result<Vec<_>>>()?;
-    let mut trainer = Trainer::new(
-        &dataset,
-        head,
-        TrainOptions {
-            iterations: args.iterations,
-            seed: 1,
-            size: None,
-            background: [0.0; 3],
-        },
-    )?;
-    let mut curve = Vec::new();
-    let mut training_s = 0.0;
-    while trainer.iteration() < args.iterations {
-        let t = Instant::now();
-        for _ in 0..args.eval_every.max(1) {
-            if trainer.iteration() >= args.iterations {
-                break;
-            }
-            trainer.step();
-        }
-        training_s += t.elapsed().as_secs_f64();
-        let mut psnr = 0.0;
-        for target in &targets {
-            let view_frames = &frames[&target.view.timestep];
-            psnr += evaluate_view(&trainer.model, view_frames, target, [0.0; 3]).1;
-        }
-        curve.push(json!({
-            "iteration": trainer.iteration(),
-            "train_s": training_s,
-            "held_out_psnr_db": psnr / targets.len().max(1) as f64,
-            "gaussians": trainer.model.len(),
-        }));
+    let mut runs = Vec::new();
+    for &renderer in &args.renderers {
+        runs.push(run_one(args, &dataset, &frames, &targets, renderer)?);
     }
     if args.dataset.is_none() {
         std::fs::remove_dir_all(&scratch).ok();
     }
     let report = json!({
-        "renderer": "cpu (f64, rayon)",
         "threads": rayon::current_num_threads(),
-        "iterations_per_s": args.iterations as f64 / training_s,
         "gradient_max_relative_error": gradient_error,
         "gradient_parameters_checked": checked,
         "peak_rss_mb": peak_rss_mb(),
-        "curve": curve,
+        "renderers": runs,
     });
     if args.json {
         println!("{report}");
         return Ok(());
     }
     println!(
-        "training on {} ({} threads): {:.2} iterations/s; gradient error {:.1e} (max relative, {checked} parameters); peak memory {:.0} MiB",
+        "training on {} ({} threads); gradient error {:.1e} (max relative against central differences, {checked} parameters); peak memory {:.0} MiB",
         root.display(),
         rayon::current_num_threads(),
-        report["iterations_per_s"].as_f64().unwrap_or(0.0),
         gradient_error,
         peak_rss_mb().unwrap_or(0.0)
     );
-    println!("  iteration  train s  held-out PSNR dB  Gaussians");
-    for row in &curve {
-        println!(
-            "  {:>9}  {:>7.1}  {:>16.2}  {:>9}",
-            row["iteration"],
-            row["train_s"].as_f64().unwrap_or(0.0),
-            row["held_out_psnr_db"].as_f64().unwrap_or(0.0),
-            row["gaussians"]
-        );
+    for run in &runs {
+        print_run(run);
     }
     Ok(())
 }

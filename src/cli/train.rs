@@ -11,6 +11,7 @@ use super::render::parse_size;
 use crate::error::{Error, Result};
 use crate::model::head::HeadModel;
 use crate::render::image::RgbImage;
+use crate::render::Backend;
 use crate::train::dataset::Dataset;
 use crate::train::model::Trainable;
 use crate::train::trainer::{evaluate_view, load_target, timestep_frames, TrainOptions, Trainer};
@@ -74,6 +75,10 @@ pub struct TrainArgs {
     /// Continue a run from its checkpoint (its seed and iteration count).
     #[arg(long, value_name = "CHECKPOINT")]
     resume: Option<PathBuf>,
+    /// Rasteriser: auto (a hardware GPU through wgpu when there is one, the
+    /// CPU otherwise), gpu (wgpu on any adapter, lavapipe included) or cpu.
+    #[arg(long, value_parser = Backend::parse, default_value = "auto")]
+    renderer: Backend,
 }
 
 /// Runs `visage train`.
@@ -105,6 +110,7 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
         seed: args.seed,
         size: args.size.map(|(w, h)| [w, h]),
         background,
+        renderer: args.renderer,
     };
     let mut trainer = match &args.resume {
         Some(path) => Trainer::resume(&dataset, head, options, path)?,
@@ -135,7 +141,7 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
             );
             return Ok(());
         }
-        let r = trainer.step();
+        let r = trainer.step()?;
         if args.checkpoint_every > 0 && r.iteration % args.checkpoint_every == 0 {
             trainer.save_checkpoint(&checkpoint)?;
         }

@@ -8,9 +8,10 @@
 use rayon::prelude::*;
 
 use super::project::{project, Geometry, Projected, TrainCamera, GEOMETRY};
-use super::raster::{self, Rasterized, Splat};
+use super::raster::{Rasterized, Rasterizer, Splat};
 use crate::avatar::binding::TriangleFrame;
 use crate::avatar::gaussians::GaussianSet;
+use crate::error::Result;
 
 /// SH coefficients stored per Gaussian (degree 3, 16 × RGB), whatever degree
 /// is active.
@@ -119,13 +120,15 @@ fn sigmoid(x: f64) -> f64 {
 }
 
 impl Render {
-    /// Renders `model` on the posed triangle `frames` from `camera`.
+    /// Renders `model` on the posed triangle `frames` from `camera` with
+    /// `rasterizer`.
     pub fn new(
         model: &Trainable,
         frames: &[TriangleFrame],
         camera: &TrainCamera,
         background: [f64; 3],
-    ) -> Self {
+        rasterizer: &mut Rasterizer,
+    ) -> Result<Self> {
         let last = frames.len().saturating_sub(1);
         let projected: Vec<(u32, Projected)> = (0..model.len())
             .into_par_iter()
@@ -161,13 +164,13 @@ impl Render {
                 depth: p.depth,
             })
             .collect();
-        let raster = raster::forward(&splats, camera.size, background);
-        Self {
+        let raster = rasterizer.forward(&splats, camera.size, background)?;
+        Ok(Self {
             projected,
             drawn,
             splats,
             raster,
-        }
+        })
     }
 
     /// The image: RGB, row-major, f64 (not clamped).
@@ -195,9 +198,15 @@ impl Render {
         self.drawn.len()
     }
 
-    /// ∂loss/∂ every parameter of `model`, given ∂loss/∂ the image.
-    pub fn backward(&self, model: &Trainable, d_image: &[f64]) -> Gradients {
-        let screen = raster::backward(&self.splats, &self.raster, d_image);
+    /// ∂loss/∂ every parameter of `model`, given ∂loss/∂ the image, with the
+    /// rasteriser that drew it.
+    pub fn backward(
+        &self,
+        model: &Trainable,
+        d_image: &[f64],
+        rasterizer: &mut Rasterizer,
+    ) -> Result<Gradients> {
+        let screen = rasterizer.backward(&self.splats, &self.raster, d_image)?;
         let n = model.len();
         let mut grads = Gradients {
             geometry: vec![[0.0; GEOMETRY]; n],
@@ -233,7 +242,7 @@ impl Render {
             grads.opacity_logit[i] = g.opacity * o * (1.0 - o);
             grads.screen_xy[i] = g.center;
         }
-        grads
+        Ok(grads)
     }
 }
 
@@ -378,24 +387,63 @@ pub mod gradient_check {
         )
     }
 
+    /// Every gradient of the check scene as one flat list (geometry, opacity
+    /// logit, SH), from `rasterizer`.
+    fn flat_gradients(rasterizer: &mut Rasterizer) -> Result<Vec<f64>> {
+        let (frames, camera, model) = (frames(), camera(), model());
+        let background = [0.05, 0.1, 0.2];
+        let render = Render::new(&model, &frames, &camera, background, rasterizer)?;
+        let weights: Vec<f64> = (0..render.image().len())
+            .map(|i| ((i * 13) % 29) as f64 / 29.0 - 0.45)
+            .collect();
+        let g = render.backward(&model, &weights, rasterizer)?;
+        Ok(g.geometry
+            .iter()
+            .flatten()
+            .chain(&g.opacity_logit)
+            .chain(&g.sh)
+            .copied()
+            .collect())
+    }
+
+    /// How far a renderer's gradients on the check scene are from the f64
+    /// CPU pass's: the largest difference over the largest gradient (the
+    /// wgpu pass is f32, so about 1e-6 to 1e-4 is its rounding).
+    pub fn agreement_with_cpu(backend: crate::render::Backend) -> Result<f64> {
+        let mut rasterizer = Rasterizer::open(backend)?;
+        let theirs = flat_gradients(&mut rasterizer)?;
+        let ours = flat_gradients(&mut Rasterizer::Cpu)?;
+        let largest = ours.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+        let difference = ours
+            .iter()
+            .zip(&theirs)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        Ok(difference / largest.max(1e-30))
+    }
+
     /// The largest relative error over every checked parameter (relative to
     /// max(|numeric|, 1e-2)), and how many parameters were checked.
     pub fn worst_relative_error() -> (f64, usize) {
         let (frames, camera, model) = (frames(), camera(), model());
         let background = [0.05, 0.1, 0.2];
-        let render = Render::new(&model, &frames, &camera, background);
+        let cpu = || Rasterizer::Cpu;
+        let render = Render::new(&model, &frames, &camera, background, &mut cpu())
+            .expect("the CPU rasteriser does not fail");
         let weights: Vec<f64> = (0..render.image().len())
             .map(|i| ((i * 13) % 29) as f64 / 29.0 - 0.45)
             .collect();
         let loss = |m: &Trainable| -> f64 {
-            Render::new(m, &frames, &camera, background)
+            Render::new(m, &frames, &camera, background, &mut cpu())
+                .expect("the CPU rasteriser does not fail")
                 .image()
                 .iter()
                 .zip(&weights)
                 .map(|(a, b)| a * b)
                 .sum()
         };
-        let grads = render.backward(&model, &weights);
+        let grads = render
+            .backward(&model, &weights, &mut cpu())
+            .expect("the CPU rasteriser does not fail");
         let h = 1e-6;
         let mut worst: f64 = 0.0;
         let mut checked = 0;
@@ -438,7 +486,14 @@ mod tests {
     /// an opaque stack that saturates pixels.
     #[test]
     fn parameter_gradients_match_central_differences() {
-        let render = Render::new(&model(), &frames(), &camera(), [0.05, 0.1, 0.2]);
+        let render = Render::new(
+            &model(),
+            &frames(),
+            &camera(),
+            [0.05, 0.1, 0.2],
+            &mut Rasterizer::Cpu,
+        )
+        .unwrap();
         assert!(render.drawn() >= 10, "{} drawn", render.drawn());
         assert!(
             render.saturated_pixels() > 0,

@@ -10,10 +10,13 @@
 
 use rayon::prelude::*;
 
+use super::raster_gpu::GpuRaster;
+use crate::error::{Error, Result};
 use crate::render::projection::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
+use crate::render::Backend;
 
-/// Tile edge in pixels.
-const TILE: u32 = 16;
+/// Tile edge in pixels (the wgpu kernels' workgroup edge too).
+pub(super) const TILE: u32 = crate::render::gpu::TILE;
 
 /// A splat as the rasteriser sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,7 +49,8 @@ pub struct SplatGrad {
 }
 
 impl SplatGrad {
-    fn add(&mut self, o: &SplatGrad) {
+    /// Adds another gradient to this one.
+    pub(super) fn add(&mut self, o: &SplatGrad) {
         for i in 0..2 {
             self.center[i] += o.center[i];
         }
@@ -68,14 +72,33 @@ pub struct Rasterized {
     /// Background colour.
     pub background: [f64; 3],
     /// Splat indices per tile, front to back.
-    lists: Vec<Vec<u32>>,
+    pub(super) lists: Vec<Vec<u32>>,
     /// Per pixel: transmittance after its last contributing splat.
-    final_t: Vec<f64>,
+    pub(super) final_t: Vec<f64>,
     /// Per pixel: how many entries of its tile's list it walked.
-    walked: Vec<u32>,
+    pub(super) walked: Vec<u32>,
 }
 
 impl Rasterized {
+    /// A forward result from its parts (the wgpu pass builds one).
+    pub(super) fn from_parts(
+        size: [u32; 2],
+        image: Vec<f64>,
+        background: [f64; 3],
+        lists: Vec<Vec<u32>>,
+        final_t: Vec<f64>,
+        walked: Vec<u32>,
+    ) -> Self {
+        Self {
+            size,
+            image,
+            background,
+            lists,
+            final_t,
+            walked,
+        }
+    }
+
     /// Pixels whose transmittance ended below 1 %.
     pub fn saturated_pixels(&self) -> usize {
         self.final_t.iter().filter(|&&t| t < 0.01).count()
@@ -113,7 +136,7 @@ fn alpha_at(s: &Splat, px: f64, py: f64) -> Option<(f64, f64, [f64; 2])> {
 }
 
 /// Tiles of an image, and the splats (sorted by depth, then index) in each.
-fn bin(splats: &[Splat], size: [u32; 2]) -> Vec<Vec<u32>> {
+pub(super) fn bin(splats: &[Splat], size: [u32; 2]) -> Vec<Vec<u32>> {
     let tiles = [size[0].div_ceil(TILE), size[1].div_ceil(TILE)];
     let mut order: Vec<u32> = (0..splats.len() as u32).collect();
     order.sort_by(|&i, &j| {
@@ -345,6 +368,67 @@ pub fn backward(splats: &[Splat], raster: &Rasterized, d_image: &[f64]) -> Vec<S
         grads[*i as usize].add(g);
     }
     grads
+}
+
+/// Which rasteriser a training run uses: the f64 CPU passes above, or their
+/// f32 wgpu kernels.
+pub enum Rasterizer {
+    /// [`forward`] and [`backward`] on rayon, f64.
+    Cpu,
+    /// [`GpuRaster`]: wgpu compute, f32.
+    Gpu(Box<GpuRaster>),
+}
+
+impl Rasterizer {
+    /// Opens the rasteriser a renderer choice names: `gpu` any wgpu adapter
+    /// (lavapipe included), `cpu` the CPU, `auto` a hardware GPU when there is
+    /// one and the CPU otherwise.
+    pub fn open(backend: Backend) -> Result<Self> {
+        Ok(match backend {
+            Backend::Cpu => Rasterizer::Cpu,
+            Backend::Gpu => Rasterizer::Gpu(Box::new(
+                GpuRaster::open(true)?.ok_or_else(|| Error::device("no graphics adapter found"))?,
+            )),
+            Backend::Auto => match GpuRaster::open(false) {
+                Ok(Some(gpu)) => Rasterizer::Gpu(Box::new(gpu)),
+                _ => Rasterizer::Cpu,
+            },
+        })
+    }
+
+    /// What runs the passes, for reports.
+    pub fn description(&self) -> String {
+        match self {
+            Rasterizer::Cpu => "cpu (f64, rayon)".to_string(),
+            Rasterizer::Gpu(gpu) => format!("wgpu (f32) on {}", gpu.description()),
+        }
+    }
+
+    /// Draws the splats over `background`.
+    pub fn forward(
+        &mut self,
+        splats: &[Splat],
+        size: [u32; 2],
+        background: [f64; 3],
+    ) -> Result<Rasterized> {
+        match self {
+            Rasterizer::Cpu => Ok(forward(splats, size, background)),
+            Rasterizer::Gpu(gpu) => gpu.forward(splats, size, background),
+        }
+    }
+
+    /// ∂loss/∂ every splat, given ∂loss/∂ the image.
+    pub fn backward(
+        &mut self,
+        splats: &[Splat],
+        raster: &Rasterized,
+        d_image: &[f64],
+    ) -> Result<Vec<SplatGrad>> {
+        match self {
+            Rasterizer::Cpu => Ok(backward(splats, raster, d_image)),
+            Rasterizer::Gpu(gpu) => gpu.backward(splats, raster, d_image),
+        }
+    }
 }
 
 #[cfg(test)]

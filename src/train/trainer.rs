@@ -17,11 +17,13 @@ use super::dataset::{Dataset, View};
 use super::loss::{photometric_loss, psnr};
 use super::model::{Gradients, Render, Trainable, SH_STRIDE};
 use super::project::{Geometry, TrainCamera};
+use super::raster::Rasterizer;
 use crate::avatar::binding::{triangle_frames, TriangleFrame};
 use crate::avatar::gaussians::GaussianSet;
 use crate::error::{Error, Result};
 use crate::io::avatar::{read_flame_params, write_avatar, AvatarParams, FlameParams, FrameParams};
 use crate::model::head::HeadModel;
+use crate::render::Backend;
 
 /// How to train.
 #[derive(Clone, Debug, PartialEq)]
@@ -34,6 +36,8 @@ pub struct TrainOptions {
     pub size: Option<[u32; 2]>,
     /// Background composited behind the foreground mask.
     pub background: [f64; 3],
+    /// Which rasteriser runs the forward and backward passes.
+    pub renderer: Backend,
 }
 
 /// Hyperparameters: GaussianAvatars' (`arguments/__init__.py`), with its
@@ -146,6 +150,7 @@ pub struct Trainer {
     reset_done: bool,
     identity: (Vec<f32>, Vec<glam::DVec3>),
     flame_frames: Vec<FrameParams>,
+    rasterizer: Rasterizer,
 }
 
 /// Adam per parameter group.
@@ -337,7 +342,9 @@ impl Trainer {
             dc: AdamGroup::new(schedule.feature_lr, 3, n),
             rest: AdamGroup::new(schedule.feature_lr / 20.0, SH_STRIDE - 3, n),
         };
+        let rasterizer = Rasterizer::open(options.renderer)?;
         Ok(Self {
+            rasterizer,
             model,
             schedule,
             head,
@@ -368,8 +375,13 @@ impl Trainer {
         self.extent
     }
 
+    /// What runs the rasteriser's passes, for reports.
+    pub fn rasterizer(&self) -> String {
+        self.rasterizer.description()
+    }
+
     /// Runs one iteration; returns its figures.
-    pub fn step(&mut self) -> StepReport {
+    pub fn step(&mut self) -> Result<StepReport> {
         self.step += 1;
         let it = self.step;
         self.groups.position.lr =
@@ -387,7 +399,13 @@ impl Trainer {
         }
         let target = &self.targets[self.order.pop().expect("refilled above")];
         let frames = &self.frames[&target.view.timestep];
-        let render = Render::new(&self.model, frames, &target.camera, self.options.background);
+        let render = Render::new(
+            &self.model,
+            frames,
+            &target.camera,
+            self.options.background,
+            &mut self.rasterizer,
+        )?;
         let goal: Vec<f64> = target.pixels.iter().map(|&p| p as f64).collect();
         let [w, h] = target.camera.size;
         let (loss, d_image) = photometric_loss(render.image(), &goal, w as usize, h as usize, true);
@@ -397,7 +415,7 @@ impl Trainer {
             psnr: psnr(render.image(), &goal),
             gaussians: self.model.len(),
         };
-        let mut grads = render.backward(&self.model, &d_image);
+        let mut grads = render.backward(&self.model, &d_image, &mut self.rasterizer)?;
         self.regularise(&render, &mut grads);
         let camera = target.camera;
         self.track_densification(&render, &grads, camera.size);
@@ -409,7 +427,7 @@ impl Trainer {
         if it % s.opacity_reset_interval == 0 && it < self.options.iterations {
             self.reset_opacity();
         }
-        report
+        Ok(report)
     }
 
     /// GaussianAvatars' regularisers over the drawn Gaussians: local position
@@ -893,7 +911,14 @@ pub fn evaluate_view(
     target: &Target,
     background: [f64; 3],
 ) -> (Vec<f64>, f64, f64) {
-    let render = Render::new(model, frames, &target.camera, background);
+    let render = Render::new(
+        model,
+        frames,
+        &target.camera,
+        background,
+        &mut Rasterizer::Cpu,
+    )
+    .expect("the CPU rasteriser does not fail");
     let goal: Vec<f64> = target.pixels.iter().map(|&p| p as f64).collect();
     let [w, h] = target.camera.size;
     let (loss, _) = photometric_loss(render.image(), &goal, w as usize, h as usize, false);
@@ -966,15 +991,16 @@ mod tests {
             seed: 9,
             size: Some([24, 24]),
             background: [0.0; 3],
+            renderer: Backend::Cpu,
         };
         let head = || crate::model::builtin::build_head();
         let mut straight = Trainer::new(&dataset, head(), train.clone()).unwrap();
         for _ in 0..40 {
-            straight.step();
+            straight.step().unwrap();
         }
         let mut first = Trainer::new(&dataset, head(), train.clone()).unwrap();
         for _ in 0..17 {
-            first.step();
+            first.step().unwrap();
         }
         let ckpt = dir.join("checkpoint.npz");
         first.save_checkpoint(&ckpt).unwrap();
@@ -991,7 +1017,7 @@ mod tests {
         .unwrap();
         assert_eq!((resumed.iteration(), resumed.iterations()), (17, 40));
         while resumed.iteration() < 40 {
-            resumed.step();
+            resumed.step().unwrap();
         }
         assert!(straight.reset_done, "the run covers an opacity reset");
         assert_eq!(resumed.model, straight.model);
@@ -1005,6 +1031,7 @@ mod tests {
                 seed: 0,
                 size: None,
                 background: [0.0; 3],
+                renderer: Backend::Cpu,
             },
             &ckpt,
         )

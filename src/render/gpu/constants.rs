@@ -16,6 +16,13 @@ pub const SORT_ITEMS: u32 = SORT_BLOCK / GROUP;
 /// of a workgroup one digit, so this equals [`GROUP`].
 pub const DIGITS: u32 = 256;
 const _: () = assert!(DIGITS == GROUP && SORT_BLOCK % GROUP == 0);
+/// Floats of one splat's screen-space gradient in the training backward:
+/// centre (2), conic (3), opacity, colour (3).
+pub const SPLAT_GRAD_FLOATS: u32 = 9;
+/// The training backward sums a tile's TILE² pixel gradients in two steps of
+/// this many terms each (REDUCE_PARTS² = TILE²).
+pub const REDUCE_PARTS: u32 = 16;
+const _: () = assert!(REDUCE_PARTS * REDUCE_PARTS == TILE * TILE);
 
 /// The WGSL declarations of every shared constant.
 pub fn wgsl_header() -> String {
@@ -29,6 +36,8 @@ pub fn wgsl_header() -> String {
         u("SORT_BLOCK", SORT_BLOCK),
         u("SORT_ITEMS", SORT_ITEMS),
         u("DIGITS", DIGITS),
+        u("SPLAT_GRAD_FLOATS", SPLAT_GRAD_FLOATS),
+        u("REDUCE_PARTS", REDUCE_PARTS),
         f("DILATION", COVARIANCE_DILATION),
         f("RADIUS_SIGMAS", RADIUS_SIGMAS),
         f("MAX_ALPHA", MAX_ALPHA),
@@ -59,6 +68,8 @@ mod tests {
                 "SORT_BLOCK",
                 "SORT_ITEMS",
                 "DIGITS",
+                "SPLAT_GRAD_FLOATS",
+                "REDUCE_PARTS",
                 "DILATION",
                 "RADIUS_SIGMAS",
                 "MAX_ALPHA",

@@ -7,6 +7,84 @@ use bytemuck::Pod;
 use super::constants::wgsl_header;
 use crate::error::{Error, Result};
 
+/// An opened wgpu device with what its users need to know about it.
+pub struct OpenDevice {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// The adapter behind it.
+    pub adapter: wgpu::AdapterInfo,
+    /// The limits it was opened with.
+    pub limits: wgpu::Limits,
+}
+
+/// Opens the best adapter (high performance) with the limits every kernel in
+/// `shaders/` needs: `Ok(None)` when `allow_software` is false and the best
+/// adapter is a software one.
+pub async fn open_device(allow_software: bool) -> Result<Option<OpenDevice>> {
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter = instance
+        .request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            apply_limit_buckets: false,
+        })
+        .await
+        .map_err(|e| {
+            Error::device(format!(
+                "no graphics adapter found ({e}); install Mesa's software Vulkan driver with \
+                 'apt-get install mesa-vulkan-drivers libvulkan1', or use --reference for the CPU renderer"
+            ))
+        })?;
+    if !allow_software && adapter.get_info().device_type == wgpu::DeviceType::Cpu {
+        return Ok(None);
+    }
+    let adapter_limits = adapter.limits();
+    let mut limits = wgpu::Limits::downlevel_defaults();
+    limits.max_storage_buffer_binding_size = adapter_limits.max_storage_buffer_binding_size;
+    limits.max_buffer_size = adapter_limits.max_buffer_size;
+    // The training backward binds six storage buffers.
+    limits.max_storage_buffers_per_shader_stage = 6;
+    limits.max_compute_invocations_per_workgroup = 256;
+    limits.max_compute_workgroup_size_x = 256;
+    limits.max_compute_workgroup_size_y = 16;
+    let (device, queue) = adapter
+        .request_device(&wgpu::DeviceDescriptor {
+            label: Some("visage"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits.clone(),
+            experimental_features: wgpu::ExperimentalFeatures::default(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        })
+        .await
+        .map_err(|e| Error::device(format!("cannot open the graphics device: {e}")))?;
+    Ok(Some(OpenDevice {
+        device,
+        queue,
+        adapter: adapter.get_info(),
+        limits,
+    }))
+}
+
+/// Name, driver and type of an adapter, for reports.
+pub fn describe_adapter(adapter: &wgpu::AdapterInfo) -> String {
+    format!(
+        "{} ({:?}, {}{})",
+        adapter.name,
+        adapter.device_type,
+        adapter.driver,
+        if adapter.driver_info.is_empty() {
+            String::new()
+        } else {
+            format!(" {}", adapter.driver_info)
+        }
+    )
+}
+
 /// Most workgroups in one dispatch dimension (wgpu's downlevel limit).
 pub const MAX_GROUPS: u32 = 65_535;
 

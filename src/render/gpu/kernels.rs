@@ -134,6 +134,11 @@ kernels! {
     Rasterize = "rasterize" { projected: read, ranges: read, list: read, image: write }
     /// Packs the RGBA image to RGB bytes for the read-back.
     PackRgb = "pack_rgb" { image: read, packed: write }
+    /// The training rasteriser's forward: colour, final transmittance and
+    /// entries walked per pixel.
+    TrainForward = "train_forward" { splats: read, ranges: read, list: read, pixels: write, walked: write }
+    /// The training rasteriser's backward: ∂loss/∂ screen quantities per list entry.
+    TrainBackward = "train_backward" { splats: read, ranges: read, list: read, pixels: read, walked: read, grads: write }
 }
 
 #[cfg(test)]

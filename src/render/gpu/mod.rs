@@ -19,7 +19,7 @@ use crate::avatar::gaussians::GaussianSet;
 use crate::error::{Error, Result};
 use crate::scene::camera::Camera;
 use binning::GpuBinning;
-use device::{map_and_read, wait, Growable, MAX_GROUPS};
+use device::{describe_adapter, map_and_read, open_device, wait, Growable, OpenDevice, MAX_GROUPS};
 use kernels::{Bind, PackRgb, Project, Rasterize};
 
 pub mod binning;
@@ -94,44 +94,15 @@ impl GpuRenderer {
     }
 
     async fn open(allow_software: bool) -> Result<Option<Self>> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapter = instance
-            .request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                force_fallback_adapter: false,
-                compatible_surface: None,
-                apply_limit_buckets: false,
-            })
-            .await
-            .map_err(|e| {
-                Error::device(format!(
-                    "no graphics adapter found ({e}); install Mesa's software Vulkan driver with \
-                     'apt-get install mesa-vulkan-drivers libvulkan1', or use --reference for the CPU renderer"
-                ))
-            })?;
-        if !allow_software && adapter.get_info().device_type == wgpu::DeviceType::Cpu {
+        let Some(OpenDevice {
+            device,
+            queue,
+            adapter,
+            limits,
+        }) = open_device(allow_software).await?
+        else {
             return Ok(None);
-        }
-        let adapter_limits = adapter.limits();
-        let mut limits = wgpu::Limits::downlevel_defaults();
-        limits.max_storage_buffer_binding_size = adapter_limits.max_storage_buffer_binding_size;
-        limits.max_buffer_size = adapter_limits.max_buffer_size;
-        limits.max_storage_buffers_per_shader_stage = 5;
-        limits.max_compute_invocations_per_workgroup = 256;
-        limits.max_compute_workgroup_size_x = 256;
-        limits.max_compute_workgroup_size_y = 16;
-        let (device, queue) = adapter
-            .request_device(&wgpu::DeviceDescriptor {
-                label: Some("visage"),
-                required_features: wgpu::Features::empty(),
-                required_limits: limits.clone(),
-                experimental_features: wgpu::ExperimentalFeatures::default(),
-                memory_hints: wgpu::MemoryHints::Performance,
-                trace: wgpu::Trace::Off,
-            })
-            .await
-            .map_err(|e| Error::device(format!("cannot open the graphics device: {e}")))?;
+        };
         let (bind, project) = (Bind::new(&device), Project::new(&device));
         let (rasterize, pack_rgb) = (Rasterize::new(&device), PackRgb::new(&device));
         let binning = GpuBinning::new(&device);
@@ -160,7 +131,7 @@ impl GpuRenderer {
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         );
         Ok(Some(Self {
-            adapter: adapter.get_info(),
+            adapter,
             limits,
             device,
             queue,
@@ -182,17 +153,7 @@ impl GpuRenderer {
 
     /// Name, driver and type of the adapter in use.
     pub fn adapter_description(&self) -> String {
-        format!(
-            "{} ({:?}, {}{})",
-            self.adapter.name,
-            self.adapter.device_type,
-            self.adapter.driver,
-            if self.adapter.driver_info.is_empty() {
-                String::new()
-            } else {
-                format!(" {}", self.adapter.driver_info)
-            }
-        )
+        describe_adapter(&self.adapter)
     }
 
     /// The device and queue, for tests of single stages.
