@@ -79,7 +79,7 @@ fn key_tiles(k: vec4<u32>, grid: vec4<u32>) -> vec4<u32> {
 // Parameters of the training rasteriser's kernels (train_forward, train_backward).
 struct RasterParams {
     size: vec4<u32>,        // width, height, tiles_x, tiles_y
-    background: vec4<f32>,  // background r, g, b; transmittance at which a pixel stops
+    tuning: vec4<f32>,      // transmittance at which a pixel stops, unused x3
 }
 
 // A training splat is three vec4s: (centre x, centre y, depth, footprint

@@ -12,7 +12,8 @@
 @group(0) @binding(2) var<storage, read> tile_ranges: array<vec2<u32>>;
 // Splat indices, each tile's run in front-to-back order.
 @group(0) @binding(3) var<storage, read> tile_list: array<u32>;
-// Per pixel: ∂loss/∂colour (rgb) and the forward's final transmittance (w).
+// Per pixel, two vec4s: ∂loss/∂colour (rgb) and the forward's final
+// transmittance (w); the backdrop's colour (rgb).
 @group(0) @binding(4) var<storage, read> pixels: array<vec4<f32>>;
 // Per pixel: entries of its tile's run the forward walked.
 @group(0) @binding(5) var<storage, read> walked: array<u32>;
@@ -44,13 +45,14 @@ fn main(
     var d_colour = vec3<f32>(0.0);
     var t_after = 1.0;
     var pixel_walked = 0u;
+    var behind = vec3<f32>(0.0);
     if (x < params.size.x && y < params.size.y) {
         let p = y * params.size.x + x;
-        d_colour = pixels[p].xyz;
-        t_after = pixels[p].w;
+        d_colour = pixels[2u * p].xyz;
+        t_after = pixels[2u * p].w;
+        behind = pixels[2u * p + 1u].xyz;
         pixel_walked = walked[p];
     }
-    var behind = params.background.xyz;
     let pixel = vec2<f32>(f32(x) + 0.5, f32(y) + 0.5);
     let range = tile_ranges[tile.y * params.size.z + tile.x];
     atomicMax(&most_walked, pixel_walked);

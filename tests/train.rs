@@ -148,6 +148,7 @@ fn train_run(
         size: Some(size),
         background: [0.0; 3],
         renderer,
+        holes: Default::default(),
     };
     let mut trainer = Trainer::new(dataset, visage::model::builtin::build_head(), options).unwrap();
     let reports = (0..iterations).map(|_| trainer.step().unwrap()).collect();

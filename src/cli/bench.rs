@@ -35,6 +35,8 @@ enum BenchWhat {
     Terminal(super::bench_terminal::TerminalBenchArgs),
     /// Training speed, held-out PSNR against time, gradient error.
     Train(super::bench_train::TrainBenchArgs),
+    /// Hole filling: leak, coverage and PSNR of plain, obscuring, culling, both.
+    Holes(super::bench_holes::HolesBenchArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -62,6 +64,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         BenchWhat::Render(a) => super::bench_render::run(a),
         BenchWhat::Terminal(a) => super::bench_terminal::run(a),
         BenchWhat::Train(a) => super::bench_train::run(a),
+        BenchWhat::Holes(a) => super::bench_holes::run(a),
     }
 }
 

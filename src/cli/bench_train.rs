@@ -48,6 +48,85 @@ pub struct TrainBenchArgs {
     json: bool,
 }
 
+/// The dataset a training bench runs on: the user's, or a fresh capture of
+/// the built-in `ada` (16 cameras, 20 frames of `talk`) removed afterwards.
+pub(super) struct BenchDataset {
+    /// The dataset.
+    pub dataset: Dataset,
+    scratch: Option<PathBuf>,
+}
+
+impl BenchDataset {
+    /// Loads `dataset`, or captures the default one at `size`.
+    pub fn open(dataset: Option<&std::path::Path>, size: (u32, u32), tag: &str) -> Result<Self> {
+        let Some(root) = dataset else {
+            let scratch =
+                std::env::temp_dir().join(format!("visage-bench-{tag}-{}", std::process::id()));
+            let (db, _) = DatabaseSpec {
+                gaussians_per_avatar: 1,
+                ..DatabaseSpec::default()
+            }
+            .load()?;
+            let options = CaptureOptions {
+                source: "ada".into(),
+                size: [size.0, size.1],
+                cameras: 16,
+                frames: 20,
+                motion: "talk".into(),
+                ring: false,
+            };
+            capture(&db, &options, &scratch, &|_, _| {})?;
+            return Ok(Self {
+                dataset: Dataset::load(&scratch)?,
+                scratch: Some(scratch),
+            });
+        };
+        Ok(Self {
+            dataset: Dataset::load(root)?,
+            scratch: None,
+        })
+    }
+}
+
+impl Drop for BenchDataset {
+    fn drop(&mut self) {
+        if let Some(dir) = &self.scratch {
+            std::fs::remove_dir_all(dir).ok();
+        }
+    }
+}
+
+/// Triangle frames per timestep.
+pub(super) type TimestepFrames = BTreeMap<usize, Vec<TriangleFrame>>;
+
+/// The held-out (val and test) views read once: each timestep's triangle
+/// frames and the targets.
+pub(super) fn held_out_targets(
+    dataset: &Dataset,
+    head: &crate::model::head::HeadModel,
+) -> Result<(TimestepFrames, Vec<Target>)> {
+    let held_out: Vec<_> = dataset.val.iter().chain(&dataset.test).cloned().collect();
+    let frames = timestep_frames(dataset, head, &held_out)?;
+    let targets = held_out
+        .iter()
+        .map(|v| load_target(v, None, [0.0; 3]))
+        .collect::<Result<Vec<_>>>()?;
+    Ok((frames, targets))
+}
+
+/// Mean held-out PSNR of a model.
+pub(super) fn held_out_psnr(
+    model: &crate::train::model::Trainable,
+    frames: &BTreeMap<usize, Vec<TriangleFrame>>,
+    targets: &[Target],
+) -> f64 {
+    let sum: f64 = targets
+        .iter()
+        .map(|t| evaluate_view(model, &frames[&t.view.timestep], t, [0.0; 3]).1)
+        .sum();
+    sum / targets.len().max(1) as f64
+}
+
 /// Trains with one renderer, evaluating the held-out views along the way.
 fn run_one(
     args: &TrainBenchArgs,
@@ -65,6 +144,7 @@ fn run_one(
             size: None,
             background: [0.0; 3],
             renderer,
+            holes: crate::train::holes::HoleFilling::RECOMMENDED,
         },
     )?;
     let agreement = gradient_check::agreement_with_cpu(renderer)?;
@@ -79,15 +159,10 @@ fn run_one(
             trainer.step()?;
         }
         training_s += t.elapsed().as_secs_f64();
-        let mut psnr = 0.0;
-        for target in targets {
-            let view_frames = &frames[&target.view.timestep];
-            psnr += evaluate_view(&trainer.model, view_frames, target, [0.0; 3]).1;
-        }
         curve.push(json!({
             "iteration": trainer.iteration(),
             "train_s": training_s,
-            "held_out_psnr_db": psnr / targets.len().max(1) as f64,
+            "held_out_psnr_db": held_out_psnr(&trainer.model, frames, targets),
             "gaussians": trainer.model.len(),
         }));
     }
@@ -123,42 +198,13 @@ fn print_run(run: &serde_json::Value) {
 /// Runs `visage bench train`.
 pub fn run(args: &TrainBenchArgs) -> Result<()> {
     let (gradient_error, checked) = gradient_check::worst_relative_error();
-    let scratch = std::env::temp_dir().join(format!("visage-bench-train-{}", std::process::id()));
-    let root = match &args.dataset {
-        Some(d) => d.clone(),
-        None => {
-            let (db, _) = DatabaseSpec {
-                gaussians_per_avatar: 1,
-                ..DatabaseSpec::default()
-            }
-            .load()?;
-            let options = CaptureOptions {
-                source: "ada".into(),
-                size: [args.capture_size.0, args.capture_size.1],
-                cameras: 16,
-                frames: 20,
-                motion: "talk".into(),
-                ring: false,
-            };
-            capture(&db, &options, &scratch, &|_, _| {})?;
-            scratch.clone()
-        }
-    };
-    let dataset = Dataset::load(&root)?;
+    let bench = BenchDataset::open(args.dataset.as_deref(), args.capture_size, "train")?;
+    let (dataset, root) = (&bench.dataset, &bench.dataset.root);
     let head = crate::model::builtin::build_head();
-    let held_out: Vec<_> = dataset.val.iter().chain(&dataset.test).cloned().collect();
-    let frames = timestep_frames(&dataset, &head, &held_out)?;
-    // Read once, evaluated at every point of the curve.
-    let targets = held_out
-        .iter()
-        .map(|v| load_target(v, None, [0.0; 3]))
-        .collect::<Result<Vec<_>>>()?;
+    let (frames, targets) = held_out_targets(dataset, &head)?;
     let mut runs = Vec::new();
     for &renderer in &args.renderers {
-        runs.push(run_one(args, &dataset, &frames, &targets, renderer)?);
-    }
-    if args.dataset.is_none() {
-        std::fs::remove_dir_all(&scratch).ok();
+        runs.push(run_one(args, dataset, &frames, &targets, renderer)?);
     }
     let report = json!({
         "threads": rayon::current_num_threads(),

@@ -123,7 +123,7 @@ impl Surface<'_> {
                 for sy in 0..SUPERSAMPLE {
                     for sx in 0..SUPERSAMPLE {
                         let k = ((y * SUPERSAMPLE + sy) * sw + x * SUPERSAMPLE + sx) as usize;
-                        if let Some((t, b)) = hits[k] {
+                        if let Some((t, b, _)) = hits[k] {
                             let rgb = self.shade(t, b);
                             for ch in 0..3 {
                                 sum[ch] += rgb[ch];
@@ -162,13 +162,35 @@ impl Surface<'_> {
     }
 }
 
-/// For each pixel centre, the nearest triangle and its perspective-correct
-/// barycentric coordinates.
+/// For each pixel centre, the nearest triangle of the mesh (z-buffered), or
+/// `None` where the mesh does not cover it: which surface a pixel shows.
+pub fn visible_triangles(
+    vertices: &[Vec3],
+    triangles: &[[u32; 3]],
+    camera: &TrainCamera,
+) -> Vec<Option<u32>> {
+    rasterize(vertices, triangles, camera)
+        .into_iter()
+        .map(|hit| hit.map(|(t, _, _)| t))
+        .collect()
+}
+
+/// For each pixel centre, the view depth of the nearest surface of the mesh
+/// (∞ where it does not cover the pixel).
+pub fn surface_depth(vertices: &[Vec3], triangles: &[[u32; 3]], camera: &TrainCamera) -> Vec<f64> {
+    rasterize(vertices, triangles, camera)
+        .into_iter()
+        .map(|hit| hit.map_or(f64::INFINITY, |(_, _, z)| z))
+        .collect()
+}
+
+/// For each pixel centre, the nearest triangle, its perspective-correct
+/// barycentric coordinates and its view depth.
 fn rasterize(
     vertices: &[Vec3],
     triangles: &[[u32; 3]],
     camera: &TrainCamera,
-) -> Vec<Option<(u32, [f32; 3])>> {
+) -> Vec<Option<(u32, [f32; 3], f64)>> {
     let [w, h] = camera.size;
     let projected: Vec<Option<[f64; 3]>> = vertices
         .iter()
@@ -223,7 +245,7 @@ fn rasterize(
                 let k = (y * w + x) as usize;
                 if z < depth[k] {
                     depth[k] = z;
-                    hits[k] = Some((t as u32, inv.map(|v| (v / sum) as f32)));
+                    hits[k] = Some((t as u32, inv.map(|v| (v / sum) as f32), z));
                 }
             }
         }

@@ -10,6 +10,8 @@ pub mod adam;
 pub mod capture;
 pub mod dataset;
 pub mod dual;
+pub mod hole_metrics;
+pub mod holes;
 pub mod loss;
 pub mod model;
 pub mod project;

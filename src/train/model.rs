@@ -7,8 +7,9 @@
 
 use rayon::prelude::*;
 
+use super::holes::Obscurer;
 use super::project::{project, Geometry, Projected, TrainCamera, GEOMETRY};
-use super::raster::{Rasterized, Rasterizer, Splat};
+use super::raster::{Backdrop, Rasterized, Rasterizer, Splat};
 use crate::avatar::binding::TriangleFrame;
 use crate::avatar::gaussians::GaussianSet;
 use crate::error::Result;
@@ -120,13 +121,15 @@ fn sigmoid(x: f64) -> f64 {
 }
 
 impl Render {
-    /// Renders `model` on the posed triangle `frames` from `camera` with
-    /// `rasterizer`.
+    /// Renders `model` on the posed triangle `frames` from `camera` over
+    /// `background` with `rasterizer`, with hole filling's `obscurer` drawn
+    /// but not optimised.
     pub fn new(
         model: &Trainable,
         frames: &[TriangleFrame],
         camera: &TrainCamera,
         background: [f64; 3],
+        obscurer: &Obscurer,
         rasterizer: &mut Rasterizer,
     ) -> Result<Self> {
         let last = frames.len().saturating_sub(1);
@@ -163,8 +166,19 @@ impl Render {
                 radius: p.radius,
                 depth: p.depth,
             })
+            .chain(match obscurer {
+                Obscurer::Gaussian(s) => Some(*s),
+                _ => None,
+            })
             .collect();
-        let raster = rasterizer.forward(&splats, camera.size, background)?;
+        let mut backdrop = Backdrop::uniform(camera.size, background);
+        if let Obscurer::Interior { colour, depth } = obscurer {
+            for (p, &d) in depth.iter().enumerate().filter(|(_, d)| d.is_finite()) {
+                backdrop.colour[p] = *colour;
+                backdrop.stop[p] = d;
+            }
+        }
+        let raster = rasterizer.forward(&splats, camera.size, &backdrop)?;
         Ok(Self {
             projected,
             drawn,
@@ -190,7 +204,13 @@ impl Render {
 
     /// Footprint radii (pixels) of the drawn Gaussians.
     pub fn radii(&self) -> impl Iterator<Item = f64> + '_ {
-        self.splats.iter().map(|s| s.radius)
+        self.splats[..self.drawn.len()].iter().map(|s| s.radius)
+    }
+
+    /// Per pixel, the opacity accumulated over it: 1 − the transmittance
+    /// left (row-major).
+    pub fn opacity(&self) -> Vec<f64> {
+        self.raster.final_t.iter().map(|t| 1.0 - t).collect()
     }
 
     /// Gaussians drawn (not culled).
@@ -392,7 +412,14 @@ pub mod gradient_check {
     fn flat_gradients(rasterizer: &mut Rasterizer) -> Result<Vec<f64>> {
         let (frames, camera, model) = (frames(), camera(), model());
         let background = [0.05, 0.1, 0.2];
-        let render = Render::new(&model, &frames, &camera, background, rasterizer)?;
+        let render = Render::new(
+            &model,
+            &frames,
+            &camera,
+            background,
+            &Obscurer::None,
+            rasterizer,
+        )?;
         let weights: Vec<f64> = (0..render.image().len())
             .map(|i| ((i * 13) % 29) as f64 / 29.0 - 0.45)
             .collect();
@@ -427,13 +454,20 @@ pub mod gradient_check {
         let (frames, camera, model) = (frames(), camera(), model());
         let background = [0.05, 0.1, 0.2];
         let cpu = || Rasterizer::Cpu;
-        let render = Render::new(&model, &frames, &camera, background, &mut cpu())
-            .expect("the CPU rasteriser does not fail");
+        let render = Render::new(
+            &model,
+            &frames,
+            &camera,
+            background,
+            &Obscurer::None,
+            &mut cpu(),
+        )
+        .expect("the CPU rasteriser does not fail");
         let weights: Vec<f64> = (0..render.image().len())
             .map(|i| ((i * 13) % 29) as f64 / 29.0 - 0.45)
             .collect();
         let loss = |m: &Trainable| -> f64 {
-            Render::new(m, &frames, &camera, background, &mut cpu())
+            Render::new(m, &frames, &camera, background, &Obscurer::None, &mut cpu())
                 .expect("the CPU rasteriser does not fail")
                 .image()
                 .iter()
@@ -491,6 +525,7 @@ mod tests {
             &frames(),
             &camera(),
             [0.05, 0.1, 0.2],
+            &Obscurer::None,
             &mut Rasterizer::Cpu,
         )
         .unwrap();

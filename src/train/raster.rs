@@ -62,6 +62,29 @@ impl SplatGrad {
     }
 }
 
+/// What lies behind the splats, per pixel: a colour and the depth at which
+/// it stops the walk (splats deeper than it are hidden). A uniform
+/// background stops nothing; the opaque interior layer stops at the head's
+/// surface plus a margin (docs/method.md §11.6).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Backdrop {
+    /// Colour per pixel.
+    pub colour: Vec<[f64; 3]>,
+    /// Depth per pixel beyond which splats are hidden (∞: none).
+    pub stop: Vec<f64>,
+}
+
+impl Backdrop {
+    /// One colour everywhere, hiding nothing.
+    pub fn uniform(size: [u32; 2], colour: [f64; 3]) -> Self {
+        let n = (size[0] * size[1]) as usize;
+        Self {
+            colour: vec![colour; n],
+            stop: vec![f64::INFINITY; n],
+        }
+    }
+}
+
 /// The forward pass's image and what the backward pass needs.
 #[derive(Clone, Debug)]
 pub struct Rasterized {
@@ -69,8 +92,8 @@ pub struct Rasterized {
     pub size: [u32; 2],
     /// RGB, row-major, f64 (not clamped or quantised).
     pub image: Vec<f64>,
-    /// Background colour.
-    pub background: [f64; 3],
+    /// What lies behind the splats.
+    pub backdrop: Backdrop,
     /// Splat indices per tile, front to back.
     pub(super) lists: Vec<Vec<u32>>,
     /// Per pixel: transmittance after its last contributing splat.
@@ -84,7 +107,7 @@ impl Rasterized {
     pub(super) fn from_parts(
         size: [u32; 2],
         image: Vec<f64>,
-        background: [f64; 3],
+        backdrop: Backdrop,
         lists: Vec<Vec<u32>>,
         final_t: Vec<f64>,
         walked: Vec<u32>,
@@ -92,7 +115,7 @@ impl Rasterized {
         Self {
             size,
             image,
-            background,
+            backdrop,
             lists,
             final_t,
             walked,
@@ -202,7 +225,13 @@ struct TileForward {
 /// Blends one tile front to back, splat by splat over each footprint (the
 /// CPU renderer's order; per pixel the result is the same as walking the
 /// pixel's list).
-fn forward_tile(splats: &[Splat], list: &[u32], size: [u32; 2], t: usize) -> TileForward {
+fn forward_tile(
+    splats: &[Splat],
+    list: &[u32],
+    size: [u32; 2],
+    stop: &[f64],
+    t: usize,
+) -> TileForward {
     let (origin, extent) = tile_bounds(t, size);
     let n = (extent[0] * extent[1]) as usize;
     let mut out = TileForward {
@@ -222,6 +251,12 @@ fn forward_tile(splats: &[Splat], list: &[u32], size: [u32; 2], t: usize) -> Til
             for lx in xs.clone() {
                 let p = (ly * extent[0] + lx) as usize;
                 if done[p] {
+                    continue;
+                }
+                if s.depth > stop[((origin[1] + ly) * size[0] + origin[0] + lx) as usize] {
+                    // Behind the backdrop, as is everything after it.
+                    done[p] = true;
+                    remaining -= 1;
                     continue;
                 }
                 let px = (origin[0] + lx) as f64 + 0.5;
@@ -249,8 +284,8 @@ fn forward_tile(splats: &[Splat], list: &[u32], size: [u32; 2], t: usize) -> Til
     out
 }
 
-/// Draws the splats over `background`.
-pub fn forward(splats: &[Splat], size: [u32; 2], background: [f64; 3]) -> Rasterized {
+/// Draws the splats over `backdrop`.
+pub fn forward(splats: &[Splat], size: [u32; 2], backdrop: &Backdrop) -> Rasterized {
     let lists = bin(splats, size);
     let pixels = (size[0] * size[1]) as usize;
     let mut image = vec![0.0; pixels * 3];
@@ -259,7 +294,7 @@ pub fn forward(splats: &[Splat], size: [u32; 2], background: [f64; 3]) -> Raster
     let tiles: Vec<TileForward> = lists
         .par_iter()
         .enumerate()
-        .map(|(t, list)| forward_tile(splats, list, size, t))
+        .map(|(t, list)| forward_tile(splats, list, size, &backdrop.stop, t))
         .collect();
     for (t, tile) in tiles.iter().enumerate() {
         let (origin, extent) = tile_bounds(t, size);
@@ -268,7 +303,8 @@ pub fn forward(splats: &[Splat], size: [u32; 2], background: [f64; 3]) -> Raster
                 let q = (ly * extent[0] + lx) as usize;
                 let p = ((origin[1] + ly) * size[0] + origin[0] + lx) as usize;
                 for ch in 0..3 {
-                    image[p * 3 + ch] = tile.colour[q][ch] + tile.transmittance[q] * background[ch];
+                    image[p * 3 + ch] =
+                        tile.colour[q][ch] + tile.transmittance[q] * backdrop.colour[p][ch];
                 }
                 final_t[p] = tile.transmittance[q];
                 walked[p] = tile.walked[q];
@@ -278,7 +314,7 @@ pub fn forward(splats: &[Splat], size: [u32; 2], background: [f64; 3]) -> Raster
     Rasterized {
         size,
         image,
-        background,
+        backdrop: backdrop.clone(),
         lists,
         final_t,
         walked,
@@ -299,7 +335,7 @@ pub fn backward(splats: &[Splat], raster: &Rasterized, d_image: &[f64]) -> Vec<S
             let n = (extent[0] * extent[1]) as usize;
             let global = |lx: u32, ly: u32| ((origin[1] + ly) * size[0] + origin[0] + lx) as usize;
             let mut t_after = vec![0.0; n];
-            let mut behind = vec![raster.background; n];
+            let mut behind = vec![[0.0; 3]; n];
             let mut walked = vec![0u32; n];
             let mut d_colour = vec![[0.0; 3]; n];
             for ly in 0..extent[1] {
@@ -307,6 +343,7 @@ pub fn backward(splats: &[Splat], raster: &Rasterized, d_image: &[f64]) -> Vec<S
                     let (q, p) = ((ly * extent[0] + lx) as usize, global(lx, ly));
                     t_after[q] = raster.final_t[p];
                     walked[q] = raster.walked[p];
+                    behind[q] = raster.backdrop.colour[p];
                     d_colour[q] = [d_image[p * 3], d_image[p * 3 + 1], d_image[p * 3 + 2]];
                 }
             }
@@ -404,16 +441,16 @@ impl Rasterizer {
         }
     }
 
-    /// Draws the splats over `background`.
+    /// Draws the splats over `backdrop`.
     pub fn forward(
         &mut self,
         splats: &[Splat],
         size: [u32; 2],
-        background: [f64; 3],
+        backdrop: &Backdrop,
     ) -> Result<Rasterized> {
         match self {
-            Rasterizer::Cpu => Ok(forward(splats, size, background)),
-            Rasterizer::Gpu(gpu) => gpu.forward(splats, size, background),
+            Rasterizer::Cpu => Ok(forward(splats, size, backdrop)),
+            Rasterizer::Gpu(gpu) => gpu.forward(splats, size, backdrop),
         }
     }
 
@@ -429,6 +466,21 @@ impl Rasterizer {
             Rasterizer::Gpu(gpu) => gpu.backward(splats, raster, d_image),
         }
     }
+}
+
+#[cfg(test)]
+/// A layer behind part of the image: its colour varies per pixel and it
+/// hides the splats deeper than 1.5 over the left half.
+pub(super) fn test_layered_backdrop(size: [u32; 2]) -> Backdrop {
+    let mut b = Backdrop::uniform(size, [0.1, 0.2, 0.3]);
+    for y in 0..size[1] {
+        for x in 0..size[0] / 2 {
+            let p = (y * size[0] + x) as usize;
+            b.colour[p] = [0.9, 0.05 * (x % 7) as f64, 0.3];
+            b.stop[p] = 1.5;
+        }
+    }
+    b
 }
 
 #[cfg(test)]
@@ -452,11 +504,20 @@ mod tests {
     }
 
     /// The loss Σ w·image for fixed weights: its gradient is w, so the
-    /// backward pass is checked against central differences of the forward.
+    /// backward pass is checked against central differences of the forward
+    /// — over a uniform background and over a layer that hides some splats.
     #[test]
     fn gradients_match_central_differences() {
         let size = [26, 21];
-        let background = [0.1, 0.2, 0.3];
+        for background in [
+            Backdrop::uniform(size, [0.1, 0.2, 0.3]),
+            test_layered_backdrop(size),
+        ] {
+            check_gradients(size, &background);
+        }
+    }
+
+    fn check_gradients(size: [u32; 2], background: &Backdrop) {
         let weights: Vec<f64> = (0..(size[0] * size[1] * 3) as usize)
             .map(|i| ((i * 37) % 17) as f64 / 17.0 - 0.4)
             .collect();

@@ -8,7 +8,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::raster::{bin, Rasterized, Splat, SplatGrad, TILE};
+use super::raster::{bin, Backdrop, Rasterized, Splat, SplatGrad, TILE};
 use crate::error::Result;
 use crate::render::gpu::constants::SPLAT_GRAD_FLOATS;
 use crate::render::gpu::device::{
@@ -22,7 +22,7 @@ use crate::render::projection::MIN_TRANSMITTANCE;
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct RasterParams {
     size: [u32; 4],
-    background: [f32; 4],
+    tuning: [f32; 4],
 }
 
 /// The wgpu training rasteriser: a device, its two kernels and buffers that
@@ -35,6 +35,7 @@ pub struct GpuRaster {
     splats: Growable,
     ranges: Growable,
     list: Growable,
+    backdrop: Growable,
     pixels: Growable,
     walked: Growable,
     grads: Growable,
@@ -63,6 +64,7 @@ impl GpuRaster {
             splats: Growable::new(device, "training splats", storage),
             ranges: Growable::new(device, "tile ranges", storage),
             list: Growable::new(device, "tile list", storage),
+            backdrop: Growable::new(device, "backdrop", storage),
             pixels: Growable::new(device, "pixels", read_back),
             walked: Growable::new(device, "walked", read_back),
             grads: Growable::new(device, "entry gradients", read_back),
@@ -97,13 +99,7 @@ impl GpuRaster {
     }
 
     /// Uploads the splats, the tile lists and the uniform; returns the grid.
-    fn upload_scene(
-        &mut self,
-        splats: &[Splat],
-        lists: &[Vec<u32>],
-        size: [u32; 2],
-        background: [f64; 3],
-    ) -> [u32; 2] {
+    fn upload_scene(&mut self, splats: &[Splat], lists: &[Vec<u32>], size: [u32; 2]) -> [u32; 2] {
         let grid = [size[0].div_ceil(TILE), size[1].div_ceil(TILE)];
         let packed: Vec<[f32; 4]> = splats
             .iter()
@@ -128,12 +124,7 @@ impl GpuRaster {
         self.upload(|s| &mut s.list, &flat);
         let params = RasterParams {
             size: [size[0], size[1], grid[0], grid[1]],
-            background: [
-                background[0] as f32,
-                background[1] as f32,
-                background[2] as f32,
-                MIN_TRANSMITTANCE as f32,
-            ],
+            tuning: [MIN_TRANSMITTANCE as f32, 0.0, 0.0, 0.0],
         };
         self.gpu
             .queue
@@ -150,7 +141,16 @@ impl GpuRaster {
         let (pixels, walked) = (&self.pixels.buffer, &self.walked.buffer);
         if forward {
             self.forward.dispatch(
-                device, &mut pass, uniform, splats, ranges, list, pixels, walked, groups,
+                device,
+                &mut pass,
+                uniform,
+                splats,
+                ranges,
+                list,
+                &self.backdrop.buffer,
+                pixels,
+                walked,
+                groups,
             );
         } else {
             self.backward.dispatch(
@@ -168,16 +168,23 @@ impl GpuRaster {
         }
     }
 
-    /// Draws the splats over `background` (the CPU pass's
+    /// Draws the splats over `backdrop` (the CPU pass's
     /// [`super::raster::forward`], in f32).
     pub fn forward(
         &mut self,
         splats: &[Splat],
         size: [u32; 2],
-        background: [f64; 3],
+        backdrop: &Backdrop,
     ) -> Result<Rasterized> {
         let lists = bin(splats, size);
-        let grid = self.upload_scene(splats, &lists, size, background);
+        let grid = self.upload_scene(splats, &lists, size);
+        let behind: Vec<[f32; 4]> = backdrop
+            .colour
+            .iter()
+            .zip(&backdrop.stop)
+            .map(|(c, &stop)| [c[0] as f32, c[1] as f32, c[2] as f32, stop as f32])
+            .collect();
+        self.upload(|s| &mut s.backdrop, &behind);
         let pixels = (size[0] * size[1]) as u64;
         let device = self.gpu.device.clone();
         self.pixels.ensure(&device, pixels * 16);
@@ -201,7 +208,12 @@ impl GpuRaster {
             walked = bytemuck::cast_slice::<u8, u32>(counts).to_vec();
         })?;
         Ok(Rasterized::from_parts(
-            size, image, background, lists, final_t, walked,
+            size,
+            image,
+            backdrop.clone(),
+            lists,
+            final_t,
+            walked,
         ))
     }
 
@@ -214,14 +226,18 @@ impl GpuRaster {
         d_image: &[f64],
     ) -> Result<Vec<SplatGrad>> {
         let size = raster.size;
-        let grid = self.upload_scene(splats, &raster.lists, size, raster.background);
+        let grid = self.upload_scene(splats, &raster.lists, size);
         let pixels: Vec<[f32; 4]> = raster
             .final_t
             .iter()
+            .zip(&raster.backdrop.colour)
             .enumerate()
-            .map(|(p, &t)| {
+            .flat_map(|(p, (&t, behind))| {
                 let d = &d_image[p * 3..p * 3 + 3];
-                [d[0] as f32, d[1] as f32, d[2] as f32, t as f32]
+                [
+                    [d[0] as f32, d[1] as f32, d[2] as f32, t as f32],
+                    [behind[0] as f32, behind[1] as f32, behind[2] as f32, 0.0],
+                ]
             })
             .collect();
         self.upload(|s| &mut s.pixels, &pixels);
@@ -341,9 +357,29 @@ mod tests {
     fn forward_matches_the_cpu_pass() {
         let size = [53, 37];
         let splats = scene(size);
-        let background = [0.1, 0.2, 0.3];
-        let cpu = forward(&splats, size, background);
-        let wgpu = gpu().forward(&splats, size, background).unwrap();
+        let mut gpu = gpu();
+        for background in [Backdrop::uniform(size, [0.1, 0.2, 0.3]), layered(size)] {
+            forward_agrees(&splats, size, &background, &mut gpu);
+        }
+    }
+
+    /// A layer at depth 2.5 over the left half, coloured per pixel.
+    fn layered(size: [u32; 2]) -> Backdrop {
+        let mut b = super::super::raster::test_layered_backdrop(size);
+        for stop in b.stop.iter_mut().filter(|s| s.is_finite()) {
+            *stop = 2.5;
+        }
+        b
+    }
+
+    fn forward_agrees(
+        splats: &[Splat],
+        size: [u32; 2],
+        background: &Backdrop,
+        gpu: &mut GpuRaster,
+    ) {
+        let cpu = forward(splats, size, background);
+        let wgpu = gpu.forward(splats, size, background).unwrap();
         assert!(cpu.saturated_pixels() > 0, "the stack saturates pixels");
         let worst = cpu
             .image
@@ -370,13 +406,14 @@ mod tests {
         assert!(same_walk * 100 >= cpu.walked.len() * 99, "{same_walk}");
     }
 
-    /// On the same forward result, the wgpu backward's per-splat gradients
-    /// are the CPU pass's to f32 rounding, and two runs agree bit for bit.
+    /// On the same forward result (over a layer hiding part of the scene),
+    /// the wgpu backward's per-splat gradients are the CPU pass's to f32
+    /// rounding, and two runs agree bit for bit.
     #[test]
     fn backward_matches_the_cpu_pass_and_repeats_exactly() {
         let size = [53, 37];
         let splats = scene(size);
-        let raster = forward(&splats, size, [0.1, 0.2, 0.3]);
+        let raster = forward(&splats, size, &layered(size));
         let d_image: Vec<f64> = (0..raster.image.len())
             .map(|i| ((i * 37) % 17) as f64 / 17.0 - 0.4)
             .collect();

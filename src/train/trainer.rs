@@ -14,6 +14,10 @@ use rand_chacha::ChaCha8Rng;
 
 use super::adam::AdamGroup;
 use super::dataset::{Dataset, View};
+use super::holes::{
+    interior_layer, obscuring_splat, oriented_box, view_ratios, HoleFilling, Obscurer, OrientedBox,
+    TriangleSubset,
+};
 use super::loss::{photometric_loss, psnr};
 use super::model::{Gradients, Render, Trainable, SH_STRIDE};
 use super::project::{Geometry, TrainCamera};
@@ -24,6 +28,7 @@ use crate::error::{Error, Result};
 use crate::io::avatar::{read_flame_params, write_avatar, AvatarParams, FlameParams, FrameParams};
 use crate::model::head::HeadModel;
 use crate::render::Backend;
+use std::collections::BTreeMap;
 
 /// How to train.
 #[derive(Clone, Debug, PartialEq)]
@@ -38,6 +43,8 @@ pub struct TrainOptions {
     pub background: [f64; 3],
     /// Which rasteriser runs the forward and backward passes.
     pub renderer: Backend,
+    /// The thesis's hole filling (obscuring Gaussians, back-face culling).
+    pub holes: HoleFilling,
 }
 
 /// Hyperparameters: GaussianAvatars' (`arguments/__init__.py`), with its
@@ -151,6 +158,12 @@ pub struct Trainer {
     identity: (Vec<f32>, Vec<glam::DVec3>),
     flame_frames: Vec<FrameParams>,
     rasterizer: Rasterizer,
+    /// The triangles trained on (all, or those back-face culling kept).
+    subset: TriangleSubset,
+    /// The posed head's box per timestep, when obscuring.
+    boxes: BTreeMap<usize, OrientedBox>,
+    /// The posed vertices per timestep, for the interior layer.
+    posed: BTreeMap<usize, Vec<Vec3>>,
 }
 
 /// Adam per parameter group.
@@ -243,22 +256,54 @@ pub fn load_target(view: &View, size: Option<[u32; 2]>, background: [f64; 3]) ->
     })
 }
 
-/// Triangle frames of every timestep the dataset names, and the identity.
+/// The training arc as hole metrics see it: the head posed at the first
+/// training timestep and every training camera of that timestep, images
+/// scaled to at most `side` pixels.
+pub fn training_arc(
+    dataset: &Dataset,
+    head: &HeadModel,
+    side: u32,
+) -> Result<(Vec<Vec3>, Vec<TrainCamera>)> {
+    let first = dataset
+        .train
+        .iter()
+        .map(|v| v.timestep)
+        .min()
+        .ok_or_else(|| Error::input(format!("{} has no training views", dataset.root.display())))?;
+    let path = dataset
+        .flame_params
+        .get(&first)
+        .ok_or_else(|| Error::input(format!("timestep {first} has no FLAME parameters")))?;
+    let posed = posed_vertices(&read_flame_params(path, "dataset", head)?, head);
+    let cameras = dataset
+        .train
+        .iter()
+        .filter(|v| v.timestep == first)
+        .map(|v| super::hole_metrics::at_most(&v.camera, side))
+        .collect();
+    Ok((posed, cameras))
+}
+
+/// The file in an exported avatar folder that records how it was trained.
+pub const TRAINING_METADATA: &str = "training.json";
+
+/// Every timestep the dataset names, posed: vertices per timestep, the
+/// identity and the FLAME parameters of each.
 #[allow(clippy::type_complexity)]
 fn pose_timesteps(
     dataset: &Dataset,
     head: &HeadModel,
 ) -> Result<(
-    std::collections::BTreeMap<usize, Vec<TriangleFrame>>,
+    BTreeMap<usize, Vec<Vec3>>,
     (Vec<f32>, Vec<glam::DVec3>),
     Vec<FrameParams>,
 )> {
-    let mut frames = std::collections::BTreeMap::new();
+    let mut posed = BTreeMap::new();
     let mut identity = None;
     let mut flame_frames = Vec::new();
     for (&t, path) in &dataset.flame_params {
         let params = read_flame_params(path, "dataset", head)?;
-        frames.insert(t, pose(&params, head));
+        posed.insert(t, posed_vertices(&params, head));
         let (expression, pose) = params.motion.frame(0);
         flame_frames.push(FrameParams {
             expression: expression.to_vec(),
@@ -268,7 +313,7 @@ fn pose_timesteps(
     }
     let identity =
         identity.ok_or_else(|| Error::input("the dataset names no FLAME parameter files"))?;
-    Ok((frames, identity, flame_frames))
+    Ok((posed, identity, flame_frames))
 }
 
 /// 1.1 × the largest distance of a training camera from their mean (3DGS's
@@ -291,7 +336,29 @@ impl Trainer {
         if options.iterations == 0 {
             return Err(Error::input("--iterations must be at least 1"));
         }
-        let (frames, identity, flame_frames) = pose_timesteps(dataset, &head)?;
+        let (posed, identity, flame_frames) = pose_timesteps(dataset, &head)?;
+        let subset = match options.holes.cull_below {
+            Some(tau) => {
+                TriangleSubset::cull(&view_ratios(&head.triangles, &posed, &dataset.train), tau)?
+            }
+            None => TriangleSubset::all(head.triangle_count()),
+        };
+        let boxes: BTreeMap<usize, OrientedBox> =
+            if options.holes.obscuring || options.holes.interior {
+                posed
+                    .iter()
+                    .filter_map(|(&t, vertices)| Some((t, oriented_box(vertices)?)))
+                    .collect()
+            } else {
+                BTreeMap::new()
+            };
+        let frames: BTreeMap<usize, Vec<TriangleFrame>> = posed
+            .iter()
+            .map(|(&t, vertices)| {
+                let full = triangle_frames(vertices, &head.triangles);
+                (t, subset.restrict(&full))
+            })
+            .collect();
         for v in dataset
             .train
             .iter()
@@ -312,7 +379,7 @@ impl Trainer {
             .map(|v| load_target(v, options.size, options.background))
             .collect::<Result<Vec<_>>>()?;
         let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
-        let n = head.triangle_count();
+        let n = subset.len();
         let mut model = Trainable {
             binding: (0..n as u32).collect(),
             geometry: vec![
@@ -345,6 +412,13 @@ impl Trainer {
         let rasterizer = Rasterizer::open(options.renderer)?;
         Ok(Self {
             rasterizer,
+            subset,
+            boxes,
+            posed: if options.holes.interior {
+                posed
+            } else {
+                BTreeMap::new()
+            },
             model,
             schedule,
             head,
@@ -375,6 +449,25 @@ impl Trainer {
         self.extent
     }
 
+    /// What hole filling draws with the Gaussians for `target` at `iteration`.
+    fn obscurer(&self, target: &Target, iteration: usize) -> Obscurer {
+        let timestep = target.view.timestep;
+        let Some(head_box) = self.boxes.get(&timestep) else {
+            return Obscurer::None;
+        };
+        match self.posed.get(&timestep) {
+            Some(posed) => interior_layer(
+                posed,
+                &self.head.triangles,
+                head_box,
+                &target.camera,
+                iteration,
+            ),
+            None => obscuring_splat(head_box, &target.camera, iteration)
+                .map_or(Obscurer::None, Obscurer::Gaussian),
+        }
+    }
+
     /// What runs the rasteriser's passes, for reports.
     pub fn rasterizer(&self) -> String {
         self.rasterizer.description()
@@ -399,11 +492,13 @@ impl Trainer {
         }
         let target = &self.targets[self.order.pop().expect("refilled above")];
         let frames = &self.frames[&target.view.timestep];
+        let obscurer = self.obscurer(target, it);
         let render = Render::new(
             &self.model,
             frames,
             &target.camera,
             self.options.background,
+            &obscurer,
             &mut self.rasterizer,
         )?;
         let goal: Vec<f64> = target.pixels.iter().map(|&p| p as f64).collect();
@@ -580,7 +675,7 @@ impl Trainer {
                     || self.world_scale(i) > max_world);
             *p |= transparent || huge;
         }
-        let mut left = vec![0usize; self.head.triangle_count()];
+        let mut left = vec![0usize; self.subset.len()];
         for (i, &b) in self.model.binding.iter().enumerate() {
             if !prune[i] {
                 left[b as usize] += 1;
@@ -652,9 +747,16 @@ impl Trainer {
         self.reset_done = true;
     }
 
-    /// The trained Gaussians (f32, SH degree 3).
+    /// The trained Gaussians (f32, SH degree 3), bound to the full topology.
     pub fn gaussians(&self) -> GaussianSet {
-        self.model.to_set(3)
+        let mut set = self.model.to_set(3);
+        set.binding = self.subset.to_full(&set.binding);
+        set
+    }
+
+    /// Triangles trained on and in the full topology.
+    pub fn triangles_kept(&self) -> (usize, usize) {
+        (self.subset.len(), self.subset.full)
     }
 
     /// Writes the avatar as a GaussianAvatars folder: the Gaussians and the
@@ -670,7 +772,26 @@ impl Trainer {
                 frames: &self.flame_frames,
             },
         )?;
-        Ok(())
+        self.write_metadata(&dir.join(TRAINING_METADATA))
+    }
+
+    /// Records how the avatar was trained (`training.json` beside it).
+    fn write_metadata(&self, path: &std::path::Path) -> Result<()> {
+        let (kept, full) = self.triangles_kept();
+        let doc = serde_json::json!({
+            "trained_by": "visage train",
+            "iterations": self.step,
+            "seed": self.options.seed,
+            "obscuring": self.options.holes.obscuring && !self.options.holes.interior,
+            "interior_layer": self.options.holes.interior,
+            "cull_backfaces": self.options.holes.cull_below,
+            "triangles_trained": kept,
+            "triangles": full,
+            "gaussians": self.model.len(),
+        });
+        let text = serde_json::to_string_pretty(&doc).expect("JSON values serialise");
+        std::fs::write(path, text + "\n")
+            .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))
     }
 
     /// Writes everything a resumed run needs to continue exactly where this
@@ -737,6 +858,10 @@ impl Trainer {
                 "scalars".into(),
                 write_npy(&[scalars.len()], NpyData::F64(&scalars)),
             ),
+            (
+                "triangles_kept".into(),
+                write_npy(&[self.subset.len()], NpyData::U32(&self.subset.kept)),
+            ),
         ];
         for (name, group) in Groups::NAMES.iter().zip(self.groups.all()) {
             let (mm, vv, t) = group.state();
@@ -800,7 +925,15 @@ impl Trainer {
         }
         let binding: Vec<u32> = get("binding")?.iter().map(|&b| b as u32).collect();
         let n = binding.len();
-        let triangles = trainer.head.triangle_count();
+        let kept: Vec<u32> = get("triangles_kept")?.iter().map(|&t| t as u32).collect();
+        if kept != trainer.subset.kept {
+            return Err(label(format!(
+                "trained on {} triangles, this run keeps {}: give the same --cull-backfaces",
+                kept.len(),
+                trainer.subset.len()
+            )));
+        }
+        let triangles = trainer.subset.len();
         let geometry = get("geometry")?;
         let sh = get("sh")?;
         let opacity = get("opacity_logit")?;
@@ -916,6 +1049,7 @@ pub fn evaluate_view(
         frames,
         &target.camera,
         background,
+        &Obscurer::None,
         &mut Rasterizer::Cpu,
     )
     .expect("the CPU rasteriser does not fail");
@@ -926,12 +1060,15 @@ pub fn evaluate_view(
     (render.image().to_vec(), quality, loss.ssim)
 }
 
+/// The posed vertices of one timestep's FLAME parameters.
+fn posed_vertices(params: &FlameParams, head: &HeadModel) -> Vec<Vec3> {
+    let (expression, pose) = params.motion.frame(0);
+    head.forward(&params.shape, Some(&params.static_offset), expression, pose)
+}
+
 /// The triangle frames of one timestep's FLAME parameters.
 fn pose(params: &FlameParams, head: &HeadModel) -> Vec<TriangleFrame> {
-    let (expression, pose) = params.motion.frame(0);
-    let posed: Vec<Vec3> =
-        head.forward(&params.shape, Some(&params.static_offset), expression, pose);
-    triangle_frames(&posed, &head.triangles)
+    triangle_frames(&posed_vertices(params, head), &head.triangles)
 }
 
 /// Triangle frames for every timestep `views` show, each read and posed once.
@@ -992,6 +1129,7 @@ mod tests {
             size: Some([24, 24]),
             background: [0.0; 3],
             renderer: Backend::Cpu,
+            holes: HoleFilling::default(),
         };
         let head = || crate::model::builtin::build_head();
         let mut straight = Trainer::new(&dataset, head(), train.clone()).unwrap();
@@ -1032,6 +1170,7 @@ mod tests {
                 size: None,
                 background: [0.0; 3],
                 renderer: Backend::Cpu,
+                holes: HoleFilling::default(),
             },
             &ckpt,
         )

@@ -136,7 +136,7 @@ kernels! {
     PackRgb = "pack_rgb" { image: read, packed: write }
     /// The training rasteriser's forward: colour, final transmittance and
     /// entries walked per pixel.
-    TrainForward = "train_forward" { splats: read, ranges: read, list: read, pixels: write, walked: write }
+    TrainForward = "train_forward" { splats: read, ranges: read, list: read, backdrop: read, pixels: write, walked: write }
     /// The training rasteriser's backward: ∂loss/∂ screen quantities per list entry.
     TrainBackward = "train_backward" { splats: read, ranges: read, list: read, pixels: read, walked: read, grads: write }
 }
