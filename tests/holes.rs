@@ -198,3 +198,72 @@ fn bench_holes_compares_six_variants_and_draws_the_grid() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("unknown variant 'bogus'"));
 }
+
+/// `sessions/trained-sources.sh` trains three sources (here tiny ones) and
+/// `sessions/trained-sources.vsg` composes them: every command succeeds, and
+/// border smoothing with colour correction change the picture.
+#[test]
+fn the_trained_sources_session_composes_sources_visage_trained() {
+    let db = std::path::Path::new("target").join("test-trained-sources");
+    std::fs::remove_dir_all(&db).ok();
+    let o = std::process::Command::new("sh")
+        .args([
+            "sessions/trained-sources.sh",
+            db.to_str().unwrap(),
+            "30",
+            "48x48",
+        ])
+        .env("VISAGE", env!("CARGO_BIN_EXE_visage"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for source in ["ada", "bram", "jomo"] {
+        assert!(
+            db.join(source).join("point_cloud.ply").is_file(),
+            "{source}"
+        );
+        assert!(!db.join(source).join("checkpoint.npz").exists());
+    }
+    let session: String = std::fs::read_to_string("sessions/trained-sources.vsg")
+        .unwrap()
+        .lines()
+        .filter(|l| !l.contains("expect image"))
+        .map(|l| {
+            let l = l.replace("db target/trained-sources", &format!("db {}", db.display()));
+            format!("{l}\n")
+        })
+        .collect();
+    let file = temp_path("holes", "trained.vsg");
+    std::fs::write(&file, session).unwrap();
+    let out = temp_path("holes", "trained-out");
+    std::fs::remove_dir_all(&out).ok();
+    let o = visage(&[
+        "replay",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--check",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(r["failures"].as_array().unwrap().is_empty(), "{r}");
+    let before = image::open(out.join("trained-before.png"))
+        .unwrap()
+        .to_rgb8();
+    let after = image::open(out.join("trained-after.png"))
+        .unwrap()
+        .to_rgb8();
+    assert_eq!(before.dimensions(), (160, 120));
+    let changed = before
+        .pixels()
+        .zip(after.pixels())
+        .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 4))
+        .count();
+    assert!(
+        changed > 200,
+        "smoothing and colour correction changed {changed} pixels"
+    );
+    std::fs::remove_dir_all(&db).ok();
+    std::fs::remove_dir_all(&out).ok();
+}
