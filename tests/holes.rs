@@ -11,22 +11,8 @@ use std::path::PathBuf;
 use common::{temp_path, visage};
 
 /// A small front-arc capture: 48×48, 6 cameras, 2 timesteps.
-fn small_capture(tag: &str) -> PathBuf {
-    let dir = temp_path("holes", tag);
-    std::fs::remove_dir_all(&dir).ok();
-    let o = visage(&[
-        "capture",
-        "--size",
-        "48x48",
-        "--cameras",
-        "6",
-        "--frames",
-        "2",
-        "-o",
-        dir.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    dir
+fn small_capture(name: &str) -> PathBuf {
+    common::small_capture("holes", name, 48, 6, 2)
 }
 
 /// A culled, obscured run exports bindings on the full topology (none on a

@@ -14,22 +14,8 @@ use visage::render::Backend;
 use visage::train::trainer::{StepReport, TrainOptions, Trainer};
 
 /// A small capture: 64×64, 4 cameras, 3 timesteps.
-fn small_capture(tag: &str) -> PathBuf {
-    let dir = temp_path("train", tag);
-    std::fs::remove_dir_all(&dir).ok();
-    let o = visage(&[
-        "capture",
-        "--size",
-        "64x64",
-        "--cameras",
-        "4",
-        "--frames",
-        "3",
-        "-o",
-        dir.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    dir
+fn small_capture(name: &str) -> PathBuf {
+    common::small_capture("train", name, 64, 4, 3)
 }
 
 /// GaussianAvatars' reader takes the capture, and its camera puts a point

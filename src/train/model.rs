@@ -407,22 +407,31 @@ pub mod gradient_check {
         )
     }
 
-    /// Every gradient of the check scene as one flat list (geometry, opacity
-    /// logit, SH), from `rasterizer`.
-    fn flat_gradients(rasterizer: &mut Rasterizer) -> Result<Vec<f64>> {
-        let (frames, camera, model) = (frames(), camera(), model());
-        let background = [0.05, 0.1, 0.2];
+    /// The check scene's background.
+    const BACKGROUND: [f64; 3] = [0.05, 0.1, 0.2];
+
+    /// The check scene drawn by `rasterizer`, and the fixed weights w of its
+    /// loss Σ w·image.
+    fn check_render(model: &Trainable, rasterizer: &mut Rasterizer) -> Result<(Render, Vec<f64>)> {
         let render = Render::new(
-            &model,
-            &frames,
-            &camera,
-            background,
+            model,
+            &frames(),
+            &camera(),
+            BACKGROUND,
             &Obscurer::None,
             rasterizer,
         )?;
-        let weights: Vec<f64> = (0..render.image().len())
+        let weights = (0..render.image().len())
             .map(|i| ((i * 13) % 29) as f64 / 29.0 - 0.45)
             .collect();
+        Ok((render, weights))
+    }
+
+    /// Every gradient of the check scene as one flat list (geometry, opacity
+    /// logit, SH), from `rasterizer`.
+    fn flat_gradients(rasterizer: &mut Rasterizer) -> Result<Vec<f64>> {
+        let model = model();
+        let (render, weights) = check_render(&model, rasterizer)?;
         let g = render.backward(&model, &weights, rasterizer)?;
         Ok(g.geometry
             .iter()
@@ -452,22 +461,11 @@ pub mod gradient_check {
     /// max(|numeric|, 1e-2)), and how many parameters were checked.
     pub fn worst_relative_error() -> (f64, usize) {
         let (frames, camera, model) = (frames(), camera(), model());
-        let background = [0.05, 0.1, 0.2];
         let cpu = || Rasterizer::Cpu;
-        let render = Render::new(
-            &model,
-            &frames,
-            &camera,
-            background,
-            &Obscurer::None,
-            &mut cpu(),
-        )
-        .expect("the CPU rasteriser does not fail");
-        let weights: Vec<f64> = (0..render.image().len())
-            .map(|i| ((i * 13) % 29) as f64 / 29.0 - 0.45)
-            .collect();
+        let (render, weights) =
+            check_render(&model, &mut cpu()).expect("the CPU rasteriser does not fail");
         let loss = |m: &Trainable| -> f64 {
-            Render::new(m, &frames, &camera, background, &Obscurer::None, &mut cpu())
+            Render::new(m, &frames, &camera, BACKGROUND, &Obscurer::None, &mut cpu())
                 .expect("the CPU rasteriser does not fail")
                 .image()
                 .iter()

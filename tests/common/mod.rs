@@ -32,3 +32,28 @@ pub fn python() -> String {
         }
     })
 }
+
+/// A small front-arc capture of the built-in `ada` in a fresh temporary
+/// folder: `size` pixels square, `cameras` cameras, `frames` timesteps.
+pub fn small_capture(tag: &str, name: &str, size: u32, cameras: u32, frames: u32) -> PathBuf {
+    let dir = temp_path(tag, name);
+    std::fs::remove_dir_all(&dir).ok();
+    let (size, cameras, frames) = (
+        format!("{size}x{size}"),
+        cameras.to_string(),
+        frames.to_string(),
+    );
+    let o = visage(&[
+        "capture",
+        "--size",
+        &size,
+        "--cameras",
+        &cameras,
+        "--frames",
+        &frames,
+        "-o",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    dir
+}
