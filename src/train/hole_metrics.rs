@@ -302,7 +302,7 @@ mod tests {
         .unwrap();
         let (head, source) = (&db.model, &db.sources[0]);
         let posed = source.neutral(head);
-        let (cameras, _) = super::super::capture::rig(4, false, [48, 48]);
+        let (cameras, _) = crate::train::capture::rig(4, false, [48, 48]);
         let solid = Trainable::from_set(&source.gaussians);
         let mut faint = solid.clone();
         for (i, &b) in solid.binding.iter().enumerate() {
@@ -333,7 +333,7 @@ mod tests {
     /// pivot in front of it, it looks at the pivot from the side.
     #[test]
     fn turned_cameras_circle_the_pivot() {
-        let (cameras, _) = super::super::capture::rig(2, false, [32, 32]);
+        let (cameras, _) = crate::train::capture::rig(2, false, [32, 32]);
         let c = cameras[0];
         let back = turn(&c, DVec3::new(0.0, 0.0, 0.1), 360.0);
         for (a, b) in c.eye.iter().zip(back.eye) {

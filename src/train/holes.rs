@@ -475,7 +475,7 @@ mod head_tests {
         let head = crate::model::builtin::build_head();
         let posed = head.neutral(&[], None);
         let b = oriented_box(&posed).unwrap();
-        let (cameras, _) = super::super::capture::rig(16, false, [128, 128]);
+        let (cameras, _) = crate::train::capture::rig(16, false, [128, 128]);
         let s = obscuring_splat(&b, &cameras[3], 0).unwrap();
         assert!((s.center[0] - 64.0).abs() < 20.0 && (s.center[1] - 64.0).abs() < 20.0);
         assert!(s.radius > 5.0 && s.radius < 64.0, "{}", s.radius);

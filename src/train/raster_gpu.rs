@@ -276,8 +276,8 @@ impl GpuRaster {
 
 #[cfg(test)]
 mod tests {
-    use super::super::raster::{backward, forward};
     use super::*;
+    use crate::train::raster::{backward, forward};
     use rand::{Rng, SeedableRng};
 
     /// Splats over several tiles and partial edge tiles: elongated and round,
@@ -365,7 +365,7 @@ mod tests {
 
     /// A layer at depth 2.5 over the left half, coloured per pixel.
     fn layered(size: [u32; 2]) -> Backdrop {
-        let mut b = super::super::raster::test_layered_backdrop(size);
+        let mut b = crate::train::raster::test_layered_backdrop(size);
         for stop in b.stop.iter_mut().filter(|s| s.is_finite()) {
             *stop = 2.5;
         }
@@ -432,7 +432,7 @@ mod tests {
     #[test]
     fn parameter_gradients_agree_with_the_cpu() {
         let difference =
-            super::super::model::gradient_check::agreement_with_cpu(crate::render::Backend::Gpu)
+            crate::train::model::gradient_check::agreement_with_cpu(crate::render::Backend::Gpu)
                 .unwrap();
         assert!(difference < 1e-4, "{difference}");
     }
