@@ -109,6 +109,7 @@ pub fn run(args: &HolesBenchArgs) -> Result<()> {
     let front = most_frontal(&cameras, &posed);
     let mut rows = Vec::new();
     let mut grid = Vec::new();
+    let mut device = String::new();
     for (name, holes) in variants
         .into_iter()
         .filter(|(n, _)| args.variants.iter().any(|v| v == n))
@@ -130,6 +131,7 @@ pub fn run(args: &HolesBenchArgs) -> Result<()> {
             trainer.step()?;
         }
         let train_s = start.elapsed().as_secs_f64();
+        device = trainer.rasterizer();
         let model = Trainable::from_set(&trainer.gaussians());
         let metrics = hole_metrics::measure(&model, &head, &posed, &cameras);
         grid.push(turning_row(&model, &head, &posed, &front));
@@ -149,7 +151,7 @@ pub fn run(args: &HolesBenchArgs) -> Result<()> {
         "dataset": dataset.root.display().to_string(),
         "iterations": args.iterations,
         "cull_backfaces": args.cull_backfaces,
-        "device": Rasterizer::open(args.renderer)?.description(),
+        "device": device,
         "grid": args.grid.display().to_string(),
         "variants": rows,
     });

@@ -107,13 +107,17 @@ pub fn measure(
         .flat_map(|c| [turn(c, pivot, BEYOND_DEG), turn(c, pivot, -BEYOND_DEG)])
         .collect();
     let coverage_from = |views: &[TrainCamera]| -> Vec<(Group, f64)> {
+        // Which surface each pixel shows, per view: the same for every group.
+        let shown_by_view: Vec<Vec<Option<u32>>> = views
+            .iter()
+            .map(|camera| visible_triangles(posed, &head.triangles, camera))
+            .collect();
         COVERED
             .iter()
             .map(|&g| {
                 let own = keep_bound(model, |t| group_of(t) == g);
                 let (mut sum, mut count) = (0.0, 0usize);
-                for camera in views {
-                    let shown = visible_triangles(posed, &head.triangles, camera);
+                for (camera, shown) in views.iter().zip(&shown_by_view) {
                     let opacity = draw(&own, camera).opacity();
                     for (p, t) in shown.iter().enumerate() {
                         if t.is_some_and(|t| group_of(t) == g) {
