@@ -17,6 +17,7 @@ pub mod model;
 pub mod pipeline;
 pub mod render;
 pub mod scene;
+pub mod study;
 pub mod text;
 pub mod train;
 pub mod tui;

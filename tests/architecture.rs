@@ -5,9 +5,9 @@
 use std::path::Path;
 
 /// Top-level modules from the bottom up; a module may use only those before it.
-const LAYERS: [&str; 13] = [
+const LAYERS: [&str; 14] = [
     "text", "error", "model", "avatar", "scene", "io", "compose", "render", "train", "pipeline",
-    "editor", "tui", "cli",
+    "editor", "study", "tui", "cli",
 ];
 
 /// Crates only the front ends (`tui`, `cli`) may use.

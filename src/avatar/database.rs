@@ -1,5 +1,7 @@
 //! Source avatars and the database of them that the editor composes from.
 
+use std::collections::BTreeMap;
+
 use glam::{DVec3, Vec3};
 
 use super::gaussians::GaussianSet;
@@ -21,6 +23,10 @@ pub struct SourceAvatar {
     pub motion: Motion,
     /// Gaussians bound to the model's triangles.
     pub gaussians: GaussianSet,
+    /// Labels describing the person (for example `skin_tone = "dark"`), which
+    /// random composites and study exclusions can constrain on. Empty when
+    /// the database says nothing.
+    pub attributes: BTreeMap<String, String>,
 }
 
 impl SourceAvatar {

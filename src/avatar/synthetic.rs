@@ -324,7 +324,45 @@ fn make_source(
         static_offset,
         motion,
         gaussians,
+        attributes: look_attributes(look),
     }
+}
+
+/// Skin luma (Rec. 709 weights on sRGB) at or above which a built-in person
+/// is labelled light-skinned, and below which dark-skinned, with `medium` in
+/// between.
+const LIGHT_SKIN_LUMA: f32 = 0.6;
+/// See [`LIGHT_SKIN_LUMA`].
+const DARK_SKIN_LUMA: f32 = 0.4;
+/// Crown hair volume (metres) from which hair counts as long.
+const LONG_HAIR: f32 = 0.015;
+
+/// The labels a built-in person carries: `skin_tone` (light, medium, dark),
+/// `facial_hair` (beard, none) and `hair` (long, short). They play the part
+/// of the thesis's skin-tone and gender labels in study constraints.
+fn look_attributes(look: &Look) -> std::collections::BTreeMap<String, String> {
+    let luma = 0.2126 * look.skin[0] + 0.7152 * look.skin[1] + 0.0722 * look.skin[2];
+    let skin_tone = if luma >= LIGHT_SKIN_LUMA {
+        "light"
+    } else if luma >= DARK_SKIN_LUMA {
+        "medium"
+    } else {
+        "dark"
+    };
+    let facial_hair = if look.beard > 0.0 { "beard" } else { "none" };
+    let hair = if look.hair_thickness >= LONG_HAIR {
+        "long"
+    } else {
+        "short"
+    };
+    [
+        ("skin_tone", skin_tone),
+        ("facial_hair", facial_hair),
+        ("hair", hair),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v.to_string()))
+    .collect()
 }
 
 /// Area-weighted vertex normals.

@@ -3,8 +3,11 @@
 
 pub mod blend;
 pub mod colour;
+pub mod composition;
 pub mod engine;
+pub mod random;
 pub mod recipe;
+pub mod rules;
 pub mod selection;
 pub mod smoothing;
 

@@ -135,7 +135,36 @@ pub fn read_avatar(dir: &Path, name: &str, model: &HeadModel) -> super::Result<S
         static_offset: params.static_offset,
         motion: params.motion,
         gaussians,
+        attributes: read_attributes(&dir.join(ATTRIBUTES_FILE))?,
     })
+}
+
+/// Optional file in an avatar folder labelling the person, one `key = "value"`
+/// per line (for example `skin_tone = "dark"`); visage's own addition to the
+/// GaussianAvatars layout, read for study constraints.
+pub const ATTRIBUTES_FILE: &str = "attributes.toml";
+
+/// Reads an avatar's labels; a missing file means none.
+fn read_attributes(path: &Path) -> super::Result<std::collections::BTreeMap<String, String>> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Default::default()),
+        Err(e) => return Err(super::FileError::access("read", path, e).into()),
+    };
+    let table: toml::Table = toml::from_str(&text)
+        .map_err(|e| format!("{}: invalid TOML: {}", path.display(), e.message().trim()))?;
+    table
+        .into_iter()
+        .map(|(key, value)| match value {
+            toml::Value::String(v) => Ok((key, v)),
+            other => Err(format!(
+                "{}: attribute '{key}' must be a string, not {}",
+                path.display(),
+                other.type_str()
+            )
+            .into()),
+        })
+        .collect()
 }
 
 /// A `flame_param.npz`'s contents: identity and per-frame expression and pose.
