@@ -14,7 +14,9 @@ mod convert;
 mod db;
 mod edit;
 mod info;
+mod random;
 mod render;
+mod study;
 mod train;
 
 use std::process::ExitCode;
@@ -60,6 +62,10 @@ enum Command {
     Train(train::TrainArgs),
     /// PSNR / SSIM of an avatar on a dataset's held-out views.
     Eval(train::EvalArgs),
+    /// Random composites by the thesis's rules, written as recipes.
+    Random(random::RandomArgs),
+    /// The perceptual study: build a study folder, run participants, analyse.
+    Study(study::StudyArgs),
     /// Measure speed beside error.
     Bench(bench::BenchArgs),
     /// Write test fixtures in the real formats (FLAME-layout model and masks
@@ -90,6 +96,8 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Render(args)) => render::run(&args),
         Some(Command::Convert(args)) => convert::run(&args),
         Some(Command::Bench(args)) => bench::run(&args),
+        Some(Command::Random(args)) => random::run(&args),
+        Some(Command::Study(args)) => study::run(&args),
         Some(Command::Capture(args)) => capture::run(&args),
         Some(Command::Train(args)) => train::run_train(&args),
         Some(Command::Eval(args)) => train::run_eval(&args),

@@ -149,7 +149,7 @@ fn read_attributes(path: &Path) -> super::Result<std::collections::BTreeMap<Stri
     let text = match std::fs::read_to_string(path) {
         Ok(text) => text,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Default::default()),
-        Err(e) => return Err(super::FileError::access("read", path, e).into()),
+        Err(e) => return Err(super::FileError::access("read", path, e)),
     };
     let table: toml::Table = toml::from_str(&text)
         .map_err(|e| format!("{}: invalid TOML: {}", path.display(), e.message().trim()))?;

@@ -321,6 +321,10 @@ impl Analysis {
             "\nper avatar (share of \"no\" [{pct}% Wilson CI], answers)\n"
         ));
         for a in &self.avatars {
+            if self.unanswered.contains(&a.id) {
+                out.push_str(&format!("  {:>4} {:<22} not answered\n", a.id, a.category));
+                continue;
+            }
             let reasons = if a.excluded.is_empty() {
                 String::new()
             } else {

@@ -4,4 +4,7 @@
 //! `tui::study` runs a participant's session; `cli` exposes the commands.
 
 pub mod analysis;
+pub mod design;
+pub mod journal;
+pub mod plot;
 pub mod results;

@@ -18,8 +18,8 @@ use ratatui::backend::CrosstermBackend;
 use ratatui::Terminal;
 
 use super::graphics::{
-    detect, encode_iterm2, encode_kitty, encode_sixel, kitty_delete, tmux_wrap, GraphicsChoice,
-    KittyTransport, Protocol, TerminalGraphics, SYNC_BEGIN, SYNC_END,
+    detect, kitty_delete, GraphicsChoice, ImageTarget, Protocol, TerminalGraphics, SYNC_BEGIN,
+    SYNC_END,
 };
 use super::keymap::Keymap;
 use super::view::{draw, layout, InfoPanel, ViewModel};
@@ -70,12 +70,7 @@ enum Job {
 struct FrameJob {
     request: FrameRequest,
     version: u64,
-    protocol: Protocol,
-    cells: (u16, u16),
-    /// Full-size pixels for sixel (which draws 1:1).
-    full: (u32, u32),
-    kitty: KittyTransport,
-    tmux: bool,
+    target: ImageTarget,
 }
 
 enum Reply {
@@ -119,7 +114,7 @@ fn worker(mut bench: Workbench, mailbox: Arc<(Mutex<Mailbox>, Condvar)>, replies
             Job::Frame(f) => match bench.render(&f.request) {
                 Ok(result) => {
                     let t = Instant::now();
-                    let encoded = encode(&result.image, &f).unwrap_or_default();
+                    let encoded = f.target.encode(&result.image).unwrap_or_default();
                     Reply::Frame {
                         version: f.version,
                         encode_ms: t.elapsed().as_secs_f64() * 1e3,
@@ -152,23 +147,6 @@ fn effect_name(effect: &Effect) -> &'static str {
     }
 }
 
-/// Encodes a rendered frame for the terminal (nothing for half-blocks).
-fn encode(image: &RgbImage, job: &FrameJob) -> std::result::Result<Vec<u8>, String> {
-    let bytes = match job.protocol {
-        Protocol::Halfblocks => return Ok(Vec::new()),
-        Protocol::Kitty => encode_kitty(image, job.cells, job.kitty).map_err(|e| e.to_string())?,
-        Protocol::Iterm2 => encode_iterm2(image, job.cells)?,
-        Protocol::Sixel => {
-            if (image.width, image.height) != job.full {
-                encode_sixel(&image.resized(job.full.0, job.full.1))?
-            } else {
-                encode_sixel(image)?
-            }
-        }
-    };
-    Ok(if job.tmux { tmux_wrap(&bytes) } else { bytes })
-}
-
 /// A `Write` that collects ratatui's output so a frame goes out in one write.
 #[derive(Clone, Default)]
 pub struct Collector(Arc<Mutex<Vec<u8>>>);
@@ -194,11 +172,11 @@ impl Write for Collector {
 }
 
 /// Restores the terminal when dropped (normal exit, error, unwinding panic).
-struct TerminalGuard {
-    kitty: bool,
+pub(super) struct TerminalGuard {
+    pub(super) kitty: bool,
 }
 
-fn restore_terminal(kitty: bool) {
+pub(super) fn restore_terminal(kitty: bool) {
     let mut out = std::io::stdout();
     if kitty {
         let _ = out.write_all(&kitty_delete());
@@ -218,6 +196,37 @@ impl Drop for TerminalGuard {
     fn drop(&mut self) {
         restore_terminal(self.kitty);
     }
+}
+
+/// Takes over the terminal (raw mode, alternate screen, mouse, no cursor)
+/// until the guard drops, restoring it on panics too; the flag turns true
+/// when SIGINT, SIGTERM or SIGHUP arrives.
+pub(super) fn enter_terminal(kitty: bool) -> Result<(TerminalGuard, Arc<AtomicBool>)> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [
+        signal_hook::consts::SIGINT,
+        signal_hook::consts::SIGTERM,
+        signal_hook::consts::SIGHUP,
+    ] {
+        signal_hook::flag::register(signal, Arc::clone(&stop))
+            .map_err(|e| Error::terminal(format!("cannot install signal handler: {e}")))?;
+    }
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        restore_terminal(kitty);
+        default_hook(info);
+    }));
+    terminal::enable_raw_mode()
+        .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
+    let guard = TerminalGuard { kitty };
+    execute!(
+        std::io::stdout(),
+        terminal::EnterAlternateScreen,
+        event::EnableMouseCapture,
+        cursor::Hide
+    )
+    .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
+    Ok((guard, stop))
 }
 
 /// Runs the editor until the user quits or a signal arrives.
@@ -259,31 +268,8 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
         None => None,
     };
 
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [
-        signal_hook::consts::SIGINT,
-        signal_hook::consts::SIGTERM,
-        signal_hook::consts::SIGHUP,
-    ] {
-        signal_hook::flag::register(signal, Arc::clone(&stop))
-            .map_err(|e| Error::terminal(format!("cannot install signal handler: {e}")))?;
-    }
     let kitty = graphics.protocol == Protocol::Kitty;
-    let default_hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        restore_terminal(kitty);
-        default_hook(info);
-    }));
-    terminal::enable_raw_mode()
-        .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
-    let _guard = TerminalGuard { kitty };
-    execute!(
-        std::io::stdout(),
-        terminal::EnterAlternateScreen,
-        event::EnableMouseCapture,
-        cursor::Hide
-    )
-    .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
+    let (_guard, stop) = enter_terminal(kitty)?;
 
     let mailbox = Arc::new((Mutex::new(Mailbox::default()), Condvar::new()));
     let (reply_tx, replies) = channel();
@@ -366,7 +352,7 @@ fn drag_command(button: MouseButton, delta: (f32, f32)) -> Option<Command> {
 /// Reads terminal events on their own thread. crossterm's `poll` can spin
 /// without returning once the terminal hangs up; on this thread that costs
 /// nothing, since the editor loop notices the hang-up and the process exits.
-fn spawn_input_reader() -> Receiver<Event> {
+pub(super) fn spawn_input_reader() -> Receiver<Event> {
     let (tx, rx) = channel();
     std::thread::spawn(move || loop {
         match event::poll(Duration::from_millis(50)) {
@@ -386,7 +372,7 @@ fn spawn_input_reader() -> Receiver<Event> {
 }
 
 /// True when standard input's terminal has hung up or is gone.
-fn terminal_hung_up() -> bool {
+pub(super) fn terminal_hung_up() -> bool {
     let mut fd = libc::pollfd {
         fd: libc::STDIN_FILENO,
         events: 0,
@@ -595,14 +581,8 @@ impl App {
         if self.requested == self.version && !refine {
             return;
         }
-        let cells = (viewport.width, viewport.height);
-        let full = match self.graphics.protocol {
-            Protocol::Halfblocks => (cells.0 as u32, 2 * cells.1 as u32),
-            _ => (
-                cells.0 as u32 * self.graphics.cell_px.0 as u32,
-                cells.1 as u32 * self.graphics.cell_px.1 as u32,
-            ),
-        };
+        let target = ImageTarget::new(&self.graphics, (viewport.width, viewport.height));
+        let full = target.full;
         let scale = if moving { self.scale } else { 1.0 };
         let (w, h) = (
             ((full.0 as f64 * scale).round() as u32).max(8),
@@ -611,15 +591,7 @@ impl App {
         let job = FrameJob {
             request: self.editor.frame_request(w, h, !moving),
             version: self.version,
-            protocol: self.graphics.protocol,
-            cells,
-            full,
-            kitty: if self.graphics.remote {
-                KittyTransport::Zlib
-            } else {
-                KittyTransport::TempFile
-            },
-            tmux: self.graphics.tmux,
+            target,
         };
         let (lock, cv) = &*self.mailbox;
         lock.lock().unwrap_or_else(|e| e.into_inner()).frame = Some(job);

@@ -283,6 +283,66 @@ pub fn reserve_cells(buf: &mut Buffer, area: Rect) {
     }
 }
 
+/// Where and how a frame goes on screen: the protocol, the cells it covers,
+/// the pixels it should have, and the transport details.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageTarget {
+    /// Protocol in use.
+    pub protocol: Protocol,
+    /// Columns and rows covered.
+    pub cells: (u16, u16),
+    /// Full-size pixels (sixel draws 1:1; half blocks are 1 × 2 per cell).
+    pub full: (u32, u32),
+    /// How kitty receives the pixels.
+    pub kitty: KittyTransport,
+    /// Wrap escapes for tmux passthrough.
+    pub tmux: bool,
+}
+
+impl ImageTarget {
+    /// The target for a viewport of `cells` on this terminal.
+    pub fn new(graphics: &TerminalGraphics, cells: (u16, u16)) -> ImageTarget {
+        let full = match graphics.protocol {
+            Protocol::Halfblocks => (cells.0 as u32, 2 * cells.1 as u32),
+            _ => (
+                cells.0 as u32 * graphics.cell_px.0 as u32,
+                cells.1 as u32 * graphics.cell_px.1 as u32,
+            ),
+        };
+        ImageTarget {
+            protocol: graphics.protocol,
+            cells,
+            full,
+            kitty: if graphics.remote {
+                KittyTransport::Zlib
+            } else {
+                KittyTransport::TempFile
+            },
+            tmux: graphics.tmux,
+        }
+    }
+
+    /// Encodes a rendered frame for the terminal (nothing for half blocks,
+    /// which are drawn into the cell buffer).
+    pub fn encode(&self, image: &RgbImage) -> Result<Vec<u8>, String> {
+        let bytes = match self.protocol {
+            Protocol::Halfblocks => return Ok(Vec::new()),
+            Protocol::Kitty => {
+                encode_kitty(image, self.cells, self.kitty).map_err(|e| e.to_string())?
+            }
+            Protocol::Iterm2 => encode_iterm2(image, self.cells)?,
+            Protocol::Sixel => {
+                if (image.width, image.height) != self.full {
+                    encode_sixel(&image.resized(self.full.0, self.full.1))?
+                } else {
+                    encode_sixel(image)?
+                }
+            }
+        };
+        Ok(if self.tmux { tmux_wrap(&bytes) } else { bytes })
+    }
+}
+
 /// Begin and end of synchronized output.
 pub const SYNC_BEGIN: &[u8] = b"\x1b[?2026h";
 /// End of synchronized output.

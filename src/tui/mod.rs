@@ -6,4 +6,5 @@
 pub mod app;
 pub mod graphics;
 pub mod keymap;
+pub mod study;
 pub mod view;

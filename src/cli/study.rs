@@ -1,0 +1,177 @@
+//! `visage study build | run | analyse`: the perceptual study of thesis
+//! §6.2-6.3 from one tool.
+
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Subcommand};
+
+use crate::compose::composition::Attributes;
+use crate::compose::rules::Rules;
+use crate::error::{Error, Result};
+use crate::render::Backend;
+use crate::study::analysis::{analyse, AnalysisOptions};
+use crate::study::design::{build, category_counts, Databases, StudyFolder};
+use crate::study::journal::tally;
+use crate::study::plot::write_plots;
+use crate::study::results::Results;
+use crate::tui::graphics::GraphicsChoice;
+use crate::tui::study::{run_participant, RunOptions};
+
+/// Arguments of `visage study`.
+#[derive(Args, Debug)]
+pub struct StudyArgs {
+    #[command(subcommand)]
+    command: StudyCommand,
+}
+
+#[derive(Subcommand, Debug)]
+enum StudyCommand {
+    /// Build a study folder from a spec (categories of recipes or unedited sources).
+    Build(BuildArgs),
+    /// Run a participant's session in the terminal (resumes where they left off).
+    Run(RunArgs),
+    /// Scores per avatar, category and region, with intervals, table and plots.
+    Analyse(AnalyseArgs),
+}
+
+/// Arguments of `visage study build`.
+#[derive(Args, Debug)]
+struct BuildArgs {
+    /// The study spec (TOML; see studies/builtin/spec.toml).
+    spec: PathBuf,
+    /// Folder to build the study in.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+}
+
+/// Arguments of `visage study run`.
+#[derive(Args, Debug)]
+struct RunArgs {
+    /// A study folder made by `visage study build`.
+    study: PathBuf,
+    /// The participant's ID (letters, digits, '-' or '_'); their answers go
+    /// to STUDY/answers/ID.jsonl.
+    #[arg(long)]
+    participant: String,
+    /// Terminal graphics protocol.
+    #[arg(long, value_enum, default_value_t = GraphicsChoice::Auto)]
+    graphics: GraphicsChoice,
+    /// Renderer: auto (hardware GPU, else CPU), gpu or cpu.
+    #[arg(long, value_parser = Backend::parse, default_value = "auto")]
+    renderer: Backend,
+}
+
+/// Arguments of `visage study analyse`.
+#[derive(Args, Debug)]
+struct AnalyseArgs {
+    /// A study folder, or a results file (such as studies/thesis/results.toml).
+    study: PathBuf,
+    /// Exclusion rules (see studies/thesis/exclusions.toml).
+    #[arg(long, value_name = "RULES")]
+    exclude: Option<PathBuf>,
+    /// Source labels for the rules, on top of the study's own.
+    #[arg(long, value_name = "FILE")]
+    attributes: Option<PathBuf>,
+    /// Print JSON instead of the table.
+    #[arg(long)]
+    json: bool,
+    /// Write authenticity.png and regions.png into this folder.
+    #[arg(long, value_name = "DIR")]
+    plots: Option<PathBuf>,
+    /// Write the tallied per-avatar results (the format a results file has).
+    #[arg(long, value_name = "FILE")]
+    results: Option<PathBuf>,
+    /// Bootstrap resamples per interval.
+    #[arg(long, default_value_t = 10_000)]
+    resamples: usize,
+    /// Seed of the bootstrap.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+/// Runs `visage study …`.
+pub fn run(args: &StudyArgs) -> Result<()> {
+    match &args.command {
+        StudyCommand::Build(a) => run_build(a),
+        StudyCommand::Run(a) => run_session(a),
+        StudyCommand::Analyse(a) => run_analyse(a),
+    }
+}
+
+fn run_build(args: &BuildArgs) -> Result<()> {
+    let study = build(&args.spec, &args.out, &mut Databases::default())?;
+    let counts: Vec<String> = category_counts(&study)
+        .into_iter()
+        .map(|(c, n)| format!("{c} {n}"))
+        .collect();
+    println!(
+        "built {} with {} avatars ({}); run it with: visage study run {} --participant ID",
+        args.out.display(),
+        study.avatars.len(),
+        counts.join(", "),
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn run_session(args: &RunArgs) -> Result<()> {
+    use std::io::IsTerminal;
+    let study = StudyFolder::open(&args.study)?;
+    if !std::io::stdout().is_terminal() || !std::io::stdin().is_terminal() {
+        return Err(Error::input("visage study run needs a terminal"));
+    }
+    let summary = run_participant(RunOptions {
+        study,
+        participant: args.participant.clone(),
+        graphics: args.graphics,
+        renderer: args.renderer,
+    })?;
+    println!("{summary}");
+    Ok(())
+}
+
+/// The results to analyse and the labels that come with them.
+fn load_results(path: &Path) -> Result<(Results, Attributes)> {
+    if path.is_dir() {
+        let study = StudyFolder::open(path)?;
+        let results = tally(&study)?;
+        Ok((results, study.study.attributes))
+    } else {
+        Ok((Results::load(path)?, Attributes::default()))
+    }
+}
+
+fn run_analyse(args: &AnalyseArgs) -> Result<()> {
+    if args.resamples == 0 || args.resamples > 1_000_000 {
+        return Err(Error::input("--resamples must be between 1 and 1000000"));
+    }
+    let (results, mut attributes) = load_results(&args.study)?;
+    if let Some(path) = &args.attributes {
+        attributes = attributes.overlaid(Attributes::load(path)?);
+    }
+    let options = AnalysisOptions {
+        exclude: args.exclude.as_deref().map(Rules::load).transpose()?,
+        attributes,
+        resamples: args.resamples,
+        seed: args.seed,
+    };
+    let analysis = analyse(&results, &options)?;
+    if let Some(path) = &args.results {
+        std::fs::write(path, results.to_toml())
+            .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))?;
+    }
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&analysis).expect("analyses serialise")
+        );
+    } else {
+        print!("{}", analysis.table());
+    }
+    if let Some(dir) = &args.plots {
+        for path in write_plots(&analysis, dir)? {
+            eprintln!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,433 @@
+//! A participant's study session in the terminal (thesis §6.2.3): each
+//! avatar loops its closed-mouth animation at the study's frame rate on an
+//! orbit locked to the study's radius and yaw/pitch limits; the participant
+//! turns it with the arrow keys or the mouse and answers "Is this face
+//! edited?" and, when yes, which parts. Every answer is journalled before the
+//! next avatar shows, so a kill or a dropped SSH connection loses nothing
+//! and the next start resumes. The category is never shown.
+
+use std::io::Write;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc::RecvTimeoutError;
+use std::time::{Duration, Instant};
+
+use crossterm::event::{Event, KeyCode, KeyEvent, KeyEventKind, KeyModifiers, MouseEventKind};
+use ratatui::backend::CrosstermBackend;
+use ratatui::layout::Rect;
+use ratatui::style::{Modifier, Style};
+use ratatui::text::Line;
+use ratatui::widgets::Paragraph;
+use ratatui::{Frame, Terminal};
+
+use super::app::{enter_terminal, spawn_input_reader, terminal_hung_up, Collector};
+use super::graphics::{
+    detect, draw_halfblocks, reserve_cells, GraphicsChoice, ImageTarget, Protocol,
+    TerminalGraphics, SYNC_BEGIN, SYNC_END,
+};
+use crate::compose::composition::StudyGroup;
+use crate::compose::engine::Engine;
+use crate::compose::recipe::Recipe;
+use crate::error::{Error, Result};
+use crate::model::regions::Group;
+use crate::pipeline::workbench::{DebugView, FrameRequest};
+use crate::pipeline::{DatabaseSpec, Workbench};
+use crate::render::image::RgbImage;
+use crate::render::Backend;
+use crate::study::design::{Display, StudyFolder};
+use crate::study::journal::{journal_path, Answer, Journal};
+
+/// Options of `visage study run`.
+pub struct RunOptions {
+    /// The study.
+    pub study: StudyFolder,
+    /// The participant's ID.
+    pub participant: String,
+    /// Graphics protocol choice.
+    pub graphics: GraphicsChoice,
+    /// Renderer.
+    pub renderer: Backend,
+}
+
+/// Degrees one arrow key turns the head.
+const KEY_STEP_DEG: f32 = 5.0;
+/// Degrees one cell of mouse drag turns the head.
+const DRAG_DEG_PER_CELL: f32 = 1.5;
+
+/// Where the participant is in answering the current avatar.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Stage {
+    /// Looking; y or n answers.
+    Looking,
+    /// Said "edited"; choosing the parts.
+    Choosing([bool; 4]),
+}
+
+/// One avatar on screen.
+struct Showing {
+    id: u32,
+    position: usize,
+    recipe: Recipe,
+    bench: usize,
+    since: Instant,
+    yaw: f32,
+    pitch: f32,
+    stage: Stage,
+    hint: String,
+}
+
+/// Runs the participant's session; returns a summary line for the shell.
+pub fn run_participant(options: RunOptions) -> Result<String> {
+    let RunOptions {
+        study,
+        participant,
+        graphics,
+        renderer,
+    } = options;
+    let mut journal = Journal::open(&study, &participant)?;
+    let order = study.order(&participant);
+    let total = order.len();
+    let todo: Vec<u32> = order
+        .iter()
+        .copied()
+        .filter(|id| !journal.answered(*id))
+        .collect();
+    let path = journal_path(&study, &participant);
+    if todo.is_empty() {
+        return Ok(format!(
+            "participant {participant} has answered all {total} avatars ({})",
+            path.display()
+        ));
+    }
+    let mut benches: Vec<(DatabaseSpec, Workbench)> = Vec::new();
+    for c in &study.study.categories {
+        let spec = c.database.spec();
+        if benches.iter().all(|(s, _)| *s != spec) {
+            eprintln!("visage: opening the {} database…", spec.db);
+            let (db, _) = spec.load()?;
+            benches.push((spec.clone(), Workbench::new(Engine::new(db)?, renderer)?));
+        }
+    }
+    let graphics = detect(graphics);
+    let kitty = graphics.protocol == Protocol::Kitty;
+    let (_guard, stop) = enter_terminal(kitty)?;
+    let mut session = Session {
+        study: &study,
+        graphics,
+        benches,
+        total,
+        done: total - todo.len(),
+    };
+    let finished = session.run(&todo, &mut journal, &stop)?;
+    Ok(if finished {
+        format!(
+            "thank you: participant {participant} answered all {total} avatars ({})",
+            path.display()
+        )
+    } else {
+        format!(
+            "stopped: participant {participant} answered {} of {total}; run the same command to go on ({})",
+            journal.answers.len(),
+            path.display()
+        )
+    })
+}
+
+struct Session<'a> {
+    study: &'a StudyFolder,
+    graphics: TerminalGraphics,
+    benches: Vec<(DatabaseSpec, Workbench)>,
+    total: usize,
+    done: usize,
+}
+
+impl Session<'_> {
+    /// Shows the avatars in order; true when all were answered.
+    fn run(
+        &mut self,
+        todo: &[u32],
+        journal: &mut Journal,
+        stop: &std::sync::atomic::AtomicBool,
+    ) -> Result<bool> {
+        let collector = Collector::default();
+        let mut term = Terminal::new(CrosstermBackend::new(collector.clone()))
+            .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
+        let input = spawn_input_reader();
+        for &id in todo {
+            let mut showing = self.show(id)?;
+            let mut drag_from: Option<(f32, f32)> = None;
+            loop {
+                if stop.load(Ordering::Relaxed) || terminal_hung_up() {
+                    return Ok(false);
+                }
+                let mut answered = None;
+                loop {
+                    match input.recv_timeout(Duration::from_millis(1)) {
+                        Ok(Event::Key(k)) if k.kind != KeyEventKind::Release => {
+                            match on_key(&mut showing, k, &self.study.study.display) {
+                                KeyOutcome::Quit => return Ok(false),
+                                KeyOutcome::Answer(a) => answered = Some(a),
+                                KeyOutcome::Nothing => {}
+                            }
+                        }
+                        Ok(Event::Mouse(m)) => {
+                            let at = (m.column as f32, m.row as f32);
+                            match m.kind {
+                                MouseEventKind::Down(_) => drag_from = Some(at),
+                                MouseEventKind::Up(_) => drag_from = None,
+                                MouseEventKind::Drag(_) => {
+                                    let from = drag_from.replace(at).unwrap_or(at);
+                                    turn(
+                                        &mut showing,
+                                        &self.study.study.display,
+                                        -DRAG_DEG_PER_CELL * (at.0 - from.0),
+                                        DRAG_DEG_PER_CELL * 2.0 * (at.1 - from.1),
+                                    );
+                                }
+                                _ => {}
+                            }
+                        }
+                        Ok(Event::Resize(..)) => {
+                            let _ = term.clear();
+                        }
+                        Ok(_) => {}
+                        Err(RecvTimeoutError::Timeout) => break,
+                        Err(RecvTimeoutError::Disconnected) => return Ok(false),
+                    }
+                    if answered.is_some() {
+                        break;
+                    }
+                }
+                if let Some(answer) = answered {
+                    journal.record(answer)?;
+                    self.done += 1;
+                    break;
+                }
+                self.present(&mut term, &collector, &showing)?;
+            }
+        }
+        Ok(true)
+    }
+
+    /// Puts an avatar on screen, facing the participant.
+    fn show(&mut self, id: u32) -> Result<Showing> {
+        let avatar = self
+            .study
+            .avatar(id)
+            .ok_or_else(|| Error::input(format!("the study has no avatar {id}")))?;
+        let recipe = self.study.recipe(avatar)?;
+        let spec = self.study.category(avatar).database.spec();
+        let bench = self
+            .benches
+            .iter()
+            .position(|(s, _)| *s == spec)
+            .expect("every category's database was opened");
+        Ok(Showing {
+            id,
+            position: self.done + 1,
+            recipe,
+            bench,
+            since: Instant::now(),
+            yaw: 0.0,
+            pitch: 0.0,
+            stage: Stage::Looking,
+            hint: String::new(),
+        })
+    }
+
+    /// Renders the current frame of the loop and draws the screen.
+    fn present(
+        &mut self,
+        term: &mut Terminal<CrosstermBackend<Collector>>,
+        collector: &Collector,
+        showing: &Showing,
+    ) -> Result<()> {
+        let size = term
+            .size()
+            .map_err(|e| Error::terminal(format!("cannot read the terminal size: {e}")))?;
+        let area = Rect::new(0, 0, size.width, size.height);
+        let viewport = Rect::new(0, 1, area.width, area.height.saturating_sub(4));
+        let target = ImageTarget::new(&self.graphics, (viewport.width, viewport.height));
+        let image = if viewport.width >= 4 && viewport.height >= 2 {
+            Some(self.render(showing, target.full)?)
+        } else {
+            None
+        };
+        let title = &self.study.study.title;
+        let protocol = self.graphics.protocol;
+        term.draw(|f| {
+            draw(
+                f,
+                viewport,
+                showing,
+                title,
+                self.total,
+                protocol,
+                image.as_ref(),
+            )
+        })
+        .map_err(|e| Error::terminal(format!("cannot draw: {e}")))?;
+        let mut out = SYNC_BEGIN.to_vec();
+        out.extend(collector.take());
+        if let Some(image) = &image {
+            let encoded = target.encode(image).map_err(Error::terminal)?;
+            if !encoded.is_empty() {
+                out.extend_from_slice(
+                    format!("\x1b7\x1b[{};{}H", viewport.y + 1, viewport.x + 1).as_bytes(),
+                );
+                out.extend_from_slice(&encoded);
+                out.extend_from_slice(b"\x1b8");
+            }
+        }
+        out.extend_from_slice(SYNC_END);
+        let mut stdout = std::io::stdout().lock();
+        stdout
+            .write_all(&out)
+            .and_then(|_| stdout.flush())
+            .map_err(|e| Error::terminal(format!("cannot write to the terminal: {e}")))
+    }
+
+    /// The frame of the loop the clock has reached, seen from the orbit.
+    fn render(&mut self, showing: &Showing, full: (u32, u32)) -> Result<RgbImage> {
+        let display = &self.study.study.display;
+        let mut recipe = showing.recipe.clone();
+        let elapsed = showing.since.elapsed().as_secs_f64();
+        recipe.animation.frame = (elapsed * display.fps) as usize;
+        recipe.camera.yaw_deg = showing.yaw;
+        recipe.camera.pitch_deg = showing.pitch;
+        recipe.camera.radius = display.radius;
+        let request = FrameRequest {
+            recipe,
+            debug: DebugView::default(),
+            group: Group::Face,
+            width: full.0.max(8),
+            height: full.1.max(8),
+            exact: true,
+        };
+        Ok(self.benches[showing.bench].1.render(&request)?.image)
+    }
+}
+
+/// What a key did.
+enum KeyOutcome {
+    Nothing,
+    Quit,
+    Answer(Answer),
+}
+
+fn turn(showing: &mut Showing, display: &Display, yaw: f32, pitch: f32) {
+    (showing.yaw, showing.pitch) = display.clamp(showing.yaw + yaw, showing.pitch + pitch);
+}
+
+fn on_key(showing: &mut Showing, key: KeyEvent, display: &Display) -> KeyOutcome {
+    let ctrl_c = key.code == KeyCode::Char('c') && key.modifiers.contains(KeyModifiers::CONTROL);
+    if ctrl_c || key.code == KeyCode::Char('q') {
+        return KeyOutcome::Quit;
+    }
+    match key.code {
+        KeyCode::Left | KeyCode::Char('h') => turn(showing, display, -KEY_STEP_DEG, 0.0),
+        KeyCode::Right | KeyCode::Char('l') => turn(showing, display, KEY_STEP_DEG, 0.0),
+        KeyCode::Up | KeyCode::Char('k') => turn(showing, display, 0.0, KEY_STEP_DEG),
+        KeyCode::Down | KeyCode::Char('j') => turn(showing, display, 0.0, -KEY_STEP_DEG),
+        _ => {}
+    }
+    let answer = |showing: &Showing, regions: Vec<StudyGroup>| {
+        KeyOutcome::Answer(Answer {
+            avatar: showing.id,
+            edited: !regions.is_empty(),
+            regions,
+            seconds: showing.since.elapsed().as_secs_f64(),
+            yaw_deg: showing.yaw,
+            pitch_deg: showing.pitch,
+        })
+    };
+    match (showing.stage, key.code) {
+        (Stage::Looking, KeyCode::Char('n' | 'N')) => answer(showing, Vec::new()),
+        (Stage::Looking, KeyCode::Char('y' | 'Y')) => {
+            showing.stage = Stage::Choosing([false; 4]);
+            showing.hint.clear();
+            KeyOutcome::Nothing
+        }
+        (Stage::Choosing(mut picked), KeyCode::Char(c @ '1'..='4')) => {
+            let i = c as usize - '1' as usize;
+            picked[i] = !picked[i];
+            showing.stage = Stage::Choosing(picked);
+            KeyOutcome::Nothing
+        }
+        (Stage::Choosing(_), KeyCode::Esc) => {
+            showing.stage = Stage::Looking;
+            KeyOutcome::Nothing
+        }
+        (Stage::Choosing(picked), KeyCode::Enter) => {
+            let regions: Vec<StudyGroup> = StudyGroup::EDITABLE
+                .into_iter()
+                .zip(picked)
+                .filter_map(|(g, on)| on.then_some(g))
+                .collect();
+            if regions.is_empty() {
+                showing.hint = "choose at least one part (or Esc to go back)".into();
+                KeyOutcome::Nothing
+            } else {
+                answer(showing, regions)
+            }
+        }
+        _ => KeyOutcome::Nothing,
+    }
+}
+
+fn draw(
+    f: &mut Frame,
+    viewport: Rect,
+    showing: &Showing,
+    title: &str,
+    total: usize,
+    protocol: Protocol,
+    image: Option<&RgbImage>,
+) {
+    let area = f.area();
+    let bold = Style::default().add_modifier(Modifier::BOLD);
+    let heading = format!("{title}  -  avatar {} of {total}", showing.position);
+    f.render_widget(
+        Paragraph::new(Line::styled(heading, bold)),
+        Rect::new(0, 0, area.width, 1),
+    );
+    if let Some(image) = image {
+        if protocol == Protocol::Halfblocks {
+            draw_halfblocks(f.buffer_mut(), viewport, image);
+        } else {
+            reserve_cells(f.buffer_mut(), viewport);
+        }
+    }
+    let (question, keys) = match showing.stage {
+        Stage::Looking => (
+            "Is this face edited?   y = yes   n = no".to_string(),
+            "arrows or mouse drag: turn the head   q: stop (answers are saved)".to_string(),
+        ),
+        Stage::Choosing(picked) => {
+            let boxes: Vec<String> = StudyGroup::EDITABLE
+                .iter()
+                .zip(picked)
+                .enumerate()
+                .map(|(i, (g, on))| {
+                    format!("{} [{}] {}", i + 1, if on { 'x' } else { ' ' }, g.label())
+                })
+                .collect();
+            (
+                format!("Which parts look edited?   {}", boxes.join("   ")),
+                if showing.hint.is_empty() {
+                    "1-4: toggle   Enter: confirm   Esc: back".to_string()
+                } else {
+                    showing.hint.clone()
+                },
+            )
+        }
+    };
+    let bottom = area.height.saturating_sub(2);
+    f.render_widget(
+        Paragraph::new(Line::styled(question, bold)),
+        Rect::new(0, bottom, area.width, 1),
+    );
+    f.render_widget(
+        Paragraph::new(Line::raw(keys)),
+        Rect::new(0, bottom + 1, area.width, 1),
+    );
+}
