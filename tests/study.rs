@@ -86,3 +86,298 @@ fn thesis_exclusion_rules_give_appendix_c() {
     assert!(differ.is_empty(), "{}", differ.join("\n"));
     assert_eq!(excluded, 30);
 }
+
+mod common;
+
+use common::tmux::{wait_file, Tmux};
+use common::visage;
+use std::time::Duration;
+use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
+use visage::compose::composition::Composition;
+use visage::compose::recipe::Recipe;
+use visage::compose::rules::Context;
+
+fn temp(name: &str) -> std::path::PathBuf {
+    let path = common::temp_path("study", name);
+    std::fs::remove_dir_all(&path).ok();
+    path
+}
+
+fn stdout(out: &std::process::Output) -> String {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn files(dir: &Path) -> Vec<(String, String)> {
+    let mut list: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .map(|p| {
+            (
+                p.file_name().unwrap().to_string_lossy().into_owned(),
+                std::fs::read_to_string(&p).unwrap(),
+            )
+        })
+        .collect();
+    list.sort();
+    list
+}
+
+/// The README's command remakes the committed study recipes exactly, and
+/// every composite meets the built-in constraints.
+#[test]
+fn random_composites_repeat_from_their_seed_and_meet_the_constraints() {
+    let out = temp("random");
+    stdout(&visage(&[
+        "random",
+        "--constraints",
+        "studies/builtin/constraints.toml",
+        "--count",
+        "10",
+        "--seed",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    let committed = files(Path::new("studies/builtin/random"));
+    assert_eq!(files(&out), committed);
+    assert_eq!(committed.len(), 10);
+
+    let db = builtin_database(
+        visage::model::builtin::build_head(),
+        SyntheticOptions {
+            seed: 1,
+            sources: 14,
+            gaussians_per_avatar: 200,
+        },
+    )
+    .unwrap();
+    let labels = Attributes::of_database(&db);
+    let rules = Rules::load(Path::new("studies/builtin/constraints.toml")).unwrap();
+    for (name, text) in &committed {
+        let recipe = Recipe::from_toml(text).unwrap();
+        recipe.resolve(&db).unwrap();
+        let c = Composition::of_recipe(&recipe);
+        assert!(c.is_composite(), "{name}");
+        assert_eq!(
+            c.gaussian_sources().len().max(2),
+            c.gaussian_sources().len()
+        );
+        let broken = rules.broken(&c, Context::default(), &labels).unwrap();
+        assert!(broken.is_empty(), "{name}: {broken:?}");
+    }
+
+    // Another seed draws other composites.
+    let other = temp("random-other");
+    stdout(&visage(&[
+        "random",
+        "--count",
+        "10",
+        "--seed",
+        "2",
+        "--out",
+        other.to_str().unwrap(),
+    ]));
+    assert_ne!(files(&other), committed);
+}
+
+#[test]
+fn bad_study_input_fails_with_one_line_and_exit_2() {
+    let out = temp("bad");
+    let o = out.to_str().unwrap();
+    let bad_rules = temp("bad-rules.toml");
+    std::fs::write(&bad_rules, "[[rule]]\nreason = \"x\"\n").unwrap();
+    let cases: Vec<Vec<&str>> = vec![
+        vec!["random", "--sources", "ada,bram", "--out", o],
+        vec!["random", "--sources", "ada,bram,zed", "--out", o],
+        vec!["random", "--groups", "nhe", "--out", o],
+        vec![
+            "random",
+            "--constraints",
+            bad_rules.to_str().unwrap(),
+            "--out",
+            o,
+        ],
+        vec!["study", "build", "studies/thesis/results.toml", "--out", o],
+        vec!["study", "run", "studies", "--participant", "x"],
+        vec!["study", "analyse", "studies/nothing.toml"],
+        vec![
+            "study",
+            "analyse",
+            "studies/thesis/results.toml",
+            "--exclude",
+            "studies/thesis/attributes.toml",
+        ],
+    ];
+    for args in cases {
+        let out = visage(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+    }
+    // Rules that need a label the study lacks name it.
+    let out = visage(&[
+        "study",
+        "analyse",
+        "studies/thesis/results.toml",
+        "--exclude",
+        "studies/thesis/exclusions.toml",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("attribute"));
+}
+
+/// `study analyse` from the command line: JSON with the thesis's numbers
+/// and the two plots.
+#[test]
+fn analyse_prints_json_and_writes_plots() {
+    let plots = temp("plots");
+    let out = stdout(&visage(&[
+        "study",
+        "analyse",
+        "studies/thesis/results.toml",
+        "--attributes",
+        "studies/thesis/attributes.toml",
+        "--exclude",
+        "studies/thesis/exclusions.toml",
+        "--json",
+        "--resamples",
+        "2000",
+        "--plots",
+        plots.to_str().unwrap(),
+    ]));
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let smooth = &json["categories"][4];
+    assert_eq!(smooth["category"], "edit_filling_smooth");
+    assert_eq!(rounded(smooth["kept"]["mean"].as_f64().unwrap()), 0.43);
+    assert_eq!(json["avatars"].as_array().unwrap().len(), 59);
+    for name in ["authenticity.png", "regions.png"] {
+        let img = image::open(plots.join(name)).unwrap().to_rgb8();
+        assert!(img.width() >= 1000, "{name}");
+        // Not blank: the bars put colour on the white canvas.
+        let coloured = img.pixels().filter(|p| p.0 != [255, 255, 255]).count();
+        assert!(coloured > 10_000, "{name}: {coloured}");
+    }
+}
+
+/// The end-to-end run: build the built-in study (10 random
+/// composites, 4 unedited sources), two participants answer in tmux — the
+/// first is killed halfway and resumes — and the analysis counts both.
+#[test]
+fn two_participants_run_the_study_in_tmux_and_survive_a_kill() {
+    let dir = temp("e2e");
+    let d = dir.to_str().unwrap();
+    stdout(&visage(&[
+        "study",
+        "build",
+        "studies/builtin/spec.toml",
+        "--out",
+        d,
+    ]));
+    let long = Duration::from_secs(90);
+    let run = |tmux: &Tmux, who: &str, status: &Path| {
+        std::fs::remove_file(status).ok();
+        tmux.start(&format!(
+            "{} study run {d} --participant {who} --graphics halfblocks --renderer cpu 2>/dev/null; echo EXIT=$? > {}; sleep 60",
+            env!("CARGO_BIN_EXE_visage"),
+            status.display()
+        ));
+    };
+    let at = |k: usize| format!("avatar {k} of 14");
+
+    // Alice says "not edited" to five avatars, then her terminal dies.
+    let alice = Tmux::new("study-alice");
+    let status = common::temp_path("study", "alice-status");
+    run(&alice, "alice", &status);
+    for k in 1..=5 {
+        alice.wait_for(&at(k), long, |s| {
+            s.contains(&at(k)) && s.contains("y = yes")
+        });
+        alice.keys(&["n"]);
+    }
+    alice.wait_for(&at(6), long, |s| s.contains(&at(6)));
+    let journal = dir.join("answers/alice.jsonl");
+    assert_eq!(
+        std::fs::read_to_string(&journal).unwrap().lines().count(),
+        6
+    );
+    std::process::Command::new("pkill")
+        .args(["-9", "-f", "participant alice"])
+        .status()
+        .unwrap();
+    drop(alice);
+
+    // She starts again and goes on from the sixth.
+    let alice = Tmux::new("study-alice-again");
+    run(&alice, "alice", &status);
+    for k in 6..=14 {
+        alice.wait_for(&at(k), long, |s| {
+            s.contains(&at(k)) && s.contains("y = yes")
+        });
+        alice.keys(&["n"]);
+    }
+    let s = wait_file(&status, long);
+    assert_eq!(s.trim(), "EXIT=0", "{}", alice.screen());
+
+    // Bob finds every face edited, around the eyes.
+    let bob = Tmux::new("study-bob");
+    let bob_status = common::temp_path("study", "bob-status");
+    run(&bob, "bob", &bob_status);
+    for k in 1..=14 {
+        bob.wait_for(&at(k), long, |s| {
+            s.contains(&at(k)) && s.contains("y = yes")
+        });
+        bob.keys(&["y"]);
+        bob.wait_for("the parts", long, |s| s.contains("Which parts"));
+        bob.keys(&["1", "Enter"]);
+    }
+    assert_eq!(wait_file(&bob_status, long).trim(), "EXIT=0");
+
+    let answers = |who: &str| -> Vec<u64> {
+        std::fs::read_to_string(dir.join(format!("answers/{who}.jsonl")))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| {
+                serde_json::from_str::<serde_json::Value>(l).unwrap()["avatar"]
+                    .as_u64()
+                    .unwrap()
+            })
+            .collect()
+    };
+    let (a, b) = (answers("alice"), answers("bob"));
+    assert_eq!(a.len(), 14, "each avatar once, the kill lost nothing");
+    let mut sorted = a.clone();
+    sorted.sort();
+    assert_eq!(sorted, (1..=14).collect::<Vec<u64>>());
+    assert_ne!(a, b, "each participant has their own order");
+
+    let json: serde_json::Value = serde_json::from_str(&stdout(&visage(&[
+        "study",
+        "analyse",
+        d,
+        "--json",
+        "--resamples",
+        "500",
+    ])))
+    .unwrap();
+    for avatar in json["avatars"].as_array().unwrap() {
+        assert_eq!(avatar["answers"], 2, "{avatar}");
+        assert_eq!(avatar["authenticity"], 0.5, "{avatar}");
+    }
+    for c in json["categories"].as_array().unwrap() {
+        assert_eq!(c["all"]["mean"], 0.5, "{c}");
+    }
+    let eyes_unedited = json["regions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["category"] == "unedited" && r["group"] == "eyes")
+        .unwrap();
+    assert_eq!(eyes_unedited["unedited"]["mean"], 0.5);
+}

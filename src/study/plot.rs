@@ -220,11 +220,7 @@ fn regions_chart(area: &Area, analysis: &Analysis) -> DrawResult {
 
 /// Bars in groups along x, each with its interval as a whisker; a missing
 /// estimate leaves a gap.
-fn grouped_bars(
-    area: &Area,
-    title: &str,
-    groups: &[BarGroup],
-) -> DrawResult {
+fn grouped_bars(area: &Area, title: &str, groups: &[BarGroup]) -> DrawResult {
     let names: Vec<String> = groups.iter().map(|g| g.0.clone()).collect();
     let count = groups.len().max(1);
     let mut chart = ChartBuilder::on(area)
