@@ -164,10 +164,7 @@ fn random_composites_repeat_from_their_seed_and_meet_the_constraints() {
         recipe.resolve(&db).unwrap();
         let c = Composition::of_recipe(&recipe);
         assert!(c.is_composite(), "{name}");
-        assert_eq!(
-            c.gaussian_sources().len().max(2),
-            c.gaussian_sources().len()
-        );
+        assert!(c.gaussian_sources().len() >= 2, "{name}");
         let broken = rules.broken(&c, Context::default(), &labels).unwrap();
         assert!(broken.is_empty(), "{name}: {broken:?}");
     }
@@ -380,4 +377,65 @@ fn two_participants_run_the_study_in_tmux_and_survive_a_kill() {
         .find(|r| r["category"] == "unedited" && r["group"] == "eyes")
         .unwrap();
     assert_eq!(eyes_unedited["unedited"]["mean"], 0.5);
+}
+
+/// Labels from a GaussianAvatars folder's `attributes.toml` drive the
+/// constraints: with one source labelled dark and "one skin tone" required,
+/// its Gaussians never appear (it may still lend shape).
+#[test]
+fn avatar_folder_attributes_constrain_random_composites() {
+    let dir = temp("fixtures");
+    let d = dir.to_str().unwrap();
+    stdout(&visage(&["fixtures", d, "--gaussians-per-avatar", "300"]));
+    for (name, tone) in [("ada", "light"), ("bram", "light"), ("cleo", "dark")] {
+        std::fs::write(
+            dir.join("avatars").join(name).join("attributes.toml"),
+            format!("skin_tone = \"{tone}\"\n"),
+        )
+        .unwrap();
+    }
+    let rules = temp("one-tone.toml");
+    std::fs::write(
+        &rules,
+        "[[rule]]\nreason = \"Skin tone\"\nsame = \"skin_tone\"\n",
+    )
+    .unwrap();
+    let out = temp("folder-random");
+    let flame = dir.join("flame/model.pkl");
+    let masks = dir.join("flame/masks.pkl");
+    let listing = stdout(&visage(&[
+        "random",
+        "--db",
+        dir.join("avatars").to_str().unwrap(),
+        "--flame",
+        flame.to_str().unwrap(),
+        "--masks",
+        masks.to_str().unwrap(),
+        "--constraints",
+        rules.to_str().unwrap(),
+        "--count",
+        "6",
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    assert_eq!(listing.lines().count(), 6);
+    for (name, text) in files(&out) {
+        let c = Composition::of_recipe(&Recipe::from_toml(&text).unwrap());
+        assert!(!c.gaussian_sources().contains(&"cleo"), "{name}: {c:?}");
+    }
+    // A bad label file is one line and exit 2.
+    std::fs::write(dir.join("avatars/cleo/attributes.toml"), "skin_tone = 3\n").unwrap();
+    let bad = visage(&[
+        "random",
+        "--db",
+        dir.join("avatars").to_str().unwrap(),
+        "--flame",
+        flame.to_str().unwrap(),
+        "--masks",
+        masks.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("attributes.toml"));
 }

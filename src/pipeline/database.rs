@@ -13,8 +13,10 @@ use crate::model::builtin::build_head;
 /// Most Gaussians per built-in avatar accepted (bounds memory: ~240 bytes each).
 pub const MAX_GAUSSIANS_PER_AVATAR: usize = 2_000_000;
 
-/// A database to open.
-#[derive(Debug, Clone, PartialEq)]
+/// A database to open (also as a study names it in `study.toml`; fields left
+/// out take the defaults).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct DatabaseSpec {
     /// `builtin` or a folder of GaussianAvatars avatars.
     pub db: String,
@@ -25,8 +27,10 @@ pub struct DatabaseSpec {
     /// Number of built-in sources.
     pub source_count: usize,
     /// FLAME model for a folder database.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub flame: Option<PathBuf>,
     /// FLAME masks for a folder database.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub masks: Option<PathBuf>,
 }
 

@@ -103,72 +103,19 @@ impl Display {
     }
 }
 
-/// A database as a study names it (the built-in one unless `db` names a folder).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct StudyDatabase {
-    /// `builtin` or a folder of GaussianAvatars avatars.
-    pub db: String,
-    /// Seed of the built-in database.
-    pub seed: u64,
-    /// Gaussians per built-in avatar.
-    pub gaussians_per_avatar: usize,
-    /// Number of built-in sources.
-    pub source_count: usize,
-    /// FLAME model for a folder database.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub flame: Option<PathBuf>,
-    /// FLAME masks for a folder database.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub masks: Option<PathBuf>,
-}
-
-impl Default for StudyDatabase {
-    fn default() -> Self {
-        Self::from(&DatabaseSpec::default())
-    }
-}
-
-impl From<&DatabaseSpec> for StudyDatabase {
-    fn from(s: &DatabaseSpec) -> Self {
-        Self {
-            db: s.db.clone(),
-            seed: s.seed,
-            gaussians_per_avatar: s.gaussians_per_avatar,
-            source_count: s.source_count,
-            flame: s.flame.clone(),
-            masks: s.masks.clone(),
-        }
-    }
-}
-
-impl StudyDatabase {
-    /// The pipeline's description of this database.
-    pub fn spec(&self) -> DatabaseSpec {
-        DatabaseSpec {
-            db: self.db.clone(),
-            seed: self.seed,
-            gaussians_per_avatar: self.gaussians_per_avatar,
-            source_count: self.source_count,
-            flame: self.flame.clone(),
-            masks: self.masks.clone(),
-        }
-    }
-
-    /// Paths made absolute against `dir` (the spec's folder), so the built
-    /// study opens from anywhere.
-    fn anchored(&self, dir: &Path) -> StudyDatabase {
-        let anchor = |p: &Path| std::path::absolute(dir.join(p)).unwrap_or_else(|_| dir.join(p));
-        StudyDatabase {
-            db: if self.db == "builtin" {
-                self.db.clone()
-            } else {
-                anchor(Path::new(&self.db)).display().to_string()
-            },
-            flame: self.flame.as_deref().map(anchor),
-            masks: self.masks.as_deref().map(anchor),
-            ..self.clone()
-        }
+/// The database with its paths made absolute against `dir` (the spec's
+/// folder), so the built study opens from anywhere.
+fn anchored(db: &DatabaseSpec, dir: &Path) -> DatabaseSpec {
+    let anchor = |p: &Path| std::path::absolute(dir.join(p)).unwrap_or_else(|_| dir.join(p));
+    DatabaseSpec {
+        db: if db.db == "builtin" {
+            db.db.clone()
+        } else {
+            anchor(Path::new(&db.db)).display().to_string()
+        },
+        flame: db.flame.as_deref().map(anchor),
+        masks: db.masks.as_deref().map(anchor),
+        ..db.clone()
     }
 }
 
@@ -177,7 +124,7 @@ impl StudyDatabase {
 struct CategorySpec {
     name: String,
     #[serde(default)]
-    database: StudyDatabase,
+    database: DatabaseSpec,
     #[serde(default)]
     post: PostProcess,
     #[serde(default)]
@@ -210,7 +157,7 @@ pub struct Category {
     /// Its name (never shown to participants).
     pub name: String,
     /// The database its avatars come from.
-    pub database: StudyDatabase,
+    pub database: DatabaseSpec,
     /// Post-processing applied to every avatar in it.
     pub post: PostProcess,
 }
@@ -409,8 +356,8 @@ pub fn build(spec_path: &Path, out: &Path, databases: &mut Databases) -> Result<
                 crate::text::printable(&c.name)
             )));
         }
-        let database = c.database.anchored(base_dir);
-        let db = database.spec();
+        let database = anchored(&c.database, base_dir);
+        let db = database.clone();
         let labels = Attributes::of_database(databases.get(&db)?);
         study.attributes = std::mem::take(&mut study.attributes).overlaid(labels);
         let mut list: Vec<Recipe> = c.unedited.iter().map(|s| Recipe::unedited(s)).collect();

@@ -18,8 +18,8 @@ use ratatui::backend::CrosstermBackend;
 use ratatui::Terminal;
 
 use super::graphics::{
-    detect, kitty_delete, GraphicsChoice, ImageTarget, Protocol, TerminalGraphics, SYNC_BEGIN,
-    SYNC_END,
+    detect, kitty_delete, place_image, GraphicsChoice, ImageTarget, Protocol, TerminalGraphics,
+    SYNC_BEGIN, SYNC_END,
 };
 use super::keymap::Keymap;
 use super::view::{draw, layout, InfoPanel, ViewModel};
@@ -680,10 +680,8 @@ impl App {
                     if self.graphics.protocol == Protocol::Kitty {
                         out.extend_from_slice(&kitty_delete());
                     }
-                } else if !self.encoded.is_empty() {
-                    out.extend_from_slice(format!("\x1b7\x1b[{};{}H", v.y + 1, v.x + 1).as_bytes());
-                    out.extend_from_slice(&self.encoded);
-                    out.extend_from_slice(b"\x1b8");
+                } else {
+                    place_image(&mut out, v, &self.encoded);
                 }
             }
         }
@@ -692,12 +690,17 @@ impl App {
             return Ok(()); // nothing changed on screen
         }
         out.extend_from_slice(SYNC_END);
-        let mut stdout = std::io::stdout().lock();
-        stdout
-            .write_all(&out)
-            .and_then(|_| stdout.flush())
-            .map_err(|e| Error::terminal(format!("cannot write to the terminal: {e}")))
+        write_to_terminal(&out)
     }
+}
+
+/// Writes a frame's bytes to the terminal in one write.
+pub(super) fn write_to_terminal(bytes: &[u8]) -> Result<()> {
+    let mut stdout = std::io::stdout().lock();
+    stdout
+        .write_all(bytes)
+        .and_then(|_| stdout.flush())
+        .map_err(|e| Error::terminal(format!("cannot write to the terminal: {e}")))
 }
 
 #[cfg(test)]

@@ -343,6 +343,17 @@ impl ImageTarget {
     }
 }
 
+/// Appends an encoded image placed at the viewport's top-left cell, with the
+/// cursor saved and restored around it (nothing when there is no image).
+pub fn place_image(out: &mut Vec<u8>, viewport: Rect, encoded: &[u8]) {
+    if encoded.is_empty() {
+        return;
+    }
+    out.extend_from_slice(format!("\x1b7\x1b[{};{}H", viewport.y + 1, viewport.x + 1).as_bytes());
+    out.extend_from_slice(encoded);
+    out.extend_from_slice(b"\x1b8");
+}
+
 /// Begin and end of synchronized output.
 pub const SYNC_BEGIN: &[u8] = b"\x1b[?2026h";
 /// End of synchronized output.

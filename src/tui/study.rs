@@ -6,7 +6,6 @@
 //! next avatar shows, so a kill or a dropped SSH connection loses nothing
 //! and the next start resumes. The category is never shown.
 
-use std::io::Write;
 use std::sync::atomic::Ordering;
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
@@ -19,9 +18,11 @@ use ratatui::text::Line;
 use ratatui::widgets::Paragraph;
 use ratatui::{Frame, Terminal};
 
-use super::app::{enter_terminal, spawn_input_reader, terminal_hung_up, Collector};
+use super::app::{
+    enter_terminal, spawn_input_reader, terminal_hung_up, write_to_terminal, Collector,
+};
 use super::graphics::{
-    detect, draw_halfblocks, reserve_cells, GraphicsChoice, ImageTarget, Protocol,
+    detect, draw_halfblocks, place_image, reserve_cells, GraphicsChoice, ImageTarget, Protocol,
     TerminalGraphics, SYNC_BEGIN, SYNC_END,
 };
 use crate::compose::composition::StudyGroup;
@@ -100,7 +101,7 @@ pub fn run_participant(options: RunOptions) -> Result<String> {
     }
     let mut benches: Vec<(DatabaseSpec, Workbench)> = Vec::new();
     for c in &study.study.categories {
-        let spec = c.database.spec();
+        let spec = c.database.clone();
         if benches.iter().all(|(s, _)| *s != spec) {
             eprintln!("visage: opening the {} database…", spec.db);
             let (db, _) = spec.load()?;
@@ -215,7 +216,7 @@ impl Session<'_> {
             .avatar(id)
             .ok_or_else(|| Error::input(format!("the study has no avatar {id}")))?;
         let recipe = self.study.recipe(avatar)?;
-        let spec = self.study.category(avatar).database.spec();
+        let spec = self.study.category(avatar).database.clone();
         let bench = self
             .benches
             .iter()
@@ -270,20 +271,10 @@ impl Session<'_> {
         out.extend(collector.take());
         if let Some(image) = &image {
             let encoded = target.encode(image).map_err(Error::terminal)?;
-            if !encoded.is_empty() {
-                out.extend_from_slice(
-                    format!("\x1b7\x1b[{};{}H", viewport.y + 1, viewport.x + 1).as_bytes(),
-                );
-                out.extend_from_slice(&encoded);
-                out.extend_from_slice(b"\x1b8");
-            }
+            place_image(&mut out, viewport, &encoded);
         }
         out.extend_from_slice(SYNC_END);
-        let mut stdout = std::io::stdout().lock();
-        stdout
-            .write_all(&out)
-            .and_then(|_| stdout.flush())
-            .map_err(|e| Error::terminal(format!("cannot write to the terminal: {e}")))
+        write_to_terminal(&out)
     }
 
     /// The frame of the loop the clock has reached, seen from the orbit.
