@@ -272,3 +272,110 @@ fn xterm_vt340_shows_the_rendered_view_as_sixel() {
         dir.display()
     );
 }
+
+/// A participant's session in a sixel terminal: the avatar shows as a
+/// picture in the viewport, and when the terminal is killed (a dropped
+/// connection) the session ends with its journal on disk.
+#[test]
+fn xterm_vt340_runs_a_study_session_as_sixel() {
+    for (tool, package) in [("Xvfb", "xvfb"), ("xterm", "xterm"), ("xwd", "x11-apps")] {
+        require(tool, package);
+    }
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("xterm-study");
+    let study = dir.join(format!("study-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&study);
+    std::fs::create_dir_all(&dir).unwrap();
+    let built = Command::new(env!("CARGO_BIN_EXE_visage"))
+        .args(["study", "build", "studies/builtin/spec.toml", "--out"])
+        .arg(&study)
+        .output()
+        .unwrap();
+    assert!(
+        built.status.success(),
+        "{}",
+        String::from_utf8_lossy(&built.stderr)
+    );
+    let mut procs = Processes(Vec::new());
+    let display = start_xvfb(&mut procs);
+    let xterm = Command::new("xterm")
+        .args(["-display", &display, "-T", TITLE, "-ti", "vt340"])
+        .args([
+            "-geometry",
+            "110x36+0+0",
+            "-xrm",
+            "XTerm*numColorRegisters: 256",
+        ])
+        .arg("-e")
+        .arg(env!("CARGO_BIN_EXE_visage"))
+        .args(["study", "run"])
+        .arg(&study)
+        .args([
+            "--participant",
+            "xterm",
+            "--graphics",
+            "sixel",
+            "--renderer",
+            "cpu",
+        ])
+        .env("NODEVICE_SELECT", "1")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start xterm");
+    procs.0.push(xterm);
+
+    let marker = study.display().to_string();
+    let start = Instant::now();
+    let mut last = String::from("no screenshot yet");
+    while start.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(500));
+        let Some(shot) = screenshot(&display) else {
+            continue;
+        };
+        let Some(viewport) = find_viewport(&shot) else {
+            last = "no viewport in the screenshot".into();
+            continue;
+        };
+        // The head fills the middle of the viewport: mostly lit, not black.
+        let (x, y, w, h) = viewport;
+        let middle = crop(&shot, (x + w * 2 / 5, y + h / 3, w / 5, h / 3));
+        let lit = middle
+            .pixels
+            .chunks(3)
+            .filter(|p| p.iter().map(|&c| c as u32).sum::<u32>() > 150)
+            .count();
+        let share = lit as f64 / (middle.width * middle.height) as f64;
+        last = format!(
+            "viewport {viewport:?}, {:.0}% of its middle lit",
+            share * 100.0
+        );
+        if share > 0.8 {
+            shot.save_png(&dir.join("screenshot.png")).unwrap();
+            assert!(
+                editor_running(&marker),
+                "the session's process was not found"
+            );
+            let mut xterm = procs.0.pop().unwrap();
+            xterm.kill().unwrap();
+            xterm.wait().unwrap();
+            let killed = Instant::now();
+            while editor_running(&marker) {
+                assert!(
+                    killed.elapsed() < Duration::from_secs(10),
+                    "the session kept running after its terminal was killed"
+                );
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            let journal = std::fs::read_to_string(study.join("answers/xterm.jsonl")).unwrap();
+            assert!(
+                journal.starts_with("{\"participant\":\"xterm\""),
+                "{journal}"
+            );
+            return;
+        }
+    }
+    panic!(
+        "xterm never showed the avatar ({last}); see {}",
+        dir.display()
+    );
+}
