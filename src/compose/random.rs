@@ -114,8 +114,12 @@ fn source_pool(db: &Database, names: &[String]) -> Result<Vec<String>> {
                 )));
             }
         }
-        let mut unique = names.to_vec();
-        unique.dedup();
+        let mut unique: Vec<String> = Vec::with_capacity(names.len());
+        for n in names {
+            if !unique.contains(n) {
+                unique.push(n.clone());
+            }
+        }
         unique
     };
     if pool.len() < SOURCES_PER_COMPOSITE {

@@ -233,6 +233,10 @@ impl StudyFolder {
                 study.version
             )));
         }
+        study
+            .display
+            .check()
+            .map_err(|e| Error::input(format!("{}: {e}", path.display())))?;
         Ok(StudyFolder {
             dir: dir.to_path_buf(),
             fingerprint: blake3::hash(text.as_bytes()).to_hex()[..16].to_string(),

@@ -175,7 +175,7 @@ fn authenticity_chart(area: &Area, analysis: &Analysis) -> DrawResult {
     } else {
         "Mean per category, 95% bootstrap CI"
     };
-    grouped_bars(&bottom, title, &groups)
+    grouped_bars(&bottom, title, &groups, false)
 }
 
 /// `colour` at `alpha` over the white background, as an opaque colour.
@@ -209,18 +209,19 @@ fn regions_chart(area: &Area, analysis: &Analysis) -> DrawResult {
             })
             .collect();
         let title = if edited {
-            "Edited regions (eyes, nose, mouth, nhe)"
+            "Regions where edited"
         } else {
-            "Unedited regions (eyes, nose, mouth, nhe)"
+            "Regions where not edited"
         };
-        grouped_bars(panel, title, &groups)?;
+        grouped_bars(panel, title, &groups, true)?;
     }
     Ok(())
 }
 
 /// Bars in groups along x, each with its interval as a whisker; a missing
-/// estimate leaves a gap.
-fn grouped_bars(area: &Area, title: &str, groups: &[BarGroup]) -> DrawResult {
+/// estimate leaves a gap. With `legend`, the first group's bar labels and
+/// colours are named in a legend.
+fn grouped_bars(area: &Area, title: &str, groups: &[BarGroup], legend: bool) -> DrawResult {
     let names: Vec<String> = groups.iter().map(|g| g.0.clone()).collect();
     let count = groups.len().max(1);
     let mut chart = ChartBuilder::on(area)
@@ -263,6 +264,27 @@ fn grouped_bars(area: &Area, title: &str, groups: &[BarGroup]) -> DrawResult {
                 (FAMILY, 12),
             )))?;
         }
+    }
+    if legend {
+        for (label, _, colour) in groups.first().map_or(&[][..], |g| &g.1[..]) {
+            let colour = *colour;
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(-10.0, -1.0), (-9.0, -0.9)],
+                    colour.filled(),
+                )))?
+                .label(label.clone())
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 6), (x + 12, y + 6)], colour.filled())
+                });
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerLeft)
+            .label_font((FAMILY, 13))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
     }
     Ok(())
 }

@@ -54,6 +54,15 @@ const KEY_STEP_DEG: f32 = 5.0;
 /// Degrees one cell of mouse drag turns the head.
 const DRAG_DEG_PER_CELL: f32 = 1.5;
 
+/// Longest wait for input before checking for signals and hang-ups.
+const POLL: Duration = Duration::from_millis(50);
+
+/// When the loop's next frame is due.
+fn next_frame_time(since: Instant, fps: f64) -> Instant {
+    let shown = (since.elapsed().as_secs_f64() * fps).floor();
+    since + Duration::from_secs_f64((shown + 1.0) / fps)
+}
+
 /// Where the participant is in answering the current avatar.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Stage {
@@ -156,21 +165,39 @@ impl Session<'_> {
         for &id in todo {
             let mut showing = self.show(id)?;
             let mut drag_from: Option<(f32, f32)> = None;
+            // Draw at once, then once per frame of the loop or on input: no
+            // faster than the display's frame rate, which matters over SSH.
+            let mut dirty = true;
+            let mut next_frame = Instant::now();
             loop {
                 if stop.load(Ordering::Relaxed) || terminal_hung_up() {
                     return Ok(false);
                 }
                 let mut answered = None;
+                let mut wait = if dirty {
+                    Duration::ZERO
+                } else {
+                    next_frame
+                        .saturating_duration_since(Instant::now())
+                        .min(POLL)
+                };
                 loop {
-                    match input.recv_timeout(Duration::from_millis(1)) {
-                        Ok(Event::Key(k)) if k.kind != KeyEventKind::Release => {
+                    let event = match input.recv_timeout(wait) {
+                        Ok(event) => event,
+                        Err(RecvTimeoutError::Timeout) => break,
+                        Err(RecvTimeoutError::Disconnected) => return Ok(false),
+                    };
+                    wait = Duration::ZERO;
+                    dirty = true;
+                    match event {
+                        Event::Key(k) if k.kind != KeyEventKind::Release => {
                             match on_key(&mut showing, k, &self.study.study.display) {
                                 KeyOutcome::Quit => return Ok(false),
                                 KeyOutcome::Answer(a) => answered = Some(a),
                                 KeyOutcome::Nothing => {}
                             }
                         }
-                        Ok(Event::Mouse(m)) => {
+                        Event::Mouse(m) => {
                             let at = (m.column as f32, m.row as f32);
                             match m.kind {
                                 MouseEventKind::Down(_) => drag_from = Some(at),
@@ -187,12 +214,10 @@ impl Session<'_> {
                                 _ => {}
                             }
                         }
-                        Ok(Event::Resize(..)) => {
+                        Event::Resize(..) => {
                             let _ = term.clear();
                         }
-                        Ok(_) => {}
-                        Err(RecvTimeoutError::Timeout) => break,
-                        Err(RecvTimeoutError::Disconnected) => return Ok(false),
+                        _ => {}
                     }
                     if answered.is_some() {
                         break;
@@ -203,7 +228,11 @@ impl Session<'_> {
                     self.done += 1;
                     break;
                 }
-                self.present(&mut term, &collector, &showing)?;
+                if dirty || Instant::now() >= next_frame {
+                    self.present(&mut term, &collector, &showing)?;
+                    dirty = false;
+                    next_frame = next_frame_time(showing.since, self.study.study.display.fps);
+                }
             }
         }
         Ok(true)
