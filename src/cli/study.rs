@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 use crate::render::Backend;
 use crate::study::analysis::{analyse, AnalysisOptions};
 use crate::study::design::{build, category_counts, Databases, StudyFolder};
-use crate::study::journal::tally;
+use crate::study::journal::{read_all, tally};
 use crate::study::plot::write_plots;
 use crate::study::results::Results;
 use crate::tui::graphics::GraphicsChoice;
@@ -32,6 +32,18 @@ enum StudyCommand {
     Run(RunArgs),
     /// Scores per avatar, category and region, with intervals, table and plots.
     Analyse(AnalyseArgs),
+    /// Who has answered how much so far (safe while sessions run).
+    Status(StatusArgs),
+}
+
+/// Arguments of `visage study status`.
+#[derive(Args, Debug)]
+struct StatusArgs {
+    /// A study folder made by `visage study build`.
+    study: PathBuf,
+    /// Print JSON instead of lines.
+    #[arg(long)]
+    json: bool,
 }
 
 /// Arguments of `visage study build`.
@@ -95,7 +107,54 @@ pub fn run(args: &StudyArgs) -> Result<()> {
         StudyCommand::Build(a) => run_build(a),
         StudyCommand::Run(a) => run_session(a),
         StudyCommand::Analyse(a) => run_analyse(a),
+        StudyCommand::Status(a) => run_status(a),
     }
+}
+
+fn run_status(args: &StatusArgs) -> Result<()> {
+    let study = StudyFolder::open(&args.study)?;
+    let total = study.study.avatars.len();
+    let journals = read_all(&study)?;
+    let rows: Vec<serde_json::Value> = journals
+        .iter()
+        .map(|(who, answers)| {
+            let mut answered: Vec<u32> = answers.iter().map(|a| a.avatar).collect();
+            answered.sort_unstable();
+            answered.dedup();
+            let seconds: f64 = answers.iter().map(|a| a.seconds).sum();
+            serde_json::json!({
+                "participant": who,
+                "answered": answered.len(),
+                "avatars": total,
+                "done": answered.len() == total,
+                "seconds": seconds,
+            })
+        })
+        .collect();
+    if args.json {
+        let all = serde_json::json!({ "avatars": total, "participants": rows });
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&all).expect("JSON values serialise")
+        );
+        return Ok(());
+    }
+    println!(
+        "{}: {total} avatars, {} participants ({} done)",
+        args.study.display(),
+        rows.len(),
+        rows.iter().filter(|r| r["done"] == true).count()
+    );
+    for r in &rows {
+        println!(
+            "  {:<20} {:>4} / {total}{}  {:.0} s looking",
+            r["participant"].as_str().unwrap_or_default(),
+            r["answered"],
+            if r["done"] == true { "  done" } else { "" },
+            r["seconds"].as_f64().unwrap_or_default()
+        );
+    }
+    Ok(())
 }
 
 fn run_build(args: &BuildArgs) -> Result<()> {
