@@ -401,22 +401,24 @@ fn avatar_folder_attributes_constrain_random_composites() {
     )
     .unwrap();
     let out = temp("folder-random");
-    let flame = dir.join("flame/model.pkl");
-    let masks = dir.join("flame/masks.pkl");
-    let listing = stdout(&visage(&[
-        "random",
-        "--db",
-        dir.join("avatars").to_str().unwrap(),
-        "--flame",
-        flame.to_str().unwrap(),
-        "--masks",
-        masks.to_str().unwrap(),
+    let (avatars, flame, masks) = (
+        dir.join("avatars"),
+        dir.join("flame/model.pkl"),
+        dir.join("flame/masks.pkl"),
+    );
+    let random = |extra: &[&str]| {
+        let mut args = vec!["random", "--db", avatars.to_str().unwrap()];
+        args.extend(["--flame", flame.to_str().unwrap()]);
+        args.extend(["--masks", masks.to_str().unwrap()]);
+        args.extend(["--out", out.to_str().unwrap()]);
+        args.extend(extra);
+        visage(&args)
+    };
+    let listing = stdout(&random(&[
         "--constraints",
         rules.to_str().unwrap(),
         "--count",
         "6",
-        "--out",
-        out.to_str().unwrap(),
     ]));
     assert_eq!(listing.lines().count(), 6);
     for (name, text) in files(&out) {
@@ -425,17 +427,7 @@ fn avatar_folder_attributes_constrain_random_composites() {
     }
     // A bad label file is one line and exit 2.
     std::fs::write(dir.join("avatars/cleo/attributes.toml"), "skin_tone = 3\n").unwrap();
-    let bad = visage(&[
-        "random",
-        "--db",
-        dir.join("avatars").to_str().unwrap(),
-        "--flame",
-        flame.to_str().unwrap(),
-        "--masks",
-        masks.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let bad = random(&[]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("attributes.toml"));
 }

@@ -169,6 +169,22 @@ fn editor_running(marker: &str) -> bool {
     })
 }
 
+/// Kills the terminal (the last process started) and waits for the program
+/// it ran, found by `marker`, to end: a hung-up tty must not leave it running.
+fn kill_terminal_and_wait(procs: &mut Processes, marker: &str) {
+    let mut xterm = procs.0.pop().unwrap();
+    xterm.kill().unwrap();
+    xterm.wait().unwrap();
+    let killed = Instant::now();
+    while editor_running(marker) {
+        assert!(
+            killed.elapsed() < Duration::from_secs(10),
+            "{marker}: still running after its terminal was killed"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
 fn rendered(size: (u32, u32), dir: &Path) -> RgbImage {
     let path = dir.join(format!("expected-{}x{}.png", size.0, size.1));
     let out = Command::new(env!("CARGO_BIN_EXE_visage"))
@@ -252,17 +268,7 @@ fn xterm_vt340_shows_the_rendered_view_as_sixel() {
                 "the editor's process was not found"
             );
             // Kill the terminal: the tty hangs up and the editor must end.
-            let mut xterm = procs.0.pop().unwrap();
-            xterm.kill().unwrap();
-            xterm.wait().unwrap();
-            let killed = Instant::now();
-            while editor_running(&marker) {
-                assert!(
-                    killed.elapsed() < Duration::from_secs(10),
-                    "the editor kept running after its terminal was killed"
-                );
-                std::thread::sleep(Duration::from_millis(100));
-            }
+            kill_terminal_and_wait(&mut procs, &marker);
             assert!(journal.is_file(), "the session journal was not written");
             return;
         }
@@ -355,17 +361,7 @@ fn xterm_vt340_runs_a_study_session_as_sixel() {
                 editor_running(&marker),
                 "the session's process was not found"
             );
-            let mut xterm = procs.0.pop().unwrap();
-            xterm.kill().unwrap();
-            xterm.wait().unwrap();
-            let killed = Instant::now();
-            while editor_running(&marker) {
-                assert!(
-                    killed.elapsed() < Duration::from_secs(10),
-                    "the session kept running after its terminal was killed"
-                );
-                std::thread::sleep(Duration::from_millis(100));
-            }
+            kill_terminal_and_wait(&mut procs, &marker);
             let journal = std::fs::read_to_string(study.join("answers/xterm.jsonl")).unwrap();
             assert!(
                 journal.starts_with("{\"participant\":\"xterm\""),
