@@ -169,6 +169,22 @@ fn editor_running(marker: &str) -> bool {
     })
 }
 
+/// An xterm (VT340, 256 colour registers, 110×36) on `display` that runs
+/// visage with the arguments the caller adds.
+fn xterm_running_visage(display: &str) -> Command {
+    let mut xterm = Command::new("xterm");
+    xterm
+        .args(["-display", display, "-T", TITLE, "-ti", "vt340"])
+        .args(["-geometry", "110x36+0+0"])
+        .args(["-xrm", "XTerm*numColorRegisters: 256"])
+        .arg("-e")
+        .arg(env!("CARGO_BIN_EXE_visage"))
+        .env("NODEVICE_SELECT", "1")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null());
+    xterm
+}
+
 /// Kills the terminal (the last process started) and waits for the program
 /// it ran, found by `marker`, to end: a hung-up tty must not leave it running.
 fn kill_terminal_and_wait(procs: &mut Processes, marker: &str) {
@@ -217,23 +233,11 @@ fn xterm_vt340_shows_the_rendered_view_as_sixel() {
     let _ = std::fs::remove_file(&journal);
     let mut procs = Processes(Vec::new());
     let display = start_xvfb(&mut procs);
-    let xterm = Command::new("xterm")
-        .args(["-display", &display, "-T", TITLE, "-ti", "vt340"])
-        .args([
-            "-geometry",
-            "110x36+0+0",
-            "-xrm",
-            "XTerm*numColorRegisters: 256",
-        ])
-        .arg("-e")
-        .arg(env!("CARGO_BIN_EXE_visage"))
+    let xterm = xterm_running_visage(&display)
         .args(["--graphics", "sixel", "--renderer", "cpu", "--record"])
         .arg(&journal)
         .args(DB)
         .env("XDG_CONFIG_HOME", &config)
-        .env("NODEVICE_SELECT", "1")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
         .spawn()
         .expect("start xterm");
     procs.0.push(xterm);
@@ -303,16 +307,7 @@ fn xterm_vt340_runs_a_study_session_as_sixel() {
     );
     let mut procs = Processes(Vec::new());
     let display = start_xvfb(&mut procs);
-    let xterm = Command::new("xterm")
-        .args(["-display", &display, "-T", TITLE, "-ti", "vt340"])
-        .args([
-            "-geometry",
-            "110x36+0+0",
-            "-xrm",
-            "XTerm*numColorRegisters: 256",
-        ])
-        .arg("-e")
-        .arg(env!("CARGO_BIN_EXE_visage"))
+    let xterm = xterm_running_visage(&display)
         .args(["study", "run"])
         .arg(&study)
         .args([
@@ -323,9 +318,6 @@ fn xterm_vt340_runs_a_study_session_as_sixel() {
             "--renderer",
             "cpu",
         ])
-        .env("NODEVICE_SELECT", "1")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
         .spawn()
         .expect("start xterm");
     procs.0.push(xterm);

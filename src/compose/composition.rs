@@ -162,11 +162,6 @@ impl Composition {
         all
     }
 
-    /// True when the group shows another source's Gaussians than the base's.
-    pub fn is_edited(&self, group: StudyGroup) -> bool {
-        self.groups.contains_key(&group)
-    }
-
     /// True when some part shows another source's Gaussians than the base's.
     pub fn is_composite(&self) -> bool {
         !self.groups.is_empty() || !self.unplaced.is_empty()
@@ -252,7 +247,10 @@ mod tests {
         assert_eq!(c.source(StudyGroup::Nose), "bram");
         assert_eq!(c.source(StudyGroup::Nhe), "cleo");
         assert_eq!(c.source(StudyGroup::Face), "ada");
-        assert!(!c.is_edited(StudyGroup::Mouth), "the base's own mouth");
+        assert!(
+            !c.groups.contains_key(&StudyGroup::Mouth),
+            "the base's own mouth"
+        );
         assert!(c.unplaced.is_empty());
         assert_eq!(c.gaussian_sources(), ["ada", "bram", "cleo"]);
 
