@@ -85,7 +85,13 @@ impl SplatRenderer {
 
     /// Uploads a world-space scene (render it with the identity frame).
     pub fn set_world_scene(&mut self, scene: &crate::scene::splats::SplatScene) -> Result<()> {
-        self.set_gaussians(&scene.as_bound_to_identity())
+        match self {
+            SplatRenderer::Gpu(g) => g.set_gaussians(&scene.as_bound_to_identity()),
+            SplatRenderer::Cpu(c) => {
+                c.set_world_scene(scene);
+                Ok(())
+            }
+        }
     }
 
     /// Renders the uploaded Gaussians on `frames`.

@@ -103,12 +103,12 @@ pub fn eval_rgb(sh: &[f32], use_degree: u8, d: [f64; 3]) -> [f64; 3] {
 /// by a test).
 pub fn eval_rgb_f32(sh: &[f32], use_degree: u8, d: [f32; 3]) -> [f32; 3] {
     let b = basis_f32(use_degree, d);
-    let coefficients = (sh.len() / 3).min((use_degree as usize + 1).pow(2));
+    let coefficients = (use_degree as usize + 1).pow(2);
     let mut rgb = [0.5f32; 3];
-    for (k, bk) in b.iter().enumerate().take(coefficients) {
-        for (ch, out) in rgb.iter_mut().enumerate() {
-            *out += bk * sh[k * 3 + ch];
-        }
+    for (coef, bk) in sh.chunks_exact(3).zip(b).take(coefficients) {
+        rgb[0] += bk * coef[0];
+        rgb[1] += bk * coef[1];
+        rgb[2] += bk * coef[2];
     }
     rgb.map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 })
 }

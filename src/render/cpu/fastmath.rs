@@ -1,0 +1,83 @@
+//! Scalar maths for the CPU renderer's inner loops, without calls into libm:
+//! x86-64's baseline has no rounding instruction, so `f32::floor` and
+//! friends are function calls there, and `f32::exp` is far more accurate than
+//! a blend of 8-bit colour needs.
+
+/// ⌊x⌋ for |x| < 2³¹ (beyond, the result saturates there, which the
+/// callers clamp to the image anyway; NaN gives 0).
+#[inline]
+pub fn floor(x: f32) -> f32 {
+    let t = x as i32 as f32;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
+/// ⌈x⌉, on the terms of [`floor`].
+#[inline]
+pub fn ceil(x: f32) -> f32 {
+    -floor(-x)
+}
+
+/// e^x for x ≤ 0, within 2·10⁻⁷ relative of the exact value: the argument is
+/// split as x = n·ln 2 + r with |r| ≤ ln 2 / 2 (Cody and Waite's two-part
+/// ln 2 keeps r exact), e^r is its degree-6 Taylor polynomial and 2ⁿ is put
+/// into the exponent bits. Arguments below −87 give 0 (as e^x does in f32).
+#[inline]
+pub fn exp_nonpositive(x: f32) -> f32 {
+    const LN2_HI: f32 = 0.693_145_75;
+    const LN2_LO: f32 = 1.428_606_8e-6;
+    if x < -87.0 {
+        return 0.0;
+    }
+    let n = floor(x * std::f32::consts::LOG2_E + 0.5);
+    let r = x - n * LN2_HI - n * LN2_LO;
+    let p = 1.0
+        + r * (1.0
+            + r * (0.5
+                + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
+    p * f32::from_bits(((n as i32 + 127) as u32) << 23)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// floor and ceil agree with the library's on whole numbers, halves,
+    /// negatives, values a step either side of an integer, and large ones.
+    #[test]
+    fn floor_and_ceil_match_the_library() {
+        for k in -4000..4000 {
+            for x in [
+                k as f32 * 0.25,
+                k as f32 * 1.37e3,
+                f32::from_bits((k as f32).to_bits() + 1),
+                f32::from_bits((k as f32).to_bits().saturating_sub(1)),
+            ] {
+                assert_eq!(floor(x), x.floor(), "floor {x}");
+                assert_eq!(ceil(x), x.ceil(), "ceil {x}");
+            }
+        }
+        assert_eq!(floor(f32::NAN), 0.0);
+        assert_eq!(floor(-1e12), i32::MIN as f32);
+    }
+
+    /// The polynomial exponential against f64's over the range the blend
+    /// uses (down to ln(1/255), and well past it) and at the ends.
+    #[test]
+    fn the_fast_exponential_is_within_two_f32_steps() {
+        let mut worst = 0.0f64;
+        for k in 0..=200_000 {
+            let x = -12.0 * k as f32 / 200_000.0;
+            let exact = (x as f64).exp();
+            let got = exp_nonpositive(x) as f64;
+            worst = worst.max((got - exact).abs() / exact);
+        }
+        assert!(worst < 2.5e-7, "worst relative error {worst:e}");
+        assert_eq!(exp_nonpositive(0.0), 1.0);
+        assert_eq!(exp_nonpositive(-100.0), 0.0);
+        assert!(exp_nonpositive(-80.0) > 0.0);
+    }
+}
