@@ -331,3 +331,39 @@ fn a_scene_half_outside_the_frustum_renders_like_the_reference() {
     );
     check_scene("half outside the frustum", &scene, &camera, 45.0);
 }
+
+/// Precision far from the origin: the same synthetic scene and camera moved
+/// 10⁴ units away render on the CPU renderer as the reference renders them
+/// there (the CPU renderer places centres in view space in f64, as the
+/// reference does), and the moved image still resembles the one at the origin.
+#[test]
+fn a_scene_far_from_the_origin_keeps_its_precision_on_the_cpu() {
+    let near_origin = visage::scene::synthetic::synthetic_scene(20_000, 5);
+    let offset = Vec3::new(1.0e4, -2.0e4, 1.5e4);
+    let mut far = near_origin.clone();
+    for p in &mut far.position {
+        *p += offset;
+    }
+    let eye = Vec3::new(0.5, 1.4, 4.0);
+    let target = Vec3::new(0.0, 0.9, 0.0);
+    let settings = RenderSettings::default();
+    let mut cpu = SplatRenderer::open(Backend::Cpu).unwrap();
+    let mut render = |scene: &SplatScene, camera: &Camera| {
+        cpu.set_world_scene(scene).unwrap();
+        let image = cpu.render_world(camera, &settings).unwrap();
+        (image, render_reference(scene, camera, &settings))
+    };
+    let (at_origin, _) = render(&near_origin, &camera_at(eye, target, 120, 90, 45.0));
+    let far_camera = camera_at(eye + offset, target + offset, 120, 90, 45.0);
+    let (image, reference) = render(&far, &far_camera);
+    let p = psnr(&image, &reference).unwrap();
+    assert!(
+        p >= 60.0,
+        "far from the origin: {p:.1} dB against the reference"
+    );
+    let moved = psnr(&image, &at_origin).unwrap();
+    assert!(
+        moved >= 40.0,
+        "the moved scene no longer resembles itself: {moved:.1} dB"
+    );
+}
