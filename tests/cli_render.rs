@@ -401,6 +401,59 @@ fn convert_between_ply_and_splat_reports_the_error() {
     }
 }
 
+/// SPZ both ways through the command line: a PLY becomes an SPZ (SH kept,
+/// quantised: lossy but close), the SPZ Niantic's tool wrote becomes a PLY
+/// losslessly, and a damaged SPZ is one line and exit code 2.
+#[test]
+fn convert_to_and_from_spz_reports_the_error() {
+    let (ply, spz, back) = (
+        temp("ring-spz.ply"),
+        temp("ring.spz"),
+        temp("ring-spz-back.ply"),
+    );
+    write_splat_ply(&ply, &ring_scene(3)).unwrap();
+    let json = |args: &[&str]| -> serde_json::Value {
+        let o = visage(args);
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let to_spz = json(&[
+        "convert",
+        ply.to_str().unwrap(),
+        spz.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(to_spz["sh_degree_out"].as_u64(), Some(3));
+    let lossy = to_spz["psnr_db"].as_f64().unwrap();
+    assert!(
+        (35.0..99.0).contains(&lossy),
+        "8-bit SPZ costs a little: {lossy}"
+    );
+    assert!(to_spz["bytes_out"].as_u64() < to_spz["bytes_in"].as_u64());
+    let theirs = "tests/data/splat/ring3.spz";
+    let from_spz = json(&["convert", theirs, back.to_str().unwrap(), "--json"]);
+    assert_eq!(from_spz["gaussians"], 200);
+    assert!(
+        from_spz["psnr_db"].as_f64().unwrap() >= 99.0,
+        "SPZ → PLY keeps everything"
+    );
+    let broken = temp("broken.spz");
+    let bytes = std::fs::read(theirs).unwrap();
+    std::fs::write(&broken, &bytes[..bytes.len() - 7]).unwrap();
+    let o = visage(&["convert", broken.to_str().unwrap(), back.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("broken.spz"), "{err}");
+    for p in [ply, spz, back, broken] {
+        std::fs::remove_file(p).ok();
+    }
+}
+
 /// `bench render` on scenes: a synthetic one made deterministically and a
 /// file, with load time and peak memory beside the usual rows.
 #[test]

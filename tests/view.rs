@@ -166,10 +166,14 @@ fn bad_scene_files_fail_with_one_line_and_exit_2() {
     .unwrap();
     let empty_splat = temp_path("view", "odd.splat");
     std::fs::write(&empty_splat, [0u8; 33]).unwrap();
+    let cut_spz = temp_path("view", "cut.spz");
+    let spz = std::fs::read("tests/data/splat/ring3.spz").unwrap();
+    std::fs::write(&cut_spz, &spz[..spz.len() / 2]).unwrap();
     let missing = temp_path("view", "missing.ply");
     for (file, needle) in [
         (&garbage, "garbage.ply"),
         (&empty_splat, "32-byte"),
+        (&cut_spz, "cut.spz"),
         (&missing, "not a file"),
     ] {
         // Replay opens the file before any terminal is needed.
@@ -200,7 +204,14 @@ fn bad_scene_files_fail_with_one_line_and_exit_2() {
 fn files_from_other_tools_open_in_the_viewer() {
     let out = temp_path("view", "tools");
     std::fs::create_dir_all(&out).unwrap();
-    for name in ["ring.ply", "ring.splat", "ring.compressed.ply", "ring3.ply"] {
+    for name in [
+        "ring.ply",
+        "ring.splat",
+        "ring.compressed.ply",
+        "ring3.ply",
+        "ring3.spz",
+        "ring.v2.spz",
+    ] {
         let file = std::fs::canonicalize(Path::new("tests/data/splat").join(name)).unwrap();
         let snap = format!("{}.png", name.replace('.', "-"));
         let session = write_session(

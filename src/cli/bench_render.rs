@@ -30,7 +30,7 @@ pub struct RenderBenchArgs {
     /// Recipe to render (default: a four-source composite with cross-fade and skin correction).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["ply", "synthetic_scale"])]
     recipe: Option<PathBuf>,
-    /// A 3DGS scene (.ply or .splat) to measure instead of a composite.
+    /// A 3DGS scene (.ply, .compressed.ply, .splat or .spz) to measure instead of a composite.
     #[arg(long, value_name = "FILE", conflicts_with = "synthetic_scale")]
     ply: Option<PathBuf>,
     /// A deterministic synthetic scene of N Gaussians to measure instead of a composite.

@@ -20,7 +20,7 @@ pub const SCENE_SIZES: [(u32, u32); 4] = [(120, 80), (200, 120), (320, 240), (64
 
 /// Where the scene comes from.
 pub enum SceneSource<'a> {
-    /// A file (.ply or .splat).
+    /// A file (.ply, .compressed.ply, .splat or .spz).
     File(&'a std::path::Path),
     /// [`crate::scene::synthetic::synthetic_scene`] of this many Gaussians.
     Synthetic(usize),

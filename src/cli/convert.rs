@@ -1,5 +1,5 @@
 //! `visage convert IN OUT`: a 3DGS scene from one format to another (INRIA
-//! PLY, `.splat`), with the error a lossy conversion introduces measured as
+//! PLY, SuperSplat's compressed PLY, `.splat`, Niantic's SPZ), with the error a lossy conversion introduces measured as
 //! the PSNR of a fixed view (the scene framed from the front at 320×240, CPU
 //! renderer) against the same view of the input.
 
@@ -19,9 +19,9 @@ use crate::scene::splats::SplatScene;
 /// Arguments of `visage convert`.
 #[derive(Args, Debug, Clone)]
 pub struct ConvertArgs {
-    /// Input scene (.ply or .splat).
+    /// Input scene (.ply, .compressed.ply, .splat or .spz).
     input: PathBuf,
-    /// Output scene (.ply or .splat).
+    /// Output scene (.ply, .compressed.ply, .splat or .spz, by extension).
     output: PathBuf,
     /// Print one JSON document.
     #[arg(long)]

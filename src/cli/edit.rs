@@ -43,7 +43,7 @@ pub struct TerminalArgs {
 pub struct EditArgs {
     #[command(flatten)]
     db: DbArgs,
-    /// A 3DGS scene file (.ply, .compressed.ply, .splat) to view instead of
+    /// A 3DGS scene file (.ply, .compressed.ply, .splat, .spz) to view instead of
     /// composing avatars: the same as `visage view FILE`.
     #[arg(value_name = "SCENE")]
     scene: Option<PathBuf>,
@@ -55,7 +55,7 @@ pub struct EditArgs {
 #[derive(Args, Debug, Clone)]
 pub struct ViewArgs {
     /// A 3DGS scene: INRIA PLY (any SH degree, ASCII or binary), SuperSplat's
-    /// compressed PLY or a .splat file.
+    /// compressed PLY, a .splat file or Niantic's SPZ (versions 2-4).
     file: PathBuf,
     #[command(flatten)]
     terminal: TerminalArgs,
@@ -78,7 +78,7 @@ pub fn run_view(args: &ViewArgs) -> Result<()> {
 fn scene_subject(file: &std::path::Path, args: &TerminalArgs) -> Result<Subject> {
     if !file.is_file() {
         return Err(Error::input(format!(
-            "{} is not a file (visage view takes a .ply, .compressed.ply or .splat scene)",
+            "{} is not a file (visage view takes a .ply, .compressed.ply, .splat or .spz scene)",
             file.display()
         )));
     }

@@ -42,7 +42,7 @@ pub struct Cli {
 enum Command {
     /// Open the editor (the default command).
     Edit(edit::EditArgs),
-    /// View a 3DGS scene file (PLY, compressed PLY, .splat) in the terminal.
+    /// View a 3DGS scene file (PLY, compressed PLY, .splat, SPZ) in the terminal.
     View(edit::ViewArgs),
     /// Replay a session file headless, with snapshots and checks.
     Replay(edit::ReplayArgs),
@@ -54,7 +54,7 @@ enum Command {
     Export(compose::ExportArgs),
     /// Render a still to PNG.
     Render(render::RenderArgs),
-    /// Convert a 3DGS scene between INRIA PLY and .splat, reporting the error.
+    /// Convert a 3DGS scene between PLY, compressed PLY, .splat and SPZ, reporting the error.
     Convert(convert::ConvertArgs),
     /// Capture a multi-view dataset (GaussianAvatars layout) of a built-in source.
     Capture(capture::CaptureArgs),

@@ -13,6 +13,7 @@ pub mod pickle_write;
 pub mod ply;
 pub mod ply_stream;
 pub mod splat;
+pub mod spz;
 
 use std::path::{Path, PathBuf};
 

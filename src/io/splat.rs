@@ -93,6 +93,8 @@ pub enum SceneFormat {
     CompressedPly,
     /// antimatter15 `.splat`.
     Splat,
+    /// Niantic's SPZ.
+    Spz,
 }
 
 impl SceneFormat {
@@ -110,16 +112,18 @@ impl SceneFormat {
         {
             Some("ply") => Ok(SceneFormat::Ply),
             Some("splat") => Ok(SceneFormat::Splat),
+            Some("spz") => Ok(SceneFormat::Spz),
             _ => Err(FileError::Malformed(format!(
-                "{}: unknown scene format (use .ply, .compressed.ply or .splat)",
+                "{}: unknown scene format (use .ply, .compressed.ply, .splat or .spz)",
                 path.display()
             ))),
         }
     }
 }
 
-/// Reads a 3DGS scene: a PLY by its `ply` magic (whatever the extension),
-/// else a `.splat` by its extension (the format has no header to recognise).
+/// Reads a 3DGS scene: a PLY by its `ply` magic and an SPZ by its `NGSP` or
+/// gzip magic (whatever the extension), else a `.splat` by its extension (the
+/// format has no header to recognise).
 pub fn read_scene(path: &Path) -> Result<SplatScene> {
     read_scene_with(path, &|_, _| {})
 }
@@ -128,19 +132,20 @@ pub fn read_scene(path: &Path) -> Result<SplatScene> {
 /// (the fast PLY path reports every chunk; the other readers, which take the
 /// file whole, report once at the end).
 pub fn read_scene_with(path: &Path, progress: super::Progress) -> Result<SplatScene> {
-    let mut magic = [0u8; 3];
-    let is_ply = std::fs::File::open(path)
+    let mut magic = [0u8; 4];
+    let read = std::fs::File::open(path)
         .and_then(|mut f| std::io::Read::read(&mut f, &mut magic))
-        .map_err(|e| FileError::access("read", path, e))?
-        == 3
-        && &magic == b"ply";
-    let scene = if is_ply {
+        .map_err(|e| FileError::access("read", path, e))?;
+    let magic = &magic[..read];
+    let scene = if magic.starts_with(b"ply") {
         super::ply::read_splat_ply_with(path, progress)
+    } else if magic == b"NGSP" || magic.starts_with(&[0x1f, 0x8b]) {
+        super::spz::read_spz(path)
     } else if SceneFormat::of(path).ok() == Some(SceneFormat::Splat) {
         read_splat(path)
     } else {
         Err(FileError::Malformed(format!(
-            "{}: neither a PLY (no 'ply' header) nor a .splat file",
+            "{}: neither a PLY (no 'ply' header), an SPZ (no 'NGSP' or gzip header) nor a .splat file",
             path.display()
         )))
     }?;
@@ -158,6 +163,7 @@ pub fn write_scene(path: &Path, scene: &SplatScene) -> Result<()> {
             write_file(path, &super::compressed_ply::encode_compressed_ply(scene))
         }
         SceneFormat::Splat => write_splat(path, scene),
+        SceneFormat::Spz => super::spz::write_spz(path, scene),
     }
 }
 
