@@ -471,6 +471,8 @@ fn bench_render_measures_scenes() {
         "0",
         "--sizes",
         "120x80",
+        "--knob-size",
+        "96x64",
         "--json",
     ]);
     assert!(
@@ -480,6 +482,17 @@ fn bench_render_measures_scenes() {
     );
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(doc["gaussians"], 20000);
+    // The early-stop knobs: exact first, accuracy falling as pixels stop sooner.
+    let knobs = doc["renderers"][0]["knobs"].as_array().unwrap();
+    let psnr: Vec<f64> = knobs
+        .iter()
+        .map(|k| k["psnr_db"].as_f64().unwrap())
+        .collect();
+    assert_eq!(knobs.len(), 4, "{knobs:?}");
+    assert!(knobs
+        .iter()
+        .all(|k| k["knob"] == "early_stop" && k["width"] == 96));
+    assert!(psnr[0] >= 60.0 && psnr[3] < psnr[0], "{psnr:?}");
     assert!(doc["load_ms"].as_f64().unwrap() > 0.0);
     assert!(doc["peak_rss_mb"].as_f64().unwrap() > 1.0);
     let row = &doc["renderers"][0]["rows"][0];

@@ -194,6 +194,7 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
             &sizes,
             &args.renderers,
             (args.warmup, args.iterations),
+            (!args.no_knobs).then_some(args.knob_size),
         )?;
         return print(&doc, args.json);
     }

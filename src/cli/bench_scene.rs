@@ -39,15 +39,15 @@ pub fn peak_rss_mb() -> Option<f64> {
 fn time_scene(
     renderer: &mut SplatRenderer,
     camera: &Camera,
+    settings: &RenderSettings,
     (warmup, iterations): (usize, usize),
 ) -> Result<(Vec<f64>, StageTimings)> {
-    let settings = RenderSettings::default();
     let (mut totals, mut stages) = (Vec::new(), Vec::new());
     for profiled in [false, true] {
         renderer.set_stage_profiling(profiled);
         for it in 0..warmup + iterations {
             let t = Instant::now();
-            renderer.render_world(camera, &settings)?;
+            renderer.render_world(camera, settings)?;
             let ms = t.elapsed().as_secs_f64() * 1e3;
             if it < warmup {
                 continue;
@@ -63,12 +63,18 @@ fn time_scene(
     Ok((totals, median_stages(&stages)))
 }
 
-/// Runs the scene benchmark and returns its JSON document.
+/// The early-stop thresholds compared on scenes (the knob that trades
+/// accuracy for speed on every renderer without resampling the image).
+const EARLY_STOPS: [f32; 4] = [1e-4, 1e-3, 1e-2, 3e-2];
+
+/// Runs the scene benchmark and returns its JSON document; with `knob_size`,
+/// the early-stop thresholds are compared at that size.
 pub fn bench_scene(
     source: SceneSource,
     sizes: &[(u32, u32)],
     renderers: &[Backend],
     rounds: (usize, usize),
+    knob_size: Option<(u32, u32)>,
 ) -> Result<Value> {
     let t = Instant::now();
     let (scene, name): (SplatScene, String) = match source {
@@ -105,20 +111,27 @@ pub fn bench_scene(
         for (camera, reference, reference_ms) in &references {
             let image = renderer.render_world(camera, &RenderSettings::default())?;
             let psnr_db = psnr_report(&image, reference).unwrap_or(0.0);
-            let (totals, stages) = time_scene(&mut renderer, camera, rounds)?;
+            let (totals, stages) =
+                time_scene(&mut renderer, camera, &RenderSettings::default(), rounds)?;
             let (median, p90) = summarize(totals);
             rows.push(json!({
                 "width": camera.width, "height": camera.height, "ms_median": median, "ms_p90": p90,
                 "fps": 1e3 / median, "psnr_db": psnr_db, "stages_ms": stages, "reference_ms": reference_ms,
             }));
         }
+        let knobs = match knob_size {
+            Some(size) => {
+                early_stop_knobs(&mut renderer, &orbit.camera(size.0, size.1), &scene, rounds)?
+            }
+            None => Vec::new(),
+        };
         docs.push(json!({
             "renderer": backend,
             "device": renderer.description(),
             "setup_ms": setup_ms,
             "gaussian_upload_ms": upload_ms,
             "rows": rows,
-            "knobs": [],
+            "knobs": knobs,
         }));
     }
     Ok(json!({
@@ -130,4 +143,32 @@ pub fn bench_scene(
         "peak_rss_mb": peak_rss_mb(),
         "renderers": docs,
     }))
+}
+
+/// Frame time and PSNR against the exact reference for each early-stop
+/// threshold at one camera.
+fn early_stop_knobs(
+    renderer: &mut SplatRenderer,
+    camera: &Camera,
+    scene: &SplatScene,
+    rounds: (usize, usize),
+) -> Result<Vec<Value>> {
+    let reference = render_reference(scene, camera, &RenderSettings::default());
+    let mut knobs = Vec::new();
+    for early_stop in EARLY_STOPS {
+        let settings = RenderSettings {
+            early_stop,
+            ..RenderSettings::default()
+        };
+        let image = renderer.render_world(camera, &settings)?;
+        let psnr_db = psnr_report(&image, &reference).unwrap_or(0.0);
+        let (totals, _) = time_scene(renderer, camera, &settings, rounds)?;
+        let (median, p90) = summarize(totals);
+        knobs.push(json!({
+            "knob": "early_stop", "value": format!("{early_stop:e}"),
+            "width": camera.width, "height": camera.height,
+            "ms_median": median, "ms_p90": p90, "psnr_db": psnr_db,
+        }));
+    }
+    Ok(knobs)
 }
