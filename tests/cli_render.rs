@@ -334,15 +334,6 @@ fn scenes_with_floaters_render_framed_and_y_down_scenes_upright() {
 fn convert_between_ply_and_splat_reports_the_error() {
     let (ply, splat, back) = (temp("ring.ply"), temp("ring.splat"), temp("ring-back.ply"));
     write_splat_ply(&ply, &ring_scene(3)).unwrap();
-    let json = |args: &[&str]| -> serde_json::Value {
-        let o = visage(args);
-        assert!(
-            o.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        serde_json::from_slice(&o.stdout).unwrap()
-    };
     let to_splat = json(&[
         "convert",
         ply.to_str().unwrap(),
@@ -401,6 +392,17 @@ fn convert_between_ply_and_splat_reports_the_error() {
     }
 }
 
+/// Runs visage, insists it succeeds, and parses its JSON output.
+fn json(args: &[&str]) -> serde_json::Value {
+    let o = visage(args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
 /// SPZ both ways through the command line: a PLY becomes an SPZ (SH kept,
 /// quantised: lossy but close), the SPZ Niantic's tool wrote becomes a PLY
 /// losslessly, and a damaged SPZ is one line and exit code 2.
@@ -412,15 +414,6 @@ fn convert_to_and_from_spz_reports_the_error() {
         temp("ring-spz-back.ply"),
     );
     write_splat_ply(&ply, &ring_scene(3)).unwrap();
-    let json = |args: &[&str]| -> serde_json::Value {
-        let o = visage(args);
-        assert!(
-            o.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        serde_json::from_slice(&o.stdout).unwrap()
-    };
     let to_spz = json(&[
         "convert",
         ply.to_str().unwrap(),

@@ -1,4 +1,5 @@
-//! File formats: pickles, npy/npz, PLY, OBJ, FLAME models and masks,
+//! File formats: pickles, npy/npz, PLY (INRIA and SuperSplat's compressed),
+//! `.splat`, SPZ, OBJ, FLAME models and masks,
 //! GaussianAvatars avatar folders, folder databases and the fixtures generator.
 
 pub mod avatar;

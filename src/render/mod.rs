@@ -15,6 +15,23 @@ use crate::avatar::binding::TriangleFrame;
 use crate::avatar::gaussians::GaussianSet;
 use crate::error::Result;
 
+/// What both renderers check before a frame: something is uploaded, there
+/// are frames to place it on; returns the uploaded data and the image size.
+pub(crate) fn frame_inputs<'a, T>(
+    uploaded: Option<&'a T>,
+    frames: &[TriangleFrame],
+    camera: &crate::scene::camera::Camera,
+) -> Result<(&'a T, (u32, u32))> {
+    let uploaded = uploaded
+        .ok_or_else(|| crate::error::Error::input("no Gaussians uploaded to the renderer"))?;
+    if frames.is_empty() {
+        return Err(crate::error::Error::input(
+            "no triangle frames to bind the Gaussians to",
+        ));
+    }
+    Ok((uploaded, (camera.width.max(1), camera.height.max(1))))
+}
+
 /// Which renderer draws frames.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]

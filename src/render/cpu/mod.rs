@@ -90,14 +90,8 @@ impl CpuRenderer {
         camera: &Camera,
         settings: &RenderSettings,
     ) -> Result<RgbImage> {
-        let prepared = self
-            .prepared
-            .as_ref()
-            .ok_or_else(|| Error::input("no Gaussians uploaded to the renderer"))?;
-        if frames.is_empty() {
-            return Err(Error::input("no triangle frames to bind the Gaussians to"));
-        }
-        let (width, height) = (camera.width.max(1), camera.height.max(1));
+        let (prepared, (width, height)) =
+            super::frame_inputs(self.prepared.as_ref(), frames, camera)?;
         if width > MAX_SIDE || height > MAX_SIDE {
             return Err(Error::input(format!(
                 "a {width}x{height} image is larger than the CPU renderer's {MAX_SIDE} pixels a side"

@@ -248,14 +248,7 @@ impl GpuRenderer {
         camera: &Camera,
         settings: &RenderSettings,
     ) -> Result<RgbImage> {
-        let scene = self
-            .scene
-            .as_ref()
-            .ok_or_else(|| Error::input("no Gaussians uploaded to the renderer"))?;
-        if frames.is_empty() {
-            return Err(Error::input("no triangle frames to bind the Gaussians to"));
-        }
-        let (width, height) = (camera.width.max(1), camera.height.max(1));
+        let (scene, (width, height)) = super::frame_inputs(self.scene.as_ref(), frames, camera)?;
         let tiles = (width.div_ceil(TILE), height.div_ceil(TILE));
         let mut timings = StageTimings::default();
 
