@@ -8,7 +8,7 @@ use serde_json::{json, Value};
 
 use super::bench::{median_stages, summarize};
 use crate::error::{Error, Result};
-use crate::render::image::psnr_report;
+use crate::render::image::{psnr_report, RgbImage};
 use crate::render::reference::render_reference;
 use crate::render::settings::{RenderSettings, StageTimings};
 use crate::render::{Backend, SplatRenderer};
@@ -120,9 +120,13 @@ pub fn bench_scene(
             }));
         }
         let knobs = match knob_size {
-            Some(size) => {
-                early_stop_knobs(&mut renderer, &orbit.camera(size.0, size.1), &scene, rounds)?
-            }
+            Some(size) => early_stop_knobs(
+                &mut renderer,
+                &orbit.camera(size.0, size.1),
+                &scene,
+                &references,
+                rounds,
+            )?,
             None => Vec::new(),
         };
         docs.push(json!({
@@ -146,14 +150,23 @@ pub fn bench_scene(
 }
 
 /// Frame time and PSNR against the exact reference for each early-stop
-/// threshold at one camera.
+/// threshold at one camera (the rows' reference images are reused).
 fn early_stop_knobs(
     renderer: &mut SplatRenderer,
     camera: &Camera,
     scene: &SplatScene,
+    references: &[(Camera, RgbImage, f64)],
     rounds: (usize, usize),
 ) -> Result<Vec<Value>> {
-    let reference = render_reference(scene, camera, &RenderSettings::default());
+    // The size's reference when a row already drew it.
+    let size = (camera.width, camera.height);
+    let reference = match references
+        .iter()
+        .find(|(c, _, _)| (c.width, c.height) == size)
+    {
+        Some((_, image, _)) => image.clone(),
+        None => render_reference(scene, camera, &RenderSettings::default()),
+    };
     let mut knobs = Vec::new();
     for early_stop in EARLY_STOPS {
         let settings = RenderSettings {

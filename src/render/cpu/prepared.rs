@@ -8,7 +8,7 @@ use glam::{Mat3, Quat, Vec3};
 use rayon::prelude::*;
 
 use crate::avatar::binding::normalize_quat;
-use crate::avatar::gaussians::{sigmoid, GaussianSet};
+use crate::avatar::gaussians::{sh_coefficients, sigmoid, GaussianSet};
 use crate::render::projection::MIN_ALPHA;
 use crate::scene::splats::SplatScene;
 
@@ -66,48 +66,47 @@ pub(super) struct Prepared {
 impl Prepared {
     /// Prepares triangle-bound Gaussians (the editor's composites).
     pub fn of_set(set: &GaussianSet) -> Self {
-        let core = (0..set.len())
-            .into_par_iter()
-            .with_min_len(4096)
-            .map(|i| {
-                Core::new(
-                    set.position[i],
-                    set.binding[i],
-                    set.rotation[i],
-                    set.log_scale[i].exp(),
-                    sigmoid(set.opacity_logit[i]),
-                )
-            })
-            .collect();
-        Self {
-            core,
-            sh: set.sh.clone(),
-            sh_stride: set.sh_stride(),
-            sh_degree: set.sh_degree,
-        }
+        Self::build(set.len(), &set.sh, set.sh_degree, |i| {
+            Core::new(
+                set.position[i],
+                set.binding[i],
+                set.rotation[i],
+                set.log_scale[i].exp(),
+                sigmoid(set.opacity_logit[i]),
+            )
+        })
     }
 
     /// Prepares a world-space scene (rendered on the identity frame) straight
     /// from its scales and opacities, without a round trip through logs.
     pub fn of_scene(scene: &SplatScene) -> Self {
-        let core = (0..scene.len())
-            .into_par_iter()
-            .with_min_len(4096)
-            .map(|i| {
-                Core::new(
-                    scene.position[i],
-                    0,
-                    scene.rotation[i],
-                    scene.scale[i],
-                    scene.opacity[i],
-                )
-            })
-            .collect();
+        Self::build(scene.len(), &scene.sh, scene.sh_degree, |i| {
+            Core::new(
+                scene.position[i],
+                0,
+                scene.rotation[i],
+                scene.scale[i],
+                scene.opacity[i],
+            )
+        })
+    }
+
+    /// `count` records made by `core` in parallel, with a copy of the SH.
+    fn build(
+        count: usize,
+        sh: &[f32],
+        sh_degree: u8,
+        core: impl Fn(usize) -> Core + Sync + Send,
+    ) -> Self {
         Self {
-            core,
-            sh: scene.sh.clone(),
-            sh_stride: scene.sh_stride(),
-            sh_degree: scene.sh_degree,
+            core: (0..count)
+                .into_par_iter()
+                .with_min_len(4096)
+                .map(core)
+                .collect(),
+            sh: sh.to_vec(),
+            sh_stride: 3 * sh_coefficients(sh_degree),
+            sh_degree,
         }
     }
 

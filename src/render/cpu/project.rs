@@ -132,11 +132,11 @@ impl Projector {
         if !self.on_screen(center, bound) {
             return None;
         }
-        let (conic, lambda, det) = self.covariance_2d(g, frame, k, depth, vx, vy)?;
+        let (conic, lambda) = self.covariance_2d(g, frame, k, depth, vx, vy)?;
         let three_sigma = ceil(RADIUS_SIGMAS as f32 * lambda.sqrt());
         let visible = (2.0 * lambda * g.log_visible).sqrt();
         let radius = three_sigma.min(visible * (1.0 + 1e-4) + 1e-3);
-        if !radius.is_finite() || !self.on_screen(center, radius) || det <= 0.0 {
+        if !radius.is_finite() || !self.on_screen(center, radius) {
             return None;
         }
         let rect = pixel_rect(center, radius, self.width, self.height)?;
@@ -163,7 +163,7 @@ impl Projector {
             && center[1] - radius <= self.height
     }
 
-    /// The conic, the larger eigenvalue and the determinant of the dilated
+    /// The conic and the larger eigenvalue of the dilated
     /// 2D covariance J·W·(k R_f L)(k R_f L)ᵀ·Wᵀ·Jᵀ + 0.3 I. With v₀, v₁ the
     /// rows of J·W·k R_f L: a = |v₀|² + d, c = |v₁|² + d, b = v₀·v₁ and
     /// det = |v₀ × v₁|² + d(|v₀|² + |v₁|²) + d² (Lagrange's identity), so
@@ -176,7 +176,7 @@ impl Projector {
         depth: f32,
         vx: f32,
         vy: f32,
-    ) -> Option<([f32; 3], f32, f32)> {
+    ) -> Option<([f32; 3], f32)> {
         let tx = vx.clamp(-self.lim_x, self.lim_x);
         let ty = vy.clamp(-self.lim_y, self.lim_y);
         let w = self.rotation.transpose();
@@ -202,7 +202,7 @@ impl Projector {
         let mid = 0.5 * (a + c);
         let half_gap = 0.5 * (a - c);
         let lambda = mid + (half_gap * half_gap + b * b).max(0.1).sqrt();
-        Some(([c / det, -b / det, a / det], lambda, det))
+        Some(([c / det, -b / det, a / det], lambda))
     }
 }
 
