@@ -1,7 +1,10 @@
-//! Scalar maths for the CPU renderer's inner loops, without calls into libm:
-//! x86-64's baseline has no rounding instruction, so `f32::floor` and
-//! friends are function calls there, and `f32::exp` is far more accurate than
-//! a blend of 8-bit colour needs.
+//! Maths for the CPU renderer's inner loops, scalar and eight lanes wide,
+//! without calls into libm: x86-64's baseline has no rounding instruction, so
+//! `f32::floor` and friends (and `wide`'s lane-wise ones) are function calls
+//! there, and `f32::exp` is far more accurate than a blend of 8-bit colour
+//! needs.
+
+use wide::f32x8;
 
 /// ⌊x⌋ for |x| < 2³¹ (beyond, the result saturates there, which the
 /// callers clamp to the image anyway; NaN gives 0).
@@ -41,6 +44,21 @@ pub fn exp_nonpositive(x: f32) -> f32 {
     p * f32::from_bits(((n as i32 + 127) as u32) << 23)
 }
 
+/// ⌊x⌋ in each lane, for |x| < 2³¹ (callers clamp to the image first);
+/// the same rule as [`floor`], a conversion each way and one compare, where
+/// `wide`'s own falls back to a library call per lane without SSE4.1.
+#[inline]
+pub fn floor_lanes(x: f32x8) -> f32x8 {
+    let t = f32x8::from_i32x8(x.fast_trunc_int());
+    t - t.simd_gt(x).bitselect(f32x8::ONE, f32x8::ZERO)
+}
+
+/// ⌈x⌉ in each lane, on the terms of [`floor_lanes`].
+#[inline]
+pub fn ceil_lanes(x: f32x8) -> f32x8 {
+    -floor_lanes(-x)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -61,6 +79,12 @@ mod tests {
             }
         }
         assert_eq!(floor(f32::NAN), 0.0);
+        for k in -500..500 {
+            let lanes = std::array::from_fn(|i| (k * 8 + i as i32) as f32 * 0.37 - 0.5);
+            let x = f32x8::new(lanes);
+            assert_eq!(floor_lanes(x).to_array(), lanes.map(f32::floor));
+            assert_eq!(ceil_lanes(x).to_array(), lanes.map(f32::ceil));
+        }
         assert_eq!(floor(-1e12), i32::MIN as f32);
     }
 

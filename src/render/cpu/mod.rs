@@ -24,7 +24,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use self::prepared::Prepared;
-use self::project::{Projector, Splat};
+use self::project::{Projector, Splat, LANES};
 use self::raster::{blend_tile, TILE_PIXELS};
 use super::image::RgbImage;
 use super::settings::{RenderSettings, StageTimings};
@@ -128,6 +128,9 @@ fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
+/// Gaussians per parallel task of the projection (a multiple of [`LANES`]).
+const PROJECT_CHUNK: usize = 4096;
+
 /// Projects every Gaussian into `splats` and writes its sort key (zero for
 /// culled ones) into `keys`.
 fn project_all(
@@ -143,32 +146,40 @@ fn project_all(
     let n = prepared.len();
     splats.resize(n, Splat::default());
     keys.resize(n, [0; 4]);
-    let last_frame = frames.len() - 1;
     let world_space = frames.len() == 1 && frames[0] == IDENTITY_FRAME;
+    let frames = (!world_space).then_some(frames);
     splats
-        .par_iter_mut()
-        .zip(keys.par_iter_mut())
-        .zip(prepared.core.par_iter())
+        .par_chunks_mut(PROJECT_CHUNK)
+        .zip(keys.par_chunks_mut(PROJECT_CHUNK))
+        .zip(prepared.core.par_chunks(PROJECT_CHUNK))
         .enumerate()
-        .with_min_len(4096)
-        .for_each(|(i, ((splat, key), g))| {
-            let frame = (!world_space).then(|| &frames[(g.binding as usize).min(last_frame)]);
-            let Some(f) = projector.project(g, frame) else {
-                *key = [0; 4];
-                return;
-            };
-            let dir = f.from_eye.normalize_or_zero();
-            *splat = Splat {
-                rgb: eval_rgb_f32(prepared.sh_of(i), degree, dir.to_array()),
-                ..f.splat
-            };
-            let [x0, y0, x1, y1] = f.splat.rect.map(u32::from);
-            *key = [
-                f.depth.to_bits(),
-                pack_tile(x0 / CPU_TILE, y0 / CPU_TILE),
-                pack_tile(x1 / CPU_TILE, y1 / CPU_TILE),
-                1,
-            ];
+        .for_each(|(chunk, ((splats, keys), cores))| {
+            let batches = splats
+                .chunks_mut(LANES)
+                .zip(keys.chunks_mut(LANES))
+                .zip(cores.chunks(LANES));
+            for (batch, ((splats, keys), cores)) in batches.enumerate() {
+                let first = chunk * PROJECT_CHUNK + batch * LANES;
+                let footprints = projector.project_batch(cores, frames);
+                for (lane, (splat, key)) in splats.iter_mut().zip(keys.iter_mut()).enumerate() {
+                    let Some(f) = footprints[lane] else {
+                        *key = [0; 4];
+                        continue;
+                    };
+                    let dir = f.from_eye.normalize_or_zero();
+                    *splat = Splat {
+                        rgb: eval_rgb_f32(prepared.sh_of(first + lane), degree, dir.to_array()),
+                        ..f.splat
+                    };
+                    let [x0, y0, x1, y1] = f.splat.rect.map(u32::from);
+                    *key = [
+                        f.depth.to_bits(),
+                        pack_tile(x0 / CPU_TILE, y0 / CPU_TILE),
+                        pack_tile(x1 / CPU_TILE, y1 / CPU_TILE),
+                        1,
+                    ];
+                }
+            }
         });
 }
 

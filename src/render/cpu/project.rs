@@ -5,11 +5,15 @@
 //! precision), tested against the near and far planes and, with a bound on
 //! its footprint from its largest scale, against the image; only what is left
 //! gets its 2D covariance (as sums of squares of L·Lᵀ's factor, so f32 does
-//! not cancel) and its colour.
+//! not cancel) and its colour. Everything after the f64 placement runs on
+//! eight Gaussians at once in `wide`'s f32x8 lanes, which the SSE2 baseline
+//! executes as two four-wide halves.
 
 use glam::{DMat3, DVec3, Mat3, Vec3};
 
-use super::fastmath::{ceil, floor};
+use wide::f32x8;
+
+use super::fastmath::{ceil_lanes, floor_lanes};
 use super::prepared::Core;
 use crate::avatar::binding::TriangleFrame;
 use crate::render::projection::{COVARIANCE_DILATION, FRUSTUM_GUARD, RADIUS_SIGMAS};
@@ -75,6 +79,98 @@ pub(super) struct Projector {
     scale_modifier: f32,
 }
 
+/// Gaussians projected together: the covariance and footprint arithmetic
+/// runs on this many lanes at once (`wide`'s f32x8: two SSE registers on
+/// x86-64's baseline, one AVX register where the build enables it).
+pub(super) const LANES: usize = 8;
+
+/// Three lanes-wide coordinates.
+#[derive(Clone, Copy)]
+struct Lanes3 {
+    x: f32x8,
+    y: f32x8,
+    z: f32x8,
+}
+
+impl Lanes3 {
+    fn splat(v: Vec3) -> Self {
+        Self {
+            x: f32x8::splat(v.x),
+            y: f32x8::splat(v.y),
+            z: f32x8::splat(v.z),
+        }
+    }
+
+    fn from_lanes(v: &[Vec3; LANES]) -> Self {
+        Self {
+            x: f32x8::new(v.map(|v| v.x)),
+            y: f32x8::new(v.map(|v| v.y)),
+            z: f32x8::new(v.map(|v| v.z)),
+        }
+    }
+
+    fn dot(self, o: Self) -> f32x8 {
+        self.x * o.x + self.y * o.y + self.z * o.z
+    }
+
+    fn scaled(self, k: f32x8) -> Self {
+        Self {
+            x: self.x * k,
+            y: self.y * k,
+            z: self.z * k,
+        }
+    }
+
+    fn length_squared(self) -> f32x8 {
+        self.dot(self)
+    }
+
+    fn cross(self, o: Self) -> Self {
+        Self {
+            x: self.y * o.z - self.z * o.y,
+            y: self.z * o.x - self.x * o.z,
+            z: self.x * o.y - self.y * o.x,
+        }
+    }
+}
+
+/// A batch's centres placed in view space (per lane, in f64), with what the
+/// lane-wide arithmetic reads; lanes that are already culled hold harmless
+/// numbers and a clear bit in `alive`.
+struct Placed {
+    alive: u32,
+    depth: [f32; LANES],
+    vx: [f32; LANES],
+    vy: [f32; LANES],
+    /// The frame's scale times the scale modifier.
+    k: [f32; LANES],
+    sigma_max: [f32; LANES],
+    log_visible: [f32; LANES],
+    /// Columns of each lane's covariance factor L.
+    factor: [[Vec3; LANES]; 3],
+    /// Columns of each lane's frame rotation (unused for world scenes).
+    frame_rotation: [[Vec3; LANES]; 3],
+    /// World-space centre minus the eye.
+    from_eye: [Vec3; LANES],
+}
+
+impl Placed {
+    fn empty() -> Self {
+        Self {
+            alive: 0,
+            depth: [1.0; LANES],
+            vx: [0.0; LANES],
+            vy: [0.0; LANES],
+            k: [0.0; LANES],
+            sigma_max: [0.0; LANES],
+            log_visible: [0.0; LANES],
+            factor: [[Vec3::ZERO; LANES]; 3],
+            frame_rotation: [[Vec3::ZERO; LANES]; 3],
+            from_eye: [Vec3::ZERO; LANES],
+        }
+    }
+}
+
 impl Projector {
     /// The camera of a frame.
     pub fn new(camera: &Camera, scale_modifier: f32) -> Self {
@@ -103,116 +199,212 @@ impl Projector {
         }
     }
 
-    /// Projects one Gaussian on its frame (`None`: the identity, for
-    /// world-space scenes, which skips the frame's arithmetic); `None` when
-    /// it cannot touch the image (the reference's culls: behind the near
-    /// plane, beyond the far one, degenerate, not finite, or off-screen).
-    pub fn project(&self, g: &Core, frame: Option<&TriangleFrame>) -> Option<Footprint> {
-        if g.opacity <= 0.0 {
-            return None;
+    /// Projects up to [`LANES`] Gaussians, each on its triangle's frame
+    /// (`frames` is `None` for world-space scenes, which skips the frames'
+    /// arithmetic); a lane is `None` when its Gaussian cannot touch the image
+    /// (the reference's culls: behind the near plane, beyond the far one,
+    /// degenerate, not finite, or off-screen).
+    pub fn project_batch(
+        &self,
+        cores: &[Core],
+        frames: Option<&[TriangleFrame]>,
+    ) -> [Option<Footprint>; LANES] {
+        let placed = self.place(cores, frames);
+        let mut out = [None; LANES];
+        if placed.alive == 0 {
+            return out;
         }
-        let world = match frame {
-            Some(f) => f.scale * (f.rotation * g.position) + f.center,
-            None => g.position,
-        };
-        let view = self.rotation64 * world.as_dvec3() + self.translation64;
-        let depth64 = -view.z;
-        if !(depth64 >= f64::from(self.near) && depth64 <= f64::from(self.far)) {
-            return None;
-        }
-        let depth = depth64 as f32;
-        let inv_depth = 1.0 / depth64;
-        let (vx, vy) = ((view.x * inv_depth) as f32, (view.y * inv_depth) as f32);
-        let center = [self.cx + self.fx * vx, self.cy - self.fy * vy];
-        let k = frame.map_or(1.0, |f| f.scale) * self.scale_modifier;
+        let depth = f32x8::new(placed.depth);
+        let vx = f32x8::new(placed.vx);
+        let vy = f32x8::new(placed.vy);
+        let k = f32x8::new(placed.k);
+        let center_x = f32x8::splat(self.cx) + f32x8::splat(self.fx) * vx;
+        let center_y = f32x8::splat(self.cy) - f32x8::splat(self.fy) * vy;
         // A bound on the footprint before any covariance work: 3σ of the
         // largest scale, dilated (√(s² + 2d) ≤ s + √(2d)), rounded up.
-        let sigma_px = self.spread_bound * k.abs() * g.sigma_max / depth;
-        let bound = RADIUS_SIGMAS as f32 * (sigma_px + DILATION_SIGMA_BOUND) + 1.0;
-        if !self.on_screen(center, bound) {
-            return None;
+        let sigma_px =
+            f32x8::splat(self.spread_bound) * k.abs() * f32x8::new(placed.sigma_max) / depth;
+        let bound = f32x8::splat(RADIUS_SIGMAS as f32)
+            * (sigma_px + f32x8::splat(DILATION_SIGMA_BOUND))
+            + f32x8::ONE;
+        let near_image = placed.alive & self.on_screen(center_x, center_y, bound);
+        if near_image == 0 {
+            return out;
         }
-        let (conic, lambda) = self.covariance_2d(g, frame, k, depth, vx, vy)?;
-        let three_sigma = ceil(RADIUS_SIGMAS as f32 * lambda.sqrt());
-        let visible = (2.0 * lambda * g.log_visible).sqrt();
-        let radius = three_sigma.min(visible * (1.0 + 1e-4) + 1e-3);
-        if !radius.is_finite() || !self.on_screen(center, radius) {
-            return None;
+        let (conic, lambda, valid) = self.covariance_2d(&placed, frames.is_some(), depth, vx, vy);
+        let three_sigma = ceil_lanes(f32x8::splat(RADIUS_SIGMAS as f32) * lambda.sqrt());
+        let visible = (f32x8::splat(2.0) * lambda * f32x8::new(placed.log_visible)).sqrt();
+        let radius = three_sigma.min(visible * f32x8::splat(1.0 + 1e-4) + f32x8::splat(1e-3));
+        let finite = radius.is_finite();
+        let radius = finite.bitselect(radius, f32x8::ZERO);
+        let live =
+            near_image & valid & finite.to_bitmask() & self.on_screen(center_x, center_y, radius);
+        let rect = self.pixel_rects(center_x, center_y, radius);
+        let (x, y) = (center_x.to_array(), center_y.to_array());
+        let inv_a = (f32x8::ONE / conic[0]).to_array();
+        let conic = conic.map(f32x8::to_array);
+        for (lane, g) in cores.iter().enumerate() {
+            let rect = rect[lane];
+            if live & (1 << lane) == 0 || rect[0] > rect[2] || rect[1] > rect[3] {
+                continue;
+            }
+            out[lane] = Some(Footprint {
+                splat: Splat {
+                    x: x[lane],
+                    y: y[lane],
+                    conic: [conic[0][lane], conic[1][lane], conic[2][lane]],
+                    inv_a: inv_a[lane],
+                    opacity: g.opacity,
+                    cutoff: -g.log_visible - 1e-6,
+                    rgb: [0.0; 3],
+                    rect: rect.map(|v| v as u16),
+                },
+                depth: placed.depth[lane],
+                from_eye: placed.from_eye[lane],
+            });
         }
-        let rect = pixel_rect(center, radius, self.width, self.height)?;
-        Some(Footprint {
-            splat: Splat {
-                x: center[0],
-                y: center[1],
-                conic,
-                inv_a: 1.0 / conic[0],
-                opacity: g.opacity,
-                cutoff: -g.log_visible - 1e-6,
-                rgb: [0.0; 3],
-                rect,
-            },
-            depth,
-            from_eye: (world.as_dvec3() - self.eye64).as_vec3(),
-        })
+        out
     }
 
-    fn on_screen(&self, center: [f32; 2], radius: f32) -> bool {
-        center[0] + radius >= 0.0
-            && center[0] - radius <= self.width
-            && center[1] + radius >= 0.0
-            && center[1] - radius <= self.height
+    /// Places each lane's centre in view space in f64 (so scenes far from
+    /// the origin keep their precision) and culls against the near and far
+    /// planes; gathers what the lane-wide arithmetic reads.
+    fn place(&self, cores: &[Core], frames: Option<&[TriangleFrame]>) -> Placed {
+        let mut p = Placed::empty();
+        for (lane, g) in cores.iter().enumerate().take(LANES) {
+            if g.opacity <= 0.0 {
+                continue;
+            }
+            let frame = frames.map(|f| &f[(g.binding as usize).min(f.len() - 1)]);
+            let world = match frame {
+                Some(f) => f.scale * (f.rotation * g.position) + f.center,
+                None => g.position,
+            };
+            let view = self.rotation64 * world.as_dvec3() + self.translation64;
+            let depth64 = -view.z;
+            if !(depth64 >= f64::from(self.near) && depth64 <= f64::from(self.far)) {
+                continue;
+            }
+            let inv_depth = 1.0 / depth64;
+            p.alive |= 1 << lane;
+            p.depth[lane] = depth64 as f32;
+            p.vx[lane] = (view.x * inv_depth) as f32;
+            p.vy[lane] = (view.y * inv_depth) as f32;
+            p.k[lane] = frame.map_or(1.0, |f| f.scale) * self.scale_modifier;
+            p.sigma_max[lane] = g.sigma_max;
+            p.log_visible[lane] = g.log_visible;
+            for (column, axis) in p.factor.iter_mut().zip(g.factor) {
+                column[lane] = axis;
+            }
+            if let Some(f) = frame {
+                let axes = [f.rotation.x_axis, f.rotation.y_axis, f.rotation.z_axis];
+                for (column, axis) in p.frame_rotation.iter_mut().zip(axes) {
+                    column[lane] = axis;
+                }
+            }
+            p.from_eye[lane] = (world.as_dvec3() - self.eye64).as_vec3();
+        }
+        p
     }
 
-    /// The conic and the larger eigenvalue of the dilated
-    /// 2D covariance J·W·(k R_f L)(k R_f L)ᵀ·Wᵀ·Jᵀ + 0.3 I. With v₀, v₁ the
+    /// Lanes (as a bitmask) whose square of half-side `radius` around the
+    /// centre overlaps the image.
+    fn on_screen(&self, center_x: f32x8, center_y: f32x8, radius: f32x8) -> u32 {
+        let (w, h) = (f32x8::splat(self.width), f32x8::splat(self.height));
+        ((center_x + radius).simd_ge(f32x8::ZERO)
+            & (center_x - radius).simd_le(w)
+            & (center_y + radius).simd_ge(f32x8::ZERO)
+            & (center_y - radius).simd_le(h))
+        .to_bitmask()
+    }
+
+    /// The conic, the larger eigenvalue of the dilated
+    /// 2D covariance J·W·(k R_f L)(k R_f L)ᵀ·Wᵀ·Jᵀ + 0.3 I, and the lanes
+    /// (bitmask) where it is finite and positive definite. With v₀, v₁ the
     /// rows of J·W·k R_f L: a = |v₀|² + d, c = |v₁|² + d, b = v₀·v₁ and
     /// det = |v₀ × v₁|² + d(|v₀|² + |v₁|²) + d² (Lagrange's identity), so
     /// nothing cancels.
     fn covariance_2d(
         &self,
-        g: &Core,
-        frame: Option<&TriangleFrame>,
-        k: f32,
-        depth: f32,
-        vx: f32,
-        vy: f32,
-    ) -> Option<([f32; 3], f32)> {
-        let tx = vx.clamp(-self.lim_x, self.lim_x);
-        let ty = vy.clamp(-self.lim_y, self.lim_y);
+        placed: &Placed,
+        on_frames: bool,
+        depth: f32x8,
+        vx: f32x8,
+        vy: f32x8,
+    ) -> ([f32x8; 3], f32x8, u32) {
+        let tx = vx
+            .max(f32x8::splat(-self.lim_x))
+            .min(f32x8::splat(self.lim_x));
+        let ty = vy
+            .max(f32x8::splat(-self.lim_y))
+            .min(f32x8::splat(self.lim_y));
         let w = self.rotation.transpose();
+        let wz = Lanes3::splat(w.z_axis);
+        let axis_plus = |axis: Vec3, t: f32x8| {
+            let a = Lanes3::splat(axis);
+            Lanes3 {
+                x: a.x + wz.x * t,
+                y: a.y + wz.y * t,
+                z: a.z + wz.z * t,
+            }
+        };
         // Rows of J·W: J's rows are (fx/z, 0, fx·tx/z) and (0, −fy/z, −fy·ty/z).
-        let j0 = (w.x_axis + w.z_axis * tx) * (self.fx / depth);
-        let j1 = (w.y_axis + w.z_axis * ty) * (-self.fy / depth);
+        let j0 = axis_plus(w.x_axis, tx).scaled(f32x8::splat(self.fx) / depth);
+        let j1 = axis_plus(w.y_axis, ty).scaled(f32x8::splat(-self.fy) / depth);
+        let k = f32x8::new(placed.k);
+        let frame_rotation = placed.frame_rotation.each_ref().map(Lanes3::from_lanes);
+        let factor = placed.factor.each_ref().map(Lanes3::from_lanes);
         // Into the Gaussian's own axes: (J·W·k·R_f·L)ᵀ rows.
-        let to_local = |j: Vec3| {
-            let r = match frame {
-                Some(f) => f.rotation.transpose() * j * k,
-                None => j * k,
+        let to_local = |j: Lanes3| {
+            let r = if on_frames {
+                Lanes3 {
+                    x: frame_rotation[0].dot(j),
+                    y: frame_rotation[1].dot(j),
+                    z: frame_rotation[2].dot(j),
+                }
+                .scaled(k)
+            } else {
+                j.scaled(k)
             };
-            Vec3::new(g.factor[0].dot(r), g.factor[1].dot(r), g.factor[2].dot(r))
+            Lanes3 {
+                x: factor[0].dot(r),
+                y: factor[1].dot(r),
+                z: factor[2].dot(r),
+            }
         };
         let (v0, v1) = (to_local(j0), to_local(j1));
-        let d = COVARIANCE_DILATION as f32;
+        let d = f32x8::splat(COVARIANCE_DILATION as f32);
         let (s0, s1) = (v0.length_squared(), v1.length_squared());
         let (a, b, c) = (s0 + d, v0.dot(v1), s1 + d);
         let det = v0.cross(v1).length_squared() + d * (s0 + s1) + d * d;
-        if !det.is_finite() || det <= 0.0 {
-            return None;
-        }
-        let mid = 0.5 * (a + c);
-        let half_gap = 0.5 * (a - c);
-        let lambda = mid + (half_gap * half_gap + b * b).max(0.1).sqrt();
-        Some(([c / det, -b / det, a / det], lambda))
+        let valid = (det.is_finite() & det.simd_gt(f32x8::ZERO)).to_bitmask();
+        let half = f32x8::splat(0.5);
+        let mid = half * (a + c);
+        let half_gap = half * (a - c);
+        let lambda = mid + (half_gap * half_gap + b * b).max(f32x8::splat(0.1)).sqrt();
+        let inv_det = f32x8::ONE / det;
+        ([c * inv_det, -b * inv_det, a * inv_det], lambda, valid)
     }
-}
 
-/// Inclusive pixel range whose centres lie in the square footprint, clamped
-/// to the image (pixel i's centre is i + 0.5; images are at most 65,536
-/// pixels a side); `None` when empty.
-fn pixel_rect(center: [f32; 2], radius: f32, w: f32, h: f32) -> Option<[u16; 4]> {
-    let x0 = ceil(center[0] - radius - 0.5).max(0.0);
-    let x1 = floor(center[0] + radius - 0.5).min(w - 1.0);
-    let y0 = ceil(center[1] - radius - 0.5).max(0.0);
-    let y1 = floor(center[1] + radius - 0.5).min(h - 1.0);
-    (x0 <= x1 && y0 <= y1).then_some([x0 as u16, y0 as u16, x1 as u16, y1 as u16])
+    /// Each lane's inclusive pixel range whose centres lie in the square
+    /// footprint, clamped to the image (pixel i's centre is i + 0.5); as
+    /// x0, y0, x1, y1, empty where x0 > x1 or y0 > y1. The arguments are
+    /// clamped before rounding (⌈max(v, −1)⌉ = max(⌈v⌉, −1), and so on), so
+    /// footprints far larger than the image round exactly.
+    fn pixel_rects(&self, center_x: f32x8, center_y: f32x8, radius: f32x8) -> [[f32; 4]; LANES] {
+        let half = f32x8::splat(0.5);
+        let low =
+            |c: f32x8| ceil_lanes((c - radius - half).max(f32x8::splat(-1.0))).max(f32x8::ZERO);
+        let high = |c: f32x8, size: f32| {
+            let last = f32x8::splat(size - 1.0);
+            floor_lanes((c + radius - half).min(f32x8::splat(size))).min(last)
+        };
+        let edges = [
+            low(center_x).to_array(),
+            low(center_y).to_array(),
+            high(center_x, self.width).to_array(),
+            high(center_y, self.height).to_array(),
+        ];
+        std::array::from_fn(|lane| edges.map(|e| e[lane]))
+    }
 }
