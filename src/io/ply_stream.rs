@@ -8,6 +8,7 @@
 
 use std::io::Read;
 use std::path::Path;
+use std::sync::Arc;
 
 use glam::{Quat, Vec3};
 use rayon::prelude::*;
@@ -109,7 +110,7 @@ pub fn read_fast(path: &Path, progress: Progress) -> Result<Option<SplatScene>> 
     scene.rotation = vec![Quat::IDENTITY; rows];
     scene.scale = vec![Vec3::ZERO; rows];
     scene.opacity = vec![0.0; rows];
-    scene.sh = vec![0.0; rows * stride];
+    scene.sh = Arc::new(vec![0.0; rows * stride]);
 
     // The body bytes already read, then whole chunks of rows.
     let mut pending: Vec<u8> = head[body.min(head.len())..].to_vec();
@@ -150,7 +151,10 @@ fn decode_rows(
         .zip(scene.rotation[range.clone()].par_iter_mut())
         .zip(scene.scale[range.clone()].par_iter_mut())
         .zip(scene.opacity[range.clone()].par_iter_mut())
-        .zip(scene.sh[first * stride..(first + count) * stride].par_chunks_mut(stride))
+        .zip(
+            Arc::make_mut(&mut scene.sh)[first * stride..(first + count) * stride]
+                .par_chunks_mut(stride),
+        )
         .enumerate()
         .try_for_each(
             |(k, (((((row, position), rotation), scale), opacity), sh))| {

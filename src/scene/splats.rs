@@ -1,5 +1,7 @@
 //! World-space Gaussians ready to render: what the renderers consume.
 
+use std::sync::Arc;
+
 use glam::{Quat, Vec3};
 
 use crate::avatar::binding::{local_to_world, normalize_quat, TriangleFrame};
@@ -24,8 +26,10 @@ pub struct SplatScene {
     pub opacity: Vec<f32>,
     /// SH degree 0..=3.
     pub sh_degree: u8,
-    /// SH coefficients.
-    pub sh: Vec<f32>,
+    /// SH coefficients: three quarters of a degree-3 scene's bytes, so the
+    /// CPU renderer shares them rather than copying (copy-on-write through
+    /// `Arc::make_mut` should anything change them while they are shared).
+    pub sh: Arc<Vec<f32>>,
 }
 
 impl SplatScene {
@@ -67,8 +71,9 @@ impl SplatScene {
         self.opacity.push(opacity);
         let stride = self.sh_stride();
         let take = stride.min(sh.len());
-        self.sh.extend_from_slice(&sh[..take]);
-        self.sh.extend(std::iter::repeat_n(0.0, stride - take));
+        let all = Arc::make_mut(&mut self.sh);
+        all.extend_from_slice(&sh[..take]);
+        all.extend(std::iter::repeat_n(0.0, stride - take));
     }
 
     /// Axis-aligned bounds of the means (None when empty or all non-finite).

@@ -4,6 +4,8 @@
 //! fill one 64-byte record; the colour, read only for Gaussians that survive
 //! culling, lives apart.
 
+use std::sync::Arc;
+
 use glam::{Mat3, Quat, Vec3};
 use rayon::prelude::*;
 
@@ -55,8 +57,9 @@ impl Core {
 pub(super) struct Prepared {
     /// One record per Gaussian.
     pub core: Vec<Core>,
-    /// SH coefficients, coefficient-major `[coef][rgb]`, `sh_stride` per Gaussian.
-    pub sh: Vec<f32>,
+    /// SH coefficients, coefficient-major `[coef][rgb]`, `sh_stride` per
+    /// Gaussian; a world scene's own, shared rather than copied.
+    pub sh: Arc<Vec<f32>>,
     /// Floats of SH per Gaussian.
     pub sh_stride: usize,
     /// The SH degree stored.
@@ -66,7 +69,7 @@ pub(super) struct Prepared {
 impl Prepared {
     /// Prepares triangle-bound Gaussians (the editor's composites).
     pub fn of_set(set: &GaussianSet) -> Self {
-        Self::build(set.len(), &set.sh, set.sh_degree, |i| {
+        Self::build(set.len(), Arc::new(set.sh.clone()), set.sh_degree, |i| {
             Core::new(
                 set.position[i],
                 set.binding[i],
@@ -80,7 +83,7 @@ impl Prepared {
     /// Prepares a world-space scene (rendered on the identity frame) straight
     /// from its scales and opacities, without a round trip through logs.
     pub fn of_scene(scene: &SplatScene) -> Self {
-        Self::build(scene.len(), &scene.sh, scene.sh_degree, |i| {
+        Self::build(scene.len(), Arc::clone(&scene.sh), scene.sh_degree, |i| {
             Core::new(
                 scene.position[i],
                 0,
@@ -91,10 +94,10 @@ impl Prepared {
         })
     }
 
-    /// `count` records made by `core` in parallel, with a copy of the SH.
+    /// `count` records made by `core` in parallel, beside the SH.
     fn build(
         count: usize,
-        sh: &[f32],
+        sh: Arc<Vec<f32>>,
         sh_degree: u8,
         core: impl Fn(usize) -> Core + Sync + Send,
     ) -> Self {
@@ -104,7 +107,7 @@ impl Prepared {
                 .with_min_len(4096)
                 .map(core)
                 .collect(),
-            sh: sh.to_vec(),
+            sh,
             sh_stride: 3 * sh_coefficients(sh_degree),
             sh_degree,
         }
@@ -118,5 +121,28 @@ impl Prepared {
     /// SH coefficients of Gaussian `i`.
     pub fn sh_of(&self, i: usize) -> &[f32] {
         &self.sh[i * self.sh_stride..(i + 1) * self.sh_stride]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A million-Gaussian scene's SH is three quarters of its bytes: the
+    /// upload must share it, and a later edit of the scene must not reach
+    /// what was uploaded.
+    #[test]
+    fn a_world_scene_shares_its_sh_and_edits_copy_on_write() {
+        let mut scene = SplatScene::with_degree(1);
+        let sh: Vec<f32> = (0..12).map(|k| k as f32 * 0.1).collect();
+        scene.push(Vec3::ZERO, Quat::IDENTITY, Vec3::splat(0.1), 0.5, &sh);
+        let prepared = Prepared::of_scene(&scene);
+        assert!(Arc::ptr_eq(&prepared.sh, &scene.sh));
+        assert_eq!(prepared.sh_of(0), &sh[..]);
+
+        scene.push(Vec3::ONE, Quat::IDENTITY, Vec3::splat(0.1), 0.5, &sh);
+        assert_eq!(scene.sh.len(), 24);
+        assert_eq!(prepared.sh.len(), 12);
+        assert_eq!(prepared.sh_of(0), &sh[..]);
     }
 }
