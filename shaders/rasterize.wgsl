@@ -10,6 +10,9 @@
 @group(0) @binding(3) var<storage, read> tile_list: array<u32>;
 // RGBA8 per pixel, row-major.
 @group(0) @binding(4) var<storage, read_write> image: array<u32>;
+// Pixels whose walk ended before their list did without saturating: a driver
+// cut the loop short (llvmpipe allows an invocation 65,535 loop iterations).
+@group(0) @binding(5) var<storage, read_write> cut_short: atomic<u32>;
 
 fn pack(c: vec3<f32>) -> u32 {
     let q = vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(1.0)) * 255.0 + vec3<f32>(0.5));
@@ -28,7 +31,9 @@ fn main(@builtin(workgroup_id) tile: vec3<u32>, @builtin(local_invocation_id) lo
     let py = f32(y) + 0.5;
     var colour = vec3<f32>(0.0);
     var transmittance = 1.0;
-    for (var k = range.x; k < range.y; k++) {
+    var saturated = false;
+    var k = range.x;
+    for (; k < range.y; k++) {
         let i = tile_list[k];
         let p0 = projected[3u * i];
         let d = vec2<f32>(px - p0.x, py - p0.y);
@@ -46,10 +51,14 @@ fn main(@builtin(workgroup_id) tile: vec3<u32>, @builtin(local_invocation_id) lo
         }
         let next = transmittance * (1.0 - alpha);
         if (next < camera.tuning.x) {
+            saturated = true;
             break;
         }
         colour += projected[3u * i + 2u].xyz * (alpha * transmittance);
         transmittance = next;
+    }
+    if (!saturated && k < range.y) {
+        atomicAdd(&cut_short, 1u);
     }
     image[y * camera.size.x + x] = pack(colour + transmittance * camera.extra.yzw);
 }

@@ -231,6 +231,87 @@ fn huge_tiny_zero_scales_and_bad_rotations() {
     check_scene("scales", &scene, &camera, 40.0);
 }
 
+/// Flat Gaussians seen almost edge-on (a trained floor or wall at a grazing
+/// angle), some exactly flat: the 2D covariance is a long, thin ellipse whose
+/// determinant a·c − b² cancels in f32; every renderer must still draw it as
+/// the reference does.
+#[test]
+fn flat_gaussians_seen_edge_on() {
+    let camera = camera_at(Vec3::new(0.0, 0.05, 4.0), Vec3::ZERO, 96, 72, 50.0);
+    let mut scene = SplatScene::with_degree(1);
+    scene.push(
+        Vec3::new(0.0, 0.0, -3.0),
+        Quat::IDENTITY,
+        Vec3::splat(3.0),
+        0.9,
+        &grey_sh(1, 1),
+    );
+    for k in 0..12 {
+        let tilt = 1.5 + 0.006 * k as f32; // the disc's normal near the view's up
+        let centre = Vec3::new(
+            -1.2 + 0.22 * k as f32,
+            -0.2 + 0.03 * k as f32,
+            1.5 - 0.4 * k as f32,
+        );
+        let flatness = [1e-4, 1e-6, 0.0][k % 3];
+        scene.push(
+            centre,
+            Quat::from_rotation_x(tilt) * Quat::from_rotation_z(0.3 * k as f32),
+            Vec3::new(0.6 + 0.1 * k as f32, 2.0, flatness),
+            0.95,
+            &grey_sh(1, k as u32 + 2),
+        );
+    }
+    check_scene("edge-on discs", &scene, &camera, 40.0);
+}
+
+/// A tile whose list is longer than 65,535 entries, with what a pixel shows
+/// at the end of it: lavapipe ends any one shader loop after 65,535
+/// iterations, which once left such pixels as bare background on the GPU
+/// (a dense million-Gaussian scene reaches 130,000 entries in one tile).
+#[test]
+fn a_tile_list_longer_than_a_driver_loop_limit() {
+    let camera = camera_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 32, 32, 40.0);
+    let mut scene = SplatScene::with_degree(0);
+    // In front: 70,000 faint specks over one corner of the first tile…
+    let corner = Vec3::new(-0.39, 0.39, 1.0);
+    for k in 0..70_000 {
+        let jitter = Vec3::new((k % 7) as f32, (k % 5) as f32, (k % 11) as f32) * 1e-4;
+        scene.push(
+            corner + jitter,
+            Quat::IDENTITY,
+            Vec3::splat(1e-5),
+            0.02,
+            &grey_sh(0, k),
+        );
+    }
+    // …and behind them one large Gaussian that every pixel shows.
+    scene.push(
+        Vec3::new(0.0, 0.0, -1.0),
+        Quat::IDENTITY,
+        Vec3::splat(2.0),
+        0.9,
+        &grey_sh(0, 1),
+    );
+    let settings = RenderSettings::default();
+    let reference = render_reference(&scene, &camera, &settings);
+    for (backend, mut r) in renderers() {
+        r.set_world_scene(&scene).unwrap();
+        match r.render_world(&camera, &settings) {
+            Ok(image) => {
+                let p = psnr(&image, &reference).unwrap();
+                assert!(p >= 40.0, "{backend}: PSNR {p:.1} dB against the reference");
+            }
+            // Never a wrong image: a driver that cuts the walk short is named.
+            Err(e) => {
+                let software = r.description().contains("llvmpipe");
+                assert!(backend == "gpu" && software, "{backend}: {e}");
+                assert!(e.to_string().contains("--renderer cpu"), "{e}");
+            }
+        }
+    }
+}
+
 #[test]
 fn opaque_stacks_terminate_early_without_artefacts() {
     let camera = camera_at(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 48, 48, 30.0);

@@ -394,6 +394,13 @@ fn print_renderer(doc: &Value) {
         "size", "median ms", "p90 ms", "FPS", "PSNR dB"
     );
     for r in doc["rows"].as_array().into_iter().flatten() {
+        if let Some(error) = r["error"].as_str() {
+            println!(
+                "{:>10} not drawn: {error}",
+                format!("{}x{}", r["width"], r["height"])
+            );
+            continue;
+        }
         let s = &r["stages_ms"];
         let f = |k: &str| s[k].as_f64().unwrap_or(0.0);
         println!(

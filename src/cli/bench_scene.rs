@@ -109,7 +109,18 @@ pub fn bench_scene(
         let upload_ms = t.elapsed().as_secs_f64() * 1e3;
         let mut rows = Vec::new();
         for (camera, reference, reference_ms) in &references {
-            let image = renderer.render_world(camera, &RenderSettings::default())?;
+            // A device that cannot draw a size is a row of the report, not
+            // the end of the run (the other sizes and renderers still count).
+            let image = match renderer.render_world(camera, &RenderSettings::default()) {
+                Ok(image) => image,
+                Err(e @ Error::Device(_)) => {
+                    rows.push(json!({
+                        "width": camera.width, "height": camera.height, "error": e.to_string(),
+                    }));
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
             let psnr_db = psnr_report(&image, reference).unwrap_or(0.0);
             let (totals, stages) =
                 time_scene(&mut renderer, camera, &RenderSettings::default(), rounds)?;
@@ -120,13 +131,17 @@ pub fn bench_scene(
             }));
         }
         let knobs = match knob_size {
-            Some(size) => early_stop_knobs(
+            Some(size) => match early_stop_knobs(
                 &mut renderer,
                 &orbit.camera(size.0, size.1),
                 &scene,
                 &references,
                 rounds,
-            )?,
+            ) {
+                Ok(knobs) => knobs,
+                Err(Error::Device(_)) => Vec::new(),
+                Err(e) => return Err(e),
+            },
             None => Vec::new(),
         };
         docs.push(json!({

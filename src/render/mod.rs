@@ -158,10 +158,14 @@ impl SplatRenderer {
         }
     }
 
-    /// What renders: adapter name or "CPU".
+    /// What renders: adapter name or "CPU", and anything the device cannot
+    /// draw of what was uploaded.
     pub fn description(&self) -> String {
         match self {
-            SplatRenderer::Gpu(g) => format!("wgpu on {}", g.adapter_description()),
+            SplatRenderer::Gpu(g) => match g.sh_notice() {
+                Some(notice) => format!("wgpu on {} ({notice})", g.adapter_description()),
+                None => format!("wgpu on {}", g.adapter_description()),
+            },
             SplatRenderer::Cpu(_) => {
                 format!("CPU renderer ({} threads)", rayon::current_num_threads())
             }

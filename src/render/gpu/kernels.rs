@@ -131,7 +131,7 @@ kernels! {
     /// Marks where each tile's run of entries starts and ends.
     TilesRanges = "tiles_ranges" { tiles: read, ranges: write }
     /// Blends each 16×16 tile front to back.
-    Rasterize = "rasterize" { projected: read, ranges: read, list: read, image: write }
+    Rasterize = "rasterize" { projected: read, ranges: read, list: read, image: write, cut_short: write }
     /// Packs the RGBA image to RGB bytes for the read-back.
     PackRgb = "pack_rgb" { image: read, packed: write }
     /// The training rasteriser's forward: colour, final transmittance and

@@ -46,6 +46,9 @@ struct CameraUniform {
 struct SceneBuffers {
     count: u32,
     sh_degree: u8,
+    /// The degree the uploaded set carried (more than `sh_degree` when the
+    /// device could not bind all of it).
+    stored_sh_degree: u8,
     sh_stride: u32,
     local: wgpu::Buffer,
     sh: wgpu::Buffer,
@@ -72,6 +75,9 @@ pub struct GpuRenderer {
     image: Growable,
     packed: Growable,
     image_readback: Growable,
+    /// Pixels of the last frame whose walk a driver cut short (read back
+    /// after the image).
+    cut_short: wgpu::Buffer,
     /// Timings of the last frame.
     pub timings: StageTimings,
     /// Wait for the device after every stage so `timings` attribute GPU time to
@@ -130,6 +136,14 @@ impl GpuRenderer {
             "image read-back",
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         );
+        let cut_short = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("walks cut short"),
+            size: 4,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         Ok(Some(Self {
             adapter,
             limits,
@@ -146,9 +160,25 @@ impl GpuRenderer {
             image,
             packed,
             image_readback,
+            cut_short,
             timings: StageTimings::default(),
             profile_stages: false,
         }))
+    }
+
+    /// Why the uploaded Gaussians are drawn with fewer SH bands than they
+    /// carry, when they are: the device binds less than their coefficients.
+    pub fn sh_notice(&self) -> Option<String> {
+        let scene = self.scene.as_ref()?;
+        (scene.sh_degree < scene.stored_sh_degree).then(|| {
+            format!(
+                "SH degree {} of {}: {} Gaussians' coefficients exceed this device's largest storage binding ({} MiB)",
+                scene.sh_degree,
+                scene.stored_sh_degree,
+                scene.count,
+                self.limits.max_storage_buffer_binding_size >> 20
+            )
+        })
     }
 
     /// Name, driver and type of the adapter in use.
@@ -181,10 +211,7 @@ impl GpuRenderer {
             local.extend_from_slice(&[s.x, s.y, s.z, set.opacity_logit[i]]);
         }
         let max_binding = self.limits.max_storage_buffer_binding_size;
-        let mut degree = set.sh_degree;
-        while degree > 0 && (n as u64) * 12 * (degree as u64 + 1).pow(2) > max_binding {
-            degree -= 1;
-        }
+        let degree = sh_degree_that_fits(n, set.sh_degree, max_binding);
         if (n as u64) * 48 > max_binding {
             return Err(Error::input(format!(
                 "{n} Gaussians do not fit this device's largest storage buffer ({max_binding} bytes)"
@@ -222,6 +249,7 @@ impl GpuRenderer {
         self.scene = Some(SceneBuffers {
             count: n as u32,
             sh_degree: degree,
+            stored_sh_degree: set.sh_degree,
             sh_stride: stride as u32,
             local: init("local gaussians", bytemuck::cast_slice(&local), storage),
             sh: init("sh", bytemuck::cast_slice(&sh), storage),
@@ -328,9 +356,11 @@ impl GpuRenderer {
         let packed_bytes = rgb_bytes.next_multiple_of(4);
         self.image.ensure(&self.device, image_bytes);
         self.packed.ensure(&self.device, packed_bytes);
-        self.image_readback.ensure(&self.device, packed_bytes);
+        // The image, then the count of walks cut short.
+        self.image_readback.ensure(&self.device, packed_bytes + 4);
         let pack_groups = (packed_bytes / 4).div_ceil(GROUP as u64) as u32;
         let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(&self.cut_short, 0, None);
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             let camera = self.camera.as_entire_buffer_binding();
@@ -342,6 +372,7 @@ impl GpuRenderer {
                 &self.binning.ranges.buffer,
                 self.binning.list(),
                 &self.image.buffer,
+                &self.cut_short,
                 tiles,
             );
             let columns = pack_groups.min(MAX_GROUPS);
@@ -361,6 +392,13 @@ impl GpuRenderer {
             0,
             packed_bytes,
         );
+        encoder.copy_buffer_to_buffer(
+            &self.cut_short,
+            0,
+            &self.image_readback.buffer,
+            packed_bytes,
+            4,
+        );
         self.queue.submit([encoder.finish()]);
         wait(&self.device)?;
         timings.rasterize = ms(t);
@@ -368,13 +406,26 @@ impl GpuRenderer {
         // Read back: the packed RGB bytes are the image.
         let t = Instant::now();
         let mut pixels = vec![0u8; rgb_bytes as usize];
+        let mut cut_short = 0;
         map_and_read(
             &self.device,
             &self.image_readback.buffer,
-            packed_bytes,
-            |rgb| pixels.copy_from_slice(&rgb[..rgb_bytes as usize]),
+            packed_bytes + 4,
+            |bytes| {
+                pixels.copy_from_slice(&bytes[..rgb_bytes as usize]);
+                let tail = &bytes[packed_bytes as usize..];
+                cut_short = u32::from_le_bytes([tail[0], tail[1], tail[2], tail[3]]);
+            },
         )?;
         timings.readback = ms(t);
+        if cut_short > 0 {
+            // llvmpipe ends an invocation's loops after 65,535 iterations in
+            // all; such pixels would silently show too much background.
+            return Err(Error::device(format!(
+                "{} stopped {cut_short} pixels' walks along their tile lists short (a dense scene: a tile lists more Gaussians than the driver lets one shader loop visit); render it with the CPU renderer (--renderer cpu)",
+                describe_adapter(&self.adapter)
+            )));
+        }
         self.timings = timings;
         Ok(RgbImage {
             width,
@@ -426,8 +477,33 @@ fn camera_uniform(
     }
 }
 
+/// The highest SH degree, up to `stored`, whose coefficients for `count`
+/// Gaussians fit one storage binding of `max_binding` bytes.
+fn sh_degree_that_fits(count: usize, stored: u8, max_binding: u64) -> u8 {
+    (0..=stored)
+        .rev()
+        .find(|&d| count as u64 * 12 * (u64::from(d) + 1).pow(2) <= max_binding)
+        .unwrap_or(0)
+}
+
 #[cfg(test)]
 mod tests {
+    /// lavapipe binds 128 MiB: a million degree-3 Gaussians (192 MB of SH)
+    /// drop to degree 2, 2.7 million to degree 1; a big binding keeps all.
+    #[test]
+    fn sh_bands_are_dropped_only_when_the_binding_is_too_small() {
+        let lavapipe = 128 << 20;
+        assert_eq!(super::sh_degree_that_fits(600_000, 3, lavapipe), 3);
+        assert_eq!(super::sh_degree_that_fits(1_000_000, 3, lavapipe), 2);
+        assert_eq!(super::sh_degree_that_fits(2_700_000, 3, lavapipe), 1);
+        assert_eq!(super::sh_degree_that_fits(20_000_000, 3, lavapipe), 0);
+        assert_eq!(
+            super::sh_degree_that_fits(5_000_000, 3, u64::from(u32::MAX)),
+            3
+        );
+        assert_eq!(super::sh_degree_that_fits(1_000_000, 1, lavapipe), 1);
+    }
+
     use glam::{Quat, Vec3};
     use rand::{Rng, SeedableRng};
 
