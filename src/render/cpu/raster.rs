@@ -2,13 +2,17 @@
 //! pixels whose centres lie both in its square footprint (the reference's
 //! rule) and in the ellipse where α = o·e^power reaches 1/255: a row at a time,
 //! the ellipse's span is solved for, so sub-pixel splats visit the handful of
-//! pixels they reach rather than their whole square. The exponential is a
-//! short polynomial accurate to an f32 step or two (`fastmath.rs`).
+//! pixels they reach rather than their whole square; long spans are blended
+//! eight pixels at a time in f32x8 lanes, bit for bit as one by one. The
+//! exponential is a short polynomial accurate to an f32 step or two
+//! (`fastmath.rs`).
 
 use crate::render::image::quantize;
 use crate::render::projection::{MAX_ALPHA, MIN_ALPHA};
 
-use super::fastmath::{ceil, exp_nonpositive, floor};
+use wide::{f32x8, i32x8};
+
+use super::fastmath::{ceil, exp_nonpositive, exp_nonpositive_lanes, floor};
 use super::project::Splat;
 
 /// Tile edge of the CPU rasteriser.
@@ -17,9 +21,21 @@ pub const CPU_TILE: u32 = 16;
 /// Pixels of one tile.
 pub(super) const TILE_PIXELS: usize = (CPU_TILE * CPU_TILE) as usize;
 
+/// Pixels blended together: a tile row is two lane groups.
+const LANES: usize = 8;
+
+/// Spans of at least this many pixels are blended a lane group at a time;
+/// shorter ones (most splats of a million-Gaussian scene reach one or two
+/// pixels of a row) a pixel at a time, which costs less there. Measured
+/// (`visage bench render`): 3 slowed small images by 12 %, 8 gave back half
+/// of what 5 gains at 640×480.
+const LANE_SPAN: u32 = 5;
+
 /// The running state of a tile's pixels.
 struct TileState {
-    colour: [[f32; 3]; TILE_PIXELS],
+    /// Accumulated colour, one plane per channel (so eight pixels of a row
+    /// load as one lane group).
+    colour: [[f32; TILE_PIXELS]; 3],
     transmittance: [f32; TILE_PIXELS],
     /// Saturated pixels, one bit a pixel, a word a row.
     done: [u16; CPU_TILE as usize],
@@ -39,7 +55,7 @@ pub(super) fn blend_tile(
     let w = (size.0 - origin.0).min(CPU_TILE);
     let h = (size.1 - origin.1).min(CPU_TILE);
     let mut state = TileState {
-        colour: [[0.0; 3]; TILE_PIXELS],
+        colour: [[0.0; TILE_PIXELS]; 3],
         transmittance: [1.0; TILE_PIXELS],
         done: [0; CPU_TILE as usize],
         remaining: w * h,
@@ -56,7 +72,7 @@ pub(super) fn blend_tile(
         for lx in 0..w {
             let p = (ly * CPU_TILE + lx) as usize;
             out[p] = std::array::from_fn(|ch| {
-                quantize(state.colour[p][ch] + state.transmittance[p] * background[ch])
+                quantize(state.colour[ch][p] + state.transmittance[p] * background[ch])
             });
         }
     }
@@ -111,35 +127,190 @@ fn blend_splat(
         if span1 < span0 as f32 {
             continue;
         }
-        let q0 = -0.5 * c * dy * dy;
-        let q1 = -b * dy;
-        let done = &mut state.done[ly as usize];
-        for lx in span0..=span1 as u32 {
-            if *done & (1 << lx) != 0 {
-                continue;
-            }
-            let dx = ox + lx as f32 + 0.5 - s.x;
-            let power = q0 + dx * (q1 - 0.5 * a * dx);
-            if power > 0.0 || power < s.cutoff {
-                continue;
-            }
-            let alpha = (s.opacity * exp_nonpositive(power)).min(MAX_ALPHA as f32);
-            if alpha < MIN_ALPHA as f32 {
-                continue;
-            }
-            let p = (ly * CPU_TILE + lx) as usize;
-            let t = state.transmittance[p];
-            let next = t * (1.0 - alpha);
-            if next < early_stop {
-                *done |= 1 << lx;
-                state.remaining -= 1;
-                continue;
-            }
-            let weight = alpha * t;
-            for (out, rgb) in state.colour[p].iter_mut().zip(s.rgb) {
-                *out += rgb * weight;
-            }
-            state.transmittance[p] = next;
+        let row = Row {
+            ly,
+            span: (span0, span1 as u32),
+            q0: -0.5 * c * dy * dy,
+            q1: -b * dy,
+            ox,
+        };
+        if row.span.1 - row.span.0 + 1 >= LANE_SPAN {
+            blend_row_lanes(state, s, &row, early_stop);
+        } else {
+            blend_row(state, s, &row, early_stop);
         }
+    }
+}
+
+/// One row of a splat's span in a tile, with the row's terms of the
+/// exponent: power(dx) = q0 + dx·(q1 − a·dx/2).
+struct Row {
+    ly: u32,
+    /// First and last pixel of the span (inclusive).
+    span: (u32, u32),
+    q0: f32,
+    q1: f32,
+    /// The tile's left edge in pixels.
+    ox: f32,
+}
+
+/// Blends a row's span a pixel at a time.
+#[inline]
+fn blend_row(state: &mut TileState, s: &Splat, row: &Row, early_stop: f32) {
+    let a = s.conic[0];
+    let done = &mut state.done[row.ly as usize];
+    for lx in row.span.0..=row.span.1 {
+        if *done & (1 << lx) != 0 {
+            continue;
+        }
+        let dx = row.ox + lx as f32 + 0.5 - s.x;
+        let power = row.q0 + dx * (row.q1 - 0.5 * a * dx);
+        if power > 0.0 || power < s.cutoff {
+            continue;
+        }
+        let alpha = (s.opacity * exp_nonpositive(power)).min(MAX_ALPHA as f32);
+        if alpha < MIN_ALPHA as f32 {
+            continue;
+        }
+        let p = (row.ly * CPU_TILE + lx) as usize;
+        let t = state.transmittance[p];
+        let next = t * (1.0 - alpha);
+        if next < early_stop {
+            *done |= 1 << lx;
+            state.remaining -= 1;
+            continue;
+        }
+        let weight = alpha * t;
+        for (plane, rgb) in state.colour.iter_mut().zip(s.rgb) {
+            plane[p] += rgb * weight;
+        }
+        state.transmittance[p] = next;
+    }
+}
+
+/// Blends a row's span eight pixels at a time with exactly the pixel loop's
+/// arithmetic: lane masks stand in for its `continue`s, so every pixel gets
+/// the bits it would get alone.
+#[inline]
+fn blend_row_lanes(state: &mut TileState, s: &Splat, row: &Row, early_stop: f32) {
+    let c = f32x8::splat;
+    let half_a = c(0.5 * s.conic[0]);
+    let span_bits = (u32::MAX >> (31 - row.span.1)) & !((1u32 << row.span.0) - 1);
+    for group in row.span.0 as usize / LANES..=row.span.1 as usize / LANES {
+        let base = group * LANES;
+        let done = &mut state.done[row.ly as usize];
+        let candidates = ((span_bits & !u32::from(*done)) >> base) & 0xFF;
+        if candidates == 0 {
+            continue;
+        }
+        let columns = f32x8::new(std::array::from_fn(|i| (base + i) as f32));
+        let dx = c(row.ox) + columns + c(0.5) - c(s.x);
+        let power = c(row.q0) + dx * (c(row.q1) - half_a * dx);
+        let alpha = (c(s.opacity) * exp_nonpositive_lanes(power)).min(c(MAX_ALPHA as f32));
+        let counts = power.simd_le(f32x8::ZERO)
+            & power.simd_ge(c(s.cutoff))
+            & alpha.simd_ge(c(MIN_ALPHA as f32));
+        let active = candidates & counts.to_bitmask();
+        if active == 0 {
+            continue;
+        }
+        let p = row.ly as usize * CPU_TILE as usize + base;
+        let t = load(&state.transmittance, p);
+        let next = t * (f32x8::ONE - alpha);
+        let saturated = active & next.simd_lt(c(early_stop)).to_bitmask();
+        *done |= (saturated << base) as u16;
+        state.remaining -= saturated.count_ones();
+        let blend = lane_mask(active & !saturated);
+        let weight = alpha * t;
+        for (plane, rgb) in state.colour.iter_mut().zip(s.rgb) {
+            let old = load(plane, p);
+            store(plane, p, blend.bitselect(old + c(rgb) * weight, old));
+        }
+        store(&mut state.transmittance, p, blend.bitselect(next, t));
+    }
+}
+
+/// Eight pixels' values from `p` on.
+#[inline]
+fn load(plane: &[f32; TILE_PIXELS], p: usize) -> f32x8 {
+    let lanes: [f32; LANES] = plane[p..p + LANES].try_into().expect("eight lanes");
+    f32x8::new(lanes)
+}
+
+/// Writes eight pixels' values from `p` on.
+#[inline]
+fn store(plane: &mut [f32; TILE_PIXELS], p: usize, values: f32x8) {
+    plane[p..p + LANES].copy_from_slice(values.as_array());
+}
+
+/// A lane mask (all bits set where `bits` has the lane's bit) for `bitselect`.
+#[inline]
+fn lane_mask(bits: u32) -> f32x8 {
+    let lane_bits = i32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
+    bytemuck::cast((i32x8::splat(bits as i32) & lane_bits).simd_eq(lane_bits))
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::{Rng, SeedableRng};
+
+    use super::*;
+
+    fn empty_state() -> TileState {
+        TileState {
+            colour: [[0.0; TILE_PIXELS]; 3],
+            transmittance: [1.0; TILE_PIXELS],
+            done: [0; CPU_TILE as usize],
+            remaining: TILE_PIXELS as u32,
+        }
+    }
+
+    /// A row blended eight pixels at a time leaves exactly the bits the
+    /// pixel loop leaves: colours, transmittance, saturation and the count of
+    /// pixels left, over random splats (opaque ones included, so pixels
+    /// saturate part-way) and spans that start and end anywhere in the row.
+    #[test]
+    fn lanes_blend_a_row_bit_for_bit_as_the_pixel_loop() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let (mut one, mut eight) = (empty_state(), empty_state());
+        for _ in 0..4_000 {
+            let opacity = if rng.random_bool(0.3) {
+                0.99
+            } else {
+                rng.random_range(0.01..0.9)
+            };
+            let a = rng.random_range(0.01f32..2.0);
+            let s = Splat {
+                x: rng.random_range(14.0..34.0),
+                y: 0.0,
+                conic: [a, 0.0, 1.0],
+                inv_a: 1.0 / a,
+                opacity,
+                cutoff: -(255.0 * opacity).ln() - 1e-6,
+                rgb: [rng.random(), rng.random(), rng.random()],
+                rect: [0; 4],
+            };
+            let first = rng.random_range(0..16u32);
+            let row = Row {
+                ly: rng.random_range(0..16),
+                span: (first, rng.random_range(first..16)),
+                q0: -rng.random_range(0.0f32..3.0),
+                q1: rng.random_range(-1.0..1.0),
+                ox: 16.0,
+            };
+            blend_row(&mut one, &s, &row, 1e-4);
+            blend_row_lanes(&mut eight, &s, &row, 1e-4);
+        }
+        let bits = |plane: &[f32; TILE_PIXELS]| plane.map(f32::to_bits);
+        for (a, b) in one.colour.iter().zip(&eight.colour) {
+            assert_eq!(bits(a), bits(b));
+        }
+        assert_eq!(bits(&one.transmittance), bits(&eight.transmittance));
+        assert_eq!(one.done, eight.done);
+        assert_eq!(one.remaining, eight.remaining);
+        assert!(
+            one.remaining < TILE_PIXELS as u32,
+            "nothing saturated: the test proves less"
+        );
     }
 }
