@@ -78,6 +78,11 @@ pub struct GpuRenderer {
     /// Pixels of the last frame whose walk a driver cut short (read back
     /// after the image).
     cut_short: wgpu::Buffer,
+    /// The frames `scene.world` was last bound on: a world scene's never
+    /// change, so after its first frame only the camera's work is redone.
+    bound_frames: Option<Vec<TriangleFrame>>,
+    /// Times the bind kernel ran (for tests).
+    bind_dispatches: u64,
     /// Timings of the last frame.
     pub timings: StageTimings,
     /// Wait for the device after every stage so `timings` attribute GPU time to
@@ -161,6 +166,8 @@ impl GpuRenderer {
             packed,
             image_readback,
             cut_short,
+            bound_frames: None,
+            bind_dispatches: 0,
             timings: StageTimings::default(),
             profile_stages: false,
         }))
@@ -246,6 +253,7 @@ impl GpuRenderer {
                 mapped_at_creation: false,
             })
         };
+        self.bound_frames = None;
         self.scene = Some(SceneBuffers {
             count: n as u32,
             sh_degree: degree,
@@ -269,6 +277,26 @@ impl GpuRenderer {
         Ok(())
     }
 
+    /// Writes the triangle frames for the bind kernel into `buffer`.
+    fn upload_frames(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        buffer: &mut Growable,
+        frames: &[TriangleFrame],
+    ) {
+        let mut frame_data = Vec::with_capacity(frames.len() * 20);
+        for f in frames {
+            let r = f.rotation;
+            frame_data.extend_from_slice(&[r.x_axis.x, r.x_axis.y, r.x_axis.z, f.scale]);
+            frame_data.extend_from_slice(&[r.y_axis.x, r.y_axis.y, r.y_axis.z, 0.0]);
+            frame_data.extend_from_slice(&[r.z_axis.x, r.z_axis.y, r.z_axis.z, 0.0]);
+            frame_data.extend_from_slice(&[f.center.x, f.center.y, f.center.z, 0.0]);
+            frame_data.extend_from_slice(&[f.quat.w, f.quat.x, f.quat.y, f.quat.z]);
+        }
+        buffer.ensure(device, frame_data.len() as u64 * 4);
+        queue.write_buffer(&buffer.buffer, 0, bytemuck::cast_slice(&frame_data));
+    }
+
     /// Renders the uploaded Gaussians placed on `frames` (one per triangle).
     pub fn render(
         &mut self,
@@ -285,19 +313,10 @@ impl GpuRenderer {
         let uniform = camera_uniform(camera, settings, scene, frames.len() as u32, tiles);
         self.queue
             .write_buffer(&self.camera, 0, bytemuck::bytes_of(&uniform));
-        let mut frame_data = Vec::with_capacity(frames.len() * 20);
-        for f in frames {
-            let r = f.rotation;
-            frame_data.extend_from_slice(&[r.x_axis.x, r.x_axis.y, r.x_axis.z, f.scale]);
-            frame_data.extend_from_slice(&[r.y_axis.x, r.y_axis.y, r.y_axis.z, 0.0]);
-            frame_data.extend_from_slice(&[r.z_axis.x, r.z_axis.y, r.z_axis.z, 0.0]);
-            frame_data.extend_from_slice(&[f.center.x, f.center.y, f.center.z, 0.0]);
-            frame_data.extend_from_slice(&[f.quat.w, f.quat.x, f.quat.y, f.quat.z]);
+        let rebind = self.bound_frames.as_deref() != Some(frames);
+        if rebind {
+            Self::upload_frames(&self.device, &self.queue, &mut self.frames, frames);
         }
-        self.frames
-            .ensure(&self.device, frame_data.len() as u64 * 4);
-        self.queue
-            .write_buffer(&self.frames.buffer, 0, bytemuck::cast_slice(&frame_data));
         timings.upload = ms(t);
 
         // bind + project, then read the keys back.
@@ -308,15 +327,17 @@ impl GpuRenderer {
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             let camera = self.camera.as_entire_buffer_binding();
-            self.bind.dispatch(
-                &self.device,
-                &mut pass,
-                camera.clone(),
-                &scene.local,
-                &self.frames.buffer,
-                &scene.world,
-                (groups, 1),
-            );
+            if rebind {
+                self.bind.dispatch(
+                    &self.device,
+                    &mut pass,
+                    camera.clone(),
+                    &scene.local,
+                    &self.frames.buffer,
+                    &scene.world,
+                    (groups, 1),
+                );
+            }
             self.project.dispatch(
                 &self.device,
                 &mut pass,
@@ -329,6 +350,10 @@ impl GpuRenderer {
             );
         }
         self.queue.submit([encoder.finish()]);
+        if rebind {
+            self.bound_frames = Some(frames.to_vec());
+            self.bind_dispatches += 1;
+        }
         if self.profile_stages {
             wait(&self.device)?;
         }
@@ -514,6 +539,62 @@ mod tests {
 
     /// Kernel level: `bind` places every Gaussian (f32 on the GPU) as the CPU
     /// binding does, degenerate triangles and unnormalised rotations included.
+    /// The bind kernel runs only when the frames change: a camera move (or
+    /// a world scene's every frame after the first) reuses the bound
+    /// Gaussians, and each image equals a fresh renderer's.
+    #[test]
+    fn binding_is_redone_only_when_the_frames_change() {
+        let positions = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
+        let triangles = [[0, 1, 2], [0, 2, 3]];
+        let still = triangle_frames(&positions, &triangles);
+        let moved = triangle_frames(&positions.map(|p| p * 1.2 + Vec3::X * 0.1), &triangles);
+        let mut set = crate::avatar::gaussians::GaussianSet::with_degree(0);
+        for i in 0..200u32 {
+            let t = i as f32 * 0.05;
+            set.push(
+                i % 2,
+                Vec3::new(t.sin(), t.cos(), 0.1) * 0.3,
+                Quat::IDENTITY,
+                Vec3::splat(-3.0),
+                1.0,
+                &[0.5, 0.2, 0.1],
+            );
+        }
+        let settings = RenderSettings::default();
+        let fresh = |frames: &[TriangleFrame], camera: &Camera| {
+            let mut r = GpuRenderer::new().unwrap();
+            r.set_gaussians(&set).unwrap();
+            r.render(frames, camera, &settings).unwrap()
+        };
+        let near = Orbit {
+            radius: 2.0,
+            target: [0.3, 0.3, 0.0],
+            ..Orbit::STUDY
+        }
+        .camera(48, 40);
+        let far = Orbit {
+            radius: 3.0,
+            ..Orbit::STUDY
+        }
+        .camera(48, 40);
+        let mut renderer = GpuRenderer::new().unwrap();
+        renderer.set_gaussians(&set).unwrap();
+        let steps: [(&[TriangleFrame], &Camera, u64); 4] = [
+            (&still, &near, 1),
+            (&still, &far, 1),
+            (&moved, &far, 2),
+            (&still, &far, 3),
+        ];
+        for (k, (frames, camera, binds)) in steps.into_iter().enumerate() {
+            let image = renderer.render(frames, camera, &settings).unwrap();
+            assert_eq!(renderer.bind_dispatches, binds, "step {k}");
+            assert_eq!(image, fresh(frames, camera), "step {k}");
+        }
+        renderer.set_gaussians(&set).unwrap();
+        renderer.render(&still, &far, &settings).unwrap();
+        assert_eq!(renderer.bind_dispatches, 4, "a new upload is bound again");
+    }
+
     #[test]
     fn bind_kernel_matches_the_cpu_binding() {
         let mut renderer = GpuRenderer::new().expect("a wgpu adapter (lavapipe in CI)");
