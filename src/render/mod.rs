@@ -103,7 +103,7 @@ impl SplatRenderer {
     /// Uploads a world-space scene (render it with the identity frame).
     pub fn set_world_scene(&mut self, scene: &crate::scene::splats::SplatScene) -> Result<()> {
         match self {
-            SplatRenderer::Gpu(g) => g.set_gaussians(&scene.as_bound_to_identity()),
+            SplatRenderer::Gpu(g) => g.set_world_scene(scene),
             SplatRenderer::Cpu(c) => {
                 c.set_world_scene(scene);
                 Ok(())

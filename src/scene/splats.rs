@@ -5,7 +5,7 @@ use std::sync::Arc;
 use glam::{Quat, Vec3};
 
 use crate::avatar::binding::{local_to_world, normalize_quat, TriangleFrame};
-use crate::avatar::gaussians::{logit, sh_coefficients, sigmoid, GaussianSet};
+use crate::avatar::gaussians::{sh_coefficients, sigmoid, GaussianSet};
 use crate::scene::camera::{Orbit, UpAxis};
 
 /// Share of the opacity-weighted means left out on each side of each axis
@@ -149,24 +149,6 @@ impl SplatScene {
             ..Orbit::STUDY
         };
         Some(start.framing(lo, hi))
-    }
-
-    /// The scene as Gaussians bound to one identity frame ([`IDENTITY_FRAME`]), so a
-    /// world-space scene goes through the same renderer path as a composite.
-    pub fn as_bound_to_identity(&self) -> GaussianSet {
-        let mut set = GaussianSet::with_degree(self.sh_degree);
-        set.reserve(self.len());
-        for i in 0..self.len() {
-            set.push(
-                0,
-                self.position[i],
-                self.rotation[i],
-                self.scale[i].max(Vec3::splat(1e-30)).ln(),
-                logit(self.opacity[i]),
-                self.sh_of(i),
-            );
-        }
-        set
     }
 
     /// Appends the Gaussians `indices` of a bound set, placed on `frames`.

@@ -77,8 +77,8 @@ impl CpuRenderer {
         self.prepared = Some(Prepared::of_set(set));
     }
 
-    /// Keeps a world-space scene to render on the identity frame (the same
-    /// as uploading `scene.as_bound_to_identity()`, without the round trip).
+    /// Keeps a world-space scene to render on the identity frame, straight
+    /// from its scales and opacities (no round trip through logs).
     pub fn set_world_scene(&mut self, scene: &SplatScene) {
         self.prepared = Some(Prepared::of_scene(scene));
     }

@@ -10,14 +10,17 @@
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
+use glam::{Quat, Vec3};
+use rayon::prelude::*;
 use wgpu::util::DeviceExt;
 
 use super::image::RgbImage;
 use super::settings::{RenderSettings, StageTimings};
 use crate::avatar::binding::TriangleFrame;
-use crate::avatar::gaussians::GaussianSet;
+use crate::avatar::gaussians::{logit, GaussianSet};
 use crate::error::{Error, Result};
 use crate::scene::camera::Camera;
+use crate::scene::splats::SplatScene;
 use binning::GpuBinning;
 use device::{describe_adapter, map_and_read, open_device, wait, Growable, OpenDevice, MAX_GROUPS};
 use kernels::{Bind, PackRgb, Project, Rasterize};
@@ -207,31 +210,47 @@ impl GpuRenderer {
     /// Uploads triangle-bound Gaussians (call when the selection changes). SH above
     /// what fits the device's largest storage binding is truncated.
     pub fn set_gaussians(&mut self, set: &GaussianSet) -> Result<()> {
-        let n = set.len();
-        let mut local = Vec::with_capacity(n * 12);
-        for i in 0..n {
-            let p = set.position[i];
-            let q = set.rotation[i];
-            let s = set.log_scale[i];
-            local.extend_from_slice(&[p.x, p.y, p.z, f32::from_bits(set.binding[i])]);
-            local.extend_from_slice(&[q.w, q.x, q.y, q.z]);
-            local.extend_from_slice(&[s.x, s.y, s.z, set.opacity_logit[i]]);
-        }
+        let local = local_records(set.len(), |i| {
+            (
+                set.position[i],
+                set.binding[i],
+                set.rotation[i],
+                set.log_scale[i],
+                set.opacity_logit[i],
+            )
+        });
+        self.upload(&local, &set.sh, set.sh_degree)
+    }
+
+    /// Uploads a world-space scene (drawn on the identity frame) straight
+    /// from its arrays: the records are made in parallel and its SH is
+    /// uploaded from the scene itself, not from a converted copy.
+    pub fn set_world_scene(&mut self, scene: &SplatScene) -> Result<()> {
+        let local = local_records(scene.len(), |i| {
+            (
+                scene.position[i],
+                0,
+                scene.rotation[i],
+                scene.scale[i].max(Vec3::splat(1e-30)).ln(),
+                logit(scene.opacity[i]),
+            )
+        });
+        self.upload(&local, &scene.sh, scene.sh_degree)
+    }
+
+    /// Makes the scene's buffers from its records (12 floats a Gaussian)
+    /// and its SH of degree `stored_degree`.
+    fn upload(&mut self, local: &[f32], all_sh: &[f32], stored_degree: u8) -> Result<()> {
+        let n = local.len() / 12;
         let max_binding = self.limits.max_storage_buffer_binding_size;
-        let degree = sh_degree_that_fits(n, set.sh_degree, max_binding);
+        let degree = sh_degree_that_fits(n, stored_degree, max_binding);
         if (n as u64) * 48 > max_binding {
             return Err(Error::input(format!(
                 "{n} Gaussians do not fit this device's largest storage buffer ({max_binding} bytes)"
             )));
         }
         let stride = 3 * (degree as usize + 1).pow(2);
-        let sh: Vec<f32> = if degree == set.sh_degree {
-            set.sh.clone()
-        } else {
-            (0..n)
-                .flat_map(|i| set.sh_of(i)[..stride].iter().copied())
-                .collect()
-        };
+        let sh = sh_up_to_degree(all_sh, stored_degree, degree);
         let storage = wgpu::BufferUsages::STORAGE;
         let init = |label, contents: &[u8], usage| {
             self.device
@@ -257,9 +276,9 @@ impl GpuRenderer {
         self.scene = Some(SceneBuffers {
             count: n as u32,
             sh_degree: degree,
-            stored_sh_degree: set.sh_degree,
+            stored_sh_degree: stored_degree,
             sh_stride: stride as u32,
-            local: init("local gaussians", bytemuck::cast_slice(&local), storage),
+            local: init("local gaussians", bytemuck::cast_slice(local), storage),
             sh: init("sh", bytemuck::cast_slice(&sh), storage),
             // COPY_SRC: the kernel tests read it back.
             world: empty(
@@ -502,6 +521,50 @@ fn camera_uniform(
     }
 }
 
+/// The bind kernel's input, 12 floats a Gaussian: position and binding
+/// (its bits), rotation (w, x, y, z), log scale and opacity logit; made in
+/// parallel from what `gaussian(i)` gives.
+fn local_records(
+    count: usize,
+    gaussian: impl Fn(usize) -> (Vec3, u32, Quat, Vec3, f32) + Sync,
+) -> Vec<f32> {
+    let mut local = vec![0.0f32; count * 12];
+    local
+        .par_chunks_mut(12)
+        .enumerate()
+        .for_each(|(i, record)| {
+            let (p, binding, q, s, opacity_logit) = gaussian(i);
+            record.copy_from_slice(&[
+                p.x,
+                p.y,
+                p.z,
+                f32::from_bits(binding),
+                q.w,
+                q.x,
+                q.y,
+                q.z,
+                s.x,
+                s.y,
+                s.z,
+                opacity_logit,
+            ]);
+        });
+    local
+}
+
+/// Each Gaussian's SH coefficients up to `degree` (of the `stored` degree
+/// they carry): the slice itself when nothing is dropped.
+fn sh_up_to_degree(sh: &[f32], stored: u8, degree: u8) -> std::borrow::Cow<'_, [f32]> {
+    if degree >= stored {
+        return sh.into();
+    }
+    let stride = |d: u8| 3 * (usize::from(d) + 1).pow(2);
+    sh.chunks_exact(stride(stored))
+        .flat_map(|g| g[..stride(degree)].iter().copied())
+        .collect::<Vec<f32>>()
+        .into()
+}
+
 /// The highest SH degree, up to `stored`, whose coefficients for `count`
 /// Gaussians fit one storage binding of `max_binding` bytes.
 fn sh_degree_that_fits(count: usize, stored: u8, max_binding: u64) -> u8 {
@@ -515,6 +578,20 @@ fn sh_degree_that_fits(count: usize, stored: u8, max_binding: u64) -> u8 {
 mod tests {
     /// lavapipe binds 128 MiB: a million degree-3 Gaussians (192 MB of SH)
     /// drop to degree 2, 2.7 million to degree 1; a big binding keeps all.
+    /// Dropping bands keeps each Gaussian's lowest coefficients in order;
+    /// keeping them all copies nothing.
+    #[test]
+    fn sh_up_to_a_degree_keeps_each_gaussians_low_bands() {
+        let sh: Vec<f32> = (0..2 * 48).map(|k| k as f32).collect();
+        let kept = super::sh_up_to_degree(&sh, 3, 1);
+        let expected: Vec<f32> = (0..12).chain(48..60).map(|k| k as f32).collect();
+        assert_eq!(&kept[..], &expected[..]);
+        assert!(matches!(
+            super::sh_up_to_degree(&sh, 3, 3),
+            std::borrow::Cow::Borrowed(_)
+        ));
+    }
+
     #[test]
     fn sh_bands_are_dropped_only_when_the_binding_is_too_small() {
         let lavapipe = 128 << 20;
