@@ -19,6 +19,11 @@ pub struct OpenDevice {
     pub limits: wgpu::Limits,
 }
 
+/// Loop iterations llvmpipe (lavapipe) allows one shader invocation, shared
+/// by all its loops (Mesa's `LP_MAX_TGSI_LOOP_ITERATIONS`); past it the loops
+/// end silently. Hardware adapters have no such limit.
+pub const SOFTWARE_LOOP_LIMIT: usize = 65_535;
+
 /// Opens the best adapter (high performance) with the limits every kernel in
 /// `shaders/` needs: `Ok(None)` when `allow_software` is false and the best
 /// adapter is a software one.
