@@ -24,14 +24,18 @@ pub fn ceil(x: f32) -> f32 {
     -floor(-x)
 }
 
+/// ln 2 in two parts (Cody and Waite): n·LN2_HI is exact for the n the
+/// exponentials meet, so the reduced argument keeps its precision.
+const LN2_HI: f32 = 0.693_145_75;
+/// The rest of ln 2 after [`LN2_HI`].
+const LN2_LO: f32 = 1.428_606_8e-6;
+
 /// e^x for x ≤ 0, within 2·10⁻⁷ relative of the exact value: the argument is
 /// split as x = n·ln 2 + r with |r| ≤ ln 2 / 2 (Cody and Waite's two-part
 /// ln 2 keeps r exact), e^r is its degree-6 Taylor polynomial and 2ⁿ is put
 /// into the exponent bits. Arguments below −87 give 0 (as e^x does in f32).
 #[inline]
 pub fn exp_nonpositive(x: f32) -> f32 {
-    const LN2_HI: f32 = 0.693_145_75;
-    const LN2_LO: f32 = 1.428_606_8e-6;
     if x < -87.0 {
         return 0.0;
     }
@@ -49,8 +53,6 @@ pub fn exp_nonpositive(x: f32) -> f32 {
 /// it would get alone).
 #[inline]
 pub fn exp_nonpositive_lanes(x: f32x8) -> f32x8 {
-    const LN2_HI: f32 = 0.693_145_75;
-    const LN2_LO: f32 = 1.428_606_8e-6;
     let c = f32x8::splat;
     let n = floor_lanes(x * c(std::f32::consts::LOG2_E) + c(0.5));
     let r = x - n * c(LN2_HI) - n * c(LN2_LO);
