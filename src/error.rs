@@ -18,6 +18,16 @@ pub enum Error {
     /// The terminal cannot be used or went away (exit 3).
     #[error("{}", one_line(.0))]
     Terminal(String),
+    /// A signal stopped a long job after it saved its work (exit 128 + the
+    /// signal, as shells report it: 130 for SIGINT, 143 for SIGTERM, 129 for
+    /// SIGHUP).
+    #[error("{}", one_line(.message))]
+    Interrupted {
+        /// The signal's number.
+        signal: i32,
+        /// What was saved and how to go on.
+        message: String,
+    },
 }
 
 /// Exit code of [`Error::Device`] and [`Error::Terminal`].
@@ -45,6 +55,7 @@ impl Error {
             Error::Input(_) => 2,
             Error::CheckFailed(_) => 1,
             Error::Device(_) | Error::Terminal(_) => EXIT_ENVIRONMENT,
+            Error::Interrupted { signal, .. } => (128 + signal).clamp(129, 255) as u8,
         }
     }
 }
@@ -73,6 +84,13 @@ mod tests {
         assert_eq!(Error::CheckFailed("x".into()).exit_code(), 1);
         assert_eq!(Error::device("x").exit_code(), 3);
         assert_eq!(Error::terminal("x").exit_code(), 3);
+        let stopped = |signal| Error::Interrupted {
+            signal,
+            message: "saved".into(),
+        };
+        assert_eq!(stopped(libc::SIGINT).exit_code(), 130);
+        assert_eq!(stopped(libc::SIGTERM).exit_code(), 143);
+        assert_eq!(stopped(libc::SIGHUP).exit_code(), 129);
         assert_eq!(
             Error::input("two\nlines\u{1b}[2J").to_string(),
             "two lines[2J"

@@ -497,7 +497,8 @@ fn editing_sessions_on_real_avatars_replay() {
     let mut header = SessionHeader::new(&db, (100, 30), Protocol::Halfblocks);
     header.render = (96, 72);
     let session = dir.join("edit.vsg");
-    let mut recorder = visage::editor::session::Recorder::open(&session, &header).unwrap();
+    std::fs::remove_file(&session).ok();
+    let mut recorder = visage::editor::session::Recorder::create(&session, &header, &[]).unwrap();
     let script = [
         (0, "select-group nose"),
         (0, "select-source bram"),

@@ -20,8 +20,9 @@ use visage::pipeline::workbench::{source_swatches, FrameRequest, Workbench};
 use visage::render::image::{psnr, RgbImage};
 use visage::render::Backend;
 use visage::tui::graphics::{encode_kitty, encode_sixel, KittyTransport, Protocol};
+use visage::tui::help::{draw_help, help_rows, HelpOverlay};
 use visage::tui::keymap::Keymap;
-use visage::tui::view::{draw, layout, InfoPanel, ViewModel};
+use visage::tui::view::{draw, layout, InfoPanel, Screen, ViewModel};
 
 struct Fixture {
     bench: Workbench,
@@ -54,11 +55,22 @@ fn fixture() -> &'static Mutex<Fixture> {
 
 /// Draws the editor for `state` into a TestBackend of the given size (half-blocks).
 fn screen(state: &EditorState, width: u16, height: u16) -> ratatui::buffer::Buffer {
+    screen_with(state, width, height, "", None)
+}
+
+/// [`screen`] with a status line and, optionally, the help overlay on top.
+fn screen_with(
+    state: &EditorState,
+    width: u16,
+    height: u16,
+    status: &str,
+    help: Option<&mut HelpOverlay>,
+) -> ratatui::buffer::Buffer {
     let mut f = fixture().lock().unwrap_or_else(|e| e.into_inner());
     let keymap = Keymap::builtin();
     let mut terminal = Terminal::new(TestBackend::new(width, height)).unwrap();
     let area = ratatui::layout::Rect::new(0, 0, width, height);
-    let image = layout(area).map(|a| {
+    let image = layout(area, Screen::default()).map(|a| {
         let request = FrameRequest {
             recipe: state.recipe.clone(),
             debug: state.debug,
@@ -83,8 +95,21 @@ fn screen(state: &EditorState, width: u16, height: u16) -> ratatui::buffer::Buff
         info: &info,
         protocol: Protocol::Halfblocks,
         image: image.as_ref(),
+        status,
+        prompt: None,
+        screen: Screen::default(),
+        overlay: help.is_some(),
+        journal: None,
     };
-    terminal.draw(|frame| draw(frame, &vm)).unwrap();
+    let rows = help_rows(&keymap, false);
+    terminal
+        .draw(|frame| {
+            draw(frame, &vm);
+            if let Some(h) = help {
+                draw_help(frame, frame.area(), h, &rows);
+            }
+        })
+        .unwrap();
     terminal.backend().buffer().clone()
 }
 
@@ -141,7 +166,7 @@ fn editor_view_shows_panels_and_the_composite_in_half_blocks() {
         assert!(t.contains(needle), "missing {needle:?} in\n{t}");
     }
     // The viewport is drawn in half-blocks, and the head is in it (not just background).
-    let areas = layout(buf.area).unwrap();
+    let areas = layout(buf.area, Screen::default()).unwrap();
     let v = areas.viewport;
     let mut lit = 0;
     for y in v.top()..v.bottom() {
@@ -162,32 +187,80 @@ fn editor_view_shows_panels_and_the_composite_in_half_blocks() {
 }
 
 #[test]
-fn help_overlay_lists_the_keymap_and_tiny_terminals_degrade() {
+fn help_overlay_lists_the_keymap_by_area_and_tiny_terminals_degrade() {
     let catalog = fixture().lock().unwrap().catalog.clone();
-    let mut state = Editor::new(catalog.clone()).state;
-    run(&mut state, &["help"]);
-    let t = text(&screen(&state, 110, 36));
-    assert!(t.contains("keys (from the keymap"));
+    let state = Editor::new(catalog.clone()).state;
+    let t = text(&screen_with(
+        &state,
+        110,
+        36,
+        "",
+        Some(&mut HelpOverlay::default()),
+    ));
+    assert!(t.contains("help: j/k"), "{t}");
     assert!(
-        t.contains("quit") && t.contains("toggle-play") && t.contains("shift-left"),
+        t.contains("editor") && t.contains("quit") && t.contains("selection"),
         "{t}"
     );
     // Commands without a key come from the command table, to type at `:`.
-    let wide = text(&screen(&state, 200, 60));
+    let mut end = HelpOverlay {
+        scroll: usize::MAX,
+        ..HelpOverlay::default()
+    };
+    let wide = text(&screen_with(&state, 200, 60, "", Some(&mut end)));
     assert!(
-        wide.contains(":  set-camera") && wide.contains(":  set-base SOURCE"),
+        wide.contains("set-camera yaw=D") && wide.contains("left drag"),
         "{wide}"
     );
+    // At 80x24 the help still shows whole rows, with where it is in the list.
+    let mut filtered = HelpOverlay::filtered("smoothing");
+    let small = text(&screen_with(&state, 80, 24, "", Some(&mut filtered)));
+    assert!(
+        small.contains("post-processing") && small.contains("set or cycle border smoothing"),
+        "{small}"
+    );
+    assert!(small.contains("filter: smoothing"), "{small}");
     let tiny = text(&screen(&Editor::new(catalog.clone()).state, 30, 8));
     assert!(tiny.contains("visage needs at least"), "{tiny}");
+}
+
+/// At 80 columns the composite panel wraps instead of cutting: the base and
+/// the weights stay readable, and the source strip keeps the selection in view.
+#[test]
+fn the_panel_and_strip_fit_narrow_terminals() {
+    let catalog = fixture().lock().unwrap().catalog.clone();
+    let mut state = Editor::new(catalog.clone()).state;
+    run(
+        &mut state,
+        &[
+            "set-shape eyes ada=0.1 bram=0.2 cleo=0.7",
+            "smoothing crossfade",
+            "colour skin",
+            "select-source elif",
+            "shape-add 0.1",
+            "shape-add 0.1",
+            "shape-add 0.1",
+        ],
+    );
+    let t = text(&screen(&state, 80, 24));
+    assert!(t.contains("cleo 0.7 bram 0.2 ada 0.1"), "{t}");
+    assert!(t.contains("base ada"), "{t}");
+    assert!(t.contains("elif 0.3"), "weights as typed:\n{t}");
+    assert!(!t.contains("0.30000000000000004"), "{t}");
+    assert!(t.contains("elif"), "the selected source shows:\n{t}");
 }
 
 #[test]
 fn control_characters_never_reach_the_screen() {
     let catalog = fixture().lock().unwrap().catalog.clone();
-    let mut state = Editor::new(catalog.clone()).state;
-    state.status = "evil\u{1b}[2Jname\u{7}".into();
-    let t = text(&screen(&state, 110, 36));
+    let state = Editor::new(catalog.clone()).state;
+    let t = text(&screen_with(
+        &state,
+        110,
+        36,
+        "evil\u{1b}[2Jname\u{7}",
+        None,
+    ));
     assert!(t.contains("evil[2Jname") && !t.contains('\u{1b}') && !t.contains('\u{7}'));
 }
 

@@ -23,11 +23,11 @@ use crate::pipeline::workbench::DebugView;
 use crate::pipeline::workbench::{FrameRequest, Workbench};
 use crate::render::image::{psnr_report, RgbImage};
 use crate::render::Backend;
-use crate::tui::app::Collector;
 use crate::tui::graphics::{
     draw_halfblocks, encode_iterm2, encode_kitty, encode_sixel, KittyTransport, Protocol,
 };
-use crate::tui::view::layout;
+use crate::tui::terminal::Collector;
+use crate::tui::view::{layout, Screen};
 
 /// Arguments of `visage bench terminal`.
 #[derive(Args, Debug, Clone)]
@@ -110,7 +110,10 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
     let mut rows = Vec::new();
     let mut latency = Vec::new();
     for &(cols, lines) in &args.terminals {
-        let Some(areas) = layout(Rect::new(0, 0, cols as u16, lines as u16)) else {
+        let Some(areas) = layout(
+            Rect::new(0, 0, cols as u16, lines as u16),
+            Screen::default(),
+        ) else {
             return Err(Error::input(format!(
                 "{cols}x{lines} is smaller than the editor's minimum layout"
             )));

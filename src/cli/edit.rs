@@ -64,15 +64,20 @@ pub struct ViewArgs {
 /// Runs the editor (or, given a scene file, the viewer).
 pub fn run_edit(args: &EditArgs) -> Result<()> {
     let subject = match &args.scene {
-        Some(file) => scene_subject(file, &args.terminal)?,
-        None => Subject::Avatars(args.db.spec()),
+        Some(file) => Some(scene_subject(file, &args.terminal)?),
+        // The built-in database by default: a journal being continued keeps its own.
+        None if args.db.spec() == crate::pipeline::DatabaseSpec::default() => None,
+        None => Some(Subject::Avatars(args.db.spec())),
     };
     run_terminal(subject, &args.terminal)
 }
 
 /// Runs `visage view FILE`.
 pub fn run_view(args: &ViewArgs) -> Result<()> {
-    run_terminal(scene_subject(&args.file, &args.terminal)?, &args.terminal)
+    run_terminal(
+        Some(scene_subject(&args.file, &args.terminal)?),
+        &args.terminal,
+    )
 }
 
 fn scene_subject(file: &std::path::Path, args: &TerminalArgs) -> Result<Subject> {
@@ -84,16 +89,27 @@ fn scene_subject(file: &std::path::Path, args: &TerminalArgs) -> Result<Subject>
     }
     Ok(Subject::Scene(SceneSpec {
         path: file.to_path_buf(),
-        up: args.camera.overrides()?.up.unwrap_or_default(),
+        up: args.camera.overrides()?.up,
     }))
 }
 
-fn run_terminal(subject: Subject, args: &TerminalArgs) -> Result<()> {
+fn run_terminal(subject: Option<Subject>, args: &TerminalArgs) -> Result<()> {
     use std::io::IsTerminal;
     let mut overrides = args.camera.overrides()?;
-    if matches!(subject, Subject::Scene(_)) {
+    if matches!(subject, Some(Subject::Scene(_))) {
         overrides.up = None; // the scene's framed camera has it already
     }
+    // Files the user named are checked before the terminal is, so the real
+    // problem is the one reported.
+    for (flag, file) in [("--session", &args.session), ("--keymap", &args.keymap)] {
+        if let Some(f) = file.as_deref().filter(|f| !f.is_file()) {
+            return Err(Error::input(format!(
+                "{flag} {}: no such file",
+                f.display()
+            )));
+        }
+    }
+    crate::tui::keymap::Keymap::load(args.keymap.as_deref())?;
     if !std::io::stdout().is_terminal() || !std::io::stdin().is_terminal() {
         return Err(Error::input(
             "the editor needs a terminal; for scripts use 'visage replay SESSION' or 'visage render'",

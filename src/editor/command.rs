@@ -45,6 +45,97 @@ pub struct CommandSpec {
     /// Needs an avatar database (edits, groups, sources, animation, the mesh):
     /// a scene view (`visage view FILE`) refuses it.
     pub avatar: bool,
+    /// Handled by the front end (quitting, help, the prompt): it changes
+    /// nothing in the document and is never journalled.
+    pub front: bool,
+    /// What each argument takes, in order (for completion); the last one
+    /// repeats when it takes the rest of the line.
+    pub args: &'static [ArgHint],
+    /// The area of the editor it belongs to (the help overlay's sections).
+    pub area: Area,
+}
+
+/// The areas of the editor, in the order the help overlay shows them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Area {
+    /// Quitting, undo, help and the prompt.
+    Editor,
+    /// Which group and source are selected, and who shows where.
+    Selection,
+    /// Shape weights.
+    Shape,
+    /// Border smoothing and colour correction.
+    PostProcessing,
+    /// Motions, frames, poses and expressions.
+    Animation,
+    /// The camera.
+    Camera,
+    /// Recipes, exports and snapshots.
+    Files,
+    /// Debug views.
+    Debug,
+}
+
+impl Area {
+    /// Every area, in help order.
+    pub const ALL: [Area; 8] = [
+        Area::Editor,
+        Area::Selection,
+        Area::Shape,
+        Area::PostProcessing,
+        Area::Animation,
+        Area::Camera,
+        Area::Files,
+        Area::Debug,
+    ];
+
+    /// The heading the help shows.
+    pub fn name(self) -> &'static str {
+        match self {
+            Area::Editor => "editor",
+            Area::Selection => "selection",
+            Area::Shape => "shape",
+            Area::PostProcessing => "post-processing",
+            Area::Animation => "animation",
+            Area::Camera => "camera",
+            Area::Files => "files",
+            Area::Debug => "debug",
+        }
+    }
+}
+
+/// What an argument takes: what `:` completion offers for it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ArgHint {
+    /// A group name.
+    Group,
+    /// A source name.
+    Source,
+    /// A motion name or `rest`.
+    Motion,
+    /// A joint: jaw, neck or eyes.
+    Joint,
+    /// One of these words.
+    Choice(&'static [&'static str]),
+    /// A file path.
+    Path,
+    /// `SOURCE=WEIGHT` pairs (the rest of the line).
+    Weights,
+    /// `key=value` camera settings (the rest of the line).
+    Camera,
+    /// A command name.
+    Command,
+    /// An image size, `WxH`.
+    Size,
+    /// A number.
+    Number,
+}
+
+impl ArgHint {
+    /// Whether the argument takes the rest of the line (and so repeats).
+    pub fn repeats(self) -> bool {
+        matches!(self, ArgHint::Weights | ArgHint::Camera)
+    }
 }
 
 /// The words of a command line after its name.
@@ -54,6 +145,8 @@ pub type Words<'a> = Peekable<SplitWhitespace<'a>>;
 trait ArgKind {
     /// The argument's value in the command.
     type Value;
+    /// What completion offers for it.
+    const HINT: ArgHint;
     /// Reads the argument; `what` names it in messages.
     fn parse(words: &mut Words, what: &str) -> Result<Self::Value, String>;
     /// Appends the argument's words (none for an absent optional).
@@ -78,15 +171,73 @@ fn finite(word: &str, what: &str) -> Result<f64, String> {
     }
 }
 
-/// One word: a source, motion or path.
-struct Word;
-impl ArgKind for Word {
-    type Value = String;
-    fn parse(words: &mut Words, what: &str) -> Result<String, String> {
-        next_word(words, what).map(str::to_string)
+/// Declares argument kinds that are one word taken as it is, each with what
+/// completion offers for it.
+macro_rules! word_kinds {
+    ($($(#[doc = $doc:expr])* $kind:ident => $hint:expr;)*) => {$(
+        $(#[doc = $doc])*
+        struct $kind;
+        impl ArgKind for $kind {
+            type Value = String;
+            const HINT: ArgHint = $hint;
+            fn parse(words: &mut Words, what: &str) -> Result<String, String> {
+                next_word(words, what).map(str::to_string)
+            }
+            fn write(value: &String, out: &mut Vec<String>) {
+                out.push(value.clone());
+            }
+        }
+    )*};
+}
+
+word_kinds! {
+    /// A source's name (checked against the database when applied).
+    SourceName => ArgHint::Source;
+    /// A motion's name or `rest`.
+    MotionName => ArgHint::Motion;
+    /// A file path.
+    PathWord => ArgHint::Path;
+}
+
+/// An optional command name (`help COMMAND`).
+struct Topic;
+impl ArgKind for Topic {
+    type Value = Option<String>;
+    const HINT: ArgHint = ArgHint::Command;
+    fn parse(words: &mut Words, _: &str) -> Result<Option<String>, String> {
+        Ok(words.next().map(str::to_string))
     }
-    fn write(value: &String, out: &mut Vec<String>) {
-        out.push(value.clone());
+    fn write(value: &Option<String>, out: &mut Vec<String>) {
+        out.extend(value.clone());
+    }
+}
+
+/// Reads an image size written `WxH` (each side 1 to 8192 pixels).
+pub fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let bad = || {
+        format!(
+            "'{}' is not a size: write WxH, e.g. 640x480",
+            crate::text::printable(text)
+        )
+    };
+    let (w, h) = text.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
+    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
+        return Err(format!("{w}x{h}: each side must be 1 to 8192 pixels"));
+    }
+    Ok((w, h))
+}
+
+/// An optional image size, `WxH`.
+struct OptionalSize;
+impl ArgKind for OptionalSize {
+    type Value = Option<(u32, u32)>;
+    const HINT: ArgHint = ArgHint::Size;
+    fn parse(words: &mut Words, _: &str) -> Result<Option<(u32, u32)>, String> {
+        words.next().map(parse_size).transpose()
+    }
+    fn write(value: &Option<(u32, u32)>, out: &mut Vec<String>) {
+        out.extend(value.map(|(w, h)| format!("{w}x{h}")));
     }
 }
 
@@ -94,6 +245,7 @@ impl ArgKind for Word {
 struct GroupName;
 impl ArgKind for GroupName {
     type Value = Group;
+    const HINT: ArgHint = ArgHint::Group;
     fn parse(words: &mut Words, _: &str) -> Result<Group, String> {
         let s = next_word(words, "group")?;
         Group::from_name(s).ok_or_else(|| {
@@ -113,6 +265,7 @@ impl ArgKind for GroupName {
 struct Finite;
 impl ArgKind for Finite {
     type Value = f32;
+    const HINT: ArgHint = ArgHint::Number;
     fn parse(words: &mut Words, what: &str) -> Result<f32, String> {
         Ok(finite(next_word(words, what)?, what)? as f32)
     }
@@ -125,6 +278,7 @@ impl ArgKind for Finite {
 struct Finite64;
 impl ArgKind for Finite64 {
     type Value = f64;
+    const HINT: ArgHint = ArgHint::Number;
     fn parse(words: &mut Words, what: &str) -> Result<f64, String> {
         finite(next_word(words, what)?, what)
     }
@@ -137,6 +291,7 @@ impl ArgKind for Finite64 {
 struct Positive;
 impl ArgKind for Positive {
     type Value = f32;
+    const HINT: ArgHint = ArgHint::Number;
     fn parse(words: &mut Words, what: &str) -> Result<f32, String> {
         let x = finite(next_word(words, what)?, what)?;
         if x <= 0.0 {
@@ -153,6 +308,7 @@ impl ArgKind for Positive {
 struct Integer;
 impl ArgKind for Integer {
     type Value = i64;
+    const HINT: ArgHint = ArgHint::Number;
     fn parse(words: &mut Words, what: &str) -> Result<i64, String> {
         number(next_word(words, what)?, what)
     }
@@ -165,6 +321,7 @@ impl ArgKind for Integer {
 struct Index;
 impl ArgKind for Index {
     type Value = usize;
+    const HINT: ArgHint = ArgHint::Number;
     fn parse(words: &mut Words, what: &str) -> Result<usize, String> {
         number(next_word(words, what)?, what)
     }
@@ -177,6 +334,7 @@ impl ArgKind for Index {
 struct ExpressionSlot;
 impl ArgKind for ExpressionSlot {
     type Value = usize;
+    const HINT: ArgHint = ArgHint::Choice(&["1", "2", "3", "4", "5"]);
     fn parse(words: &mut Words, what: &str) -> Result<usize, String> {
         let k: usize = number(next_word(words, what)?, what)?;
         if !(1..=5).contains(&k) {
@@ -193,6 +351,7 @@ impl ArgKind for ExpressionSlot {
 struct Joint;
 impl ArgKind for Joint {
     type Value = PoseJoint;
+    const HINT: ArgHint = ArgHint::Joint;
     fn parse(words: &mut Words, _: &str) -> Result<PoseJoint, String> {
         let j = next_word(words, "joint")?;
         Ok(match j {
@@ -223,6 +382,7 @@ impl ArgKind for Joint {
 struct Degree;
 impl ArgKind for Degree {
     type Value = Option<u8>;
+    const HINT: ArgHint = ArgHint::Choice(&["0", "1", "2", "3"]);
     fn parse(words: &mut Words, what: &str) -> Result<Option<u8>, String> {
         let Some(word) = words.next() else {
             return Ok(None);
@@ -242,6 +402,7 @@ impl ArgKind for Degree {
 struct Angles;
 impl ArgKind for Angles {
     type Value = [f32; 3];
+    const HINT: ArgHint = ArgHint::Number;
     fn parse(words: &mut Words, _: &str) -> Result<[f32; 3], String> {
         let mut v = [0.0f32; 3];
         for x in &mut v {
@@ -258,6 +419,7 @@ impl ArgKind for Angles {
 struct Weights;
 impl ArgKind for Weights {
     type Value = Vec<(String, f64)>;
+    const HINT: ArgHint = ArgHint::Weights;
     fn parse(words: &mut Words, _: &str) -> Result<Vec<(String, f64)>, String> {
         let mut weights = Vec::new();
         for pair in words.by_ref() {
@@ -280,6 +442,7 @@ impl ArgKind for Weights {
 struct CameraSettings;
 impl ArgKind for CameraSettings {
     type Value = CameraOverrides;
+    const HINT: ArgHint = ArgHint::Camera;
     fn parse(words: &mut Words, _: &str) -> Result<CameraOverrides, String> {
         CameraOverrides::parse(words.by_ref())
     }
@@ -294,6 +457,8 @@ trait Named: Copy + PartialEq + 'static {
     const NAMES: &'static [(Self, &'static str)];
     /// What the option sets, for messages.
     const LABEL: &'static str;
+    /// The names alone, for completion.
+    const WORDS: &'static [&'static str];
 }
 
 impl Named for Smoothing {
@@ -303,6 +468,7 @@ impl Named for Smoothing {
         (Smoothing::Crossfade, "crossfade"),
     ];
     const LABEL: &'static str = "smoothing";
+    const WORDS: &'static [&'static str] = &["off", "thesis", "crossfade"];
 }
 
 impl Named for ColourCorrection {
@@ -312,6 +478,7 @@ impl Named for ColourCorrection {
         (ColourCorrection::Skin, "skin"),
     ];
     const LABEL: &'static str = "colour";
+    const WORDS: &'static [&'static str] = &["off", "thesis", "skin"];
 }
 
 impl Named for AnimationMode {
@@ -320,12 +487,14 @@ impl Named for AnimationMode {
         (AnimationMode::Exact, "exact"),
     ];
     const LABEL: &'static str = "mode";
+    const WORDS: &'static [&'static str] = &["fast", "exact"];
 }
 
 /// An optional named option (left out: cycle or toggle).
 struct Choice<T>(std::marker::PhantomData<T>);
 impl<T: Named> ArgKind for Choice<T> {
     type Value = Option<T>;
+    const HINT: ArgHint = ArgHint::Choice(T::WORDS);
     fn parse(words: &mut Words, _: &str) -> Result<Option<T>, String> {
         let Some(word) = words.next() else {
             return Ok(None);
@@ -359,6 +528,7 @@ macro_rules! has_flag {
     (edit, edit $(, $rest:ident)*) => { true };
     (local, local $(, $rest:ident)*) => { true };
     (avatar, avatar $(, $rest:ident)*) => { true };
+    (front, front $(, $rest:ident)*) => { true };
     ($want:ident, $first:ident $(, $rest:ident)*) => { has_flag!($want $(, $rest)*) };
 }
 
@@ -367,7 +537,8 @@ macro_rules! commands {
     ($(
         $(#[doc = $doc:expr])*
         $variant:ident $( ( $( $field:ident : $ty:ty as $kind:ty ),+ ) )?
-            => $name:literal $(| $alias:literal)*, $synopsis:literal, $summary:literal $(, $flag:ident)* ;
+            => $name:literal $(| $alias:literal)*, $synopsis:literal, $summary:literal,
+            $area:ident $(, $flag:ident)* ;
     )*) => {
         /// A named editor command.
         #[derive(Clone, Debug, PartialEq)]
@@ -383,8 +554,11 @@ macro_rules! commands {
                 synopsis: $synopsis,
                 summary: $summary,
                 edit: has_flag!(edit $(, $flag)*),
-                journal: !has_flag!(local $(, $flag)*),
+                journal: !has_flag!(local $(, $flag)*) && !has_flag!(front $(, $flag)*),
                 avatar: has_flag!(avatar $(, $flag)*) || has_flag!(edit $(, $flag)*),
+                front: has_flag!(front $(, $flag)*),
+                args: &[$( $( <$kind as ArgKind>::HINT ),+ )?],
+                area: Area::$area,
             }, )*
         ];
 
@@ -396,10 +570,7 @@ macro_rules! commands {
                         <$kind as ArgKind>::parse(words, stringify!($field))?
                     ),+ ) )?, )*
                     other => {
-                        return Err(format!(
-                            "unknown command '{}' (type ? for help)",
-                            crate::text::printable(other)
-                        ))
+                        return Err(unknown_command(other))
                     }
                 })
             }
@@ -429,106 +600,167 @@ macro_rules! commands {
     };
 }
 
+/// The message for a name that is no command, with the nearest names when
+/// it looks like a typo.
+fn unknown_command(name: &str) -> String {
+    let near = nearest_names(name);
+    if near.is_empty() {
+        format!(
+            "unknown command '{}' (type ? for help, or Tab to complete)",
+            crate::text::printable(name)
+        )
+    } else {
+        format!(
+            "unknown command '{}': did you mean {}?",
+            crate::text::printable(name),
+            near.join(" or ")
+        )
+    }
+}
+
+/// Command names within a small edit distance of `typed` (typos), or that
+/// start with it, closest first, at most three.
+pub fn nearest_names(typed: &str) -> Vec<&'static str> {
+    let mut scored: Vec<(usize, &'static str)> = COMMANDS
+        .iter()
+        .flat_map(|c| std::iter::once(c.name).chain(c.aliases.iter().copied()))
+        .filter_map(|name| {
+            let d = edit_distance(typed, name);
+            let close = d <= (typed.chars().count() / 3).max(1);
+            (close || (typed.len() >= 3 && name.starts_with(typed))).then_some((d, name))
+        })
+        .collect();
+    scored.sort();
+    scored.dedup_by_key(|(_, n)| *n);
+    scored.into_iter().take(3).map(|(_, n)| n).collect()
+}
+
+/// Levenshtein distance between two short strings.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let above = row[j + 1];
+            row[j + 1] = (above + 1)
+                .min(row[j] + 1)
+                .min(diagonal + usize::from(ca != *cb));
+            diagonal = above;
+        }
+    }
+    row[b.len()]
+}
+
 commands! {
-    /// Leave the editor.
-    Quit => "quit", "", "leave the editor", local;
+    /// Leave the editor (asks first when edits are unsaved).
+    Quit => "quit" | "q", "", "leave the editor (asks first when edits are unsaved)", Editor, front;
+    /// Leave the editor at once, whatever is unsaved.
+    ForceQuit => "quit!" | "q!", "", "leave at once, discarding unsaved edits", Editor, front;
     /// Undo the last edit.
-    Undo => "undo", "", "undo the last edit";
+    Undo => "undo", "", "undo the last edit", Editor;
     /// Redo the last undone edit.
-    Redo => "redo", "", "redo the last undone edit";
-    /// Show or hide the key help.
-    Help => "help", "", "show or hide the key help", local;
+    Redo => "redo", "", "redo the last undone edit", Editor;
+    /// Show or hide the help, or show one command's usage.
+    Help(topic: Option<String> as Topic) => "help", "[COMMAND]", "show the help, or one command's usage", Editor, front;
     /// Open the `:` command prompt.
-    Prompt => "prompt", "", "open the command prompt", local;
+    Prompt => "prompt", "", "open the command prompt", Editor, front;
     /// Select a group in the group list.
-    SelectGroup(group: Group as GroupName) => "select-group", "GROUP", "select a group", avatar;
+    SelectGroup(group: Group as GroupName) => "select-group", "GROUP", "select a group", Selection, avatar;
     /// Move the group cursor down.
-    NextGroup => "next-group", "", "next group", avatar;
+    NextGroup => "next-group", "", "select the next group", Selection, avatar;
     /// Move the group cursor up.
-    PrevGroup => "prev-group", "", "previous group", avatar;
+    PrevGroup => "prev-group", "", "select the previous group", Selection, avatar;
     /// Select a source in the source strip.
-    SelectSource(source: String as Word) => "select-source", "SOURCE", "select a source", avatar;
+    SelectSource(source: String as SourceName) => "select-source", "SOURCE", "select a source", Selection, avatar;
     /// Move the source cursor right.
-    NextSource => "next-source", "", "next source", avatar;
+    NextSource => "next-source", "", "select the next source", Selection, avatar;
     /// Move the source cursor left.
-    PrevSource => "prev-source", "", "previous source", avatar;
+    PrevSource => "prev-source", "", "select the previous source", Selection, avatar;
     /// Show the selected source's Gaussians in the selected group.
-    Assign => "assign", "", "show the selected source's Gaussians in the selected group", edit;
+    Assign => "assign", "", "show the selected source's Gaussians in the selected group", Selection, edit;
     /// Show a source's Gaussians in a group.
-    SetGaussians(group: Group as GroupName, source: String as Word)
-        => "set-gaussians", "GROUP SOURCE", "show a source's Gaussians in a group", edit;
+    SetGaussians(group: Group as GroupName, source: String as SourceName)
+        => "set-gaussians", "GROUP SOURCE", "show a source's Gaussians in a group", Selection, edit;
+    /// Make a source the base avatar.
+    SetBase(source: String as SourceName) => "set-base", "SOURCE", "make a source the base avatar", Selection, edit;
+    /// Make the selected source the base avatar.
+    BaseFromSelected => "base-from-selected", "", "make the selected source the base", Selection, edit;
     /// Set a group's shape weights.
     SetShape(group: Group as GroupName, weights: Vec<(String, f64)> as Weights)
-        => "set-shape", "GROUP SOURCE=W ...", "set a group's shape weights", edit;
+        => "set-shape", "GROUP SOURCE=W ...", "set a group's shape weights", Shape, edit;
     /// Add to the selected source's shape weight in the selected group (others scale to keep the sum 1).
     ShapeAdd(change: f64 as Finite64)
-        => "shape-add", "DELTA", "add to the selected source's shape weight in the selected group", edit;
-    /// Make a source the base avatar.
-    SetBase(source: String as Word) => "set-base", "SOURCE", "make a source the base avatar", edit;
-    /// Make the selected source the base avatar.
-    BaseFromSelected => "base-from-selected", "", "make the selected source the base", edit;
+        => "shape-add", "DELTA", "add to the selected source's weight in the selected group", Shape, edit;
     /// Set (or with `None`, cycle) border smoothing.
     Smoothing(choice: Option<Smoothing> as Choice<Smoothing>)
-        => "smoothing", "[off|thesis|crossfade]", "set or cycle border smoothing", edit;
+        => "smoothing", "[off|thesis|crossfade]", "set or cycle border smoothing", PostProcessing, edit;
     /// Set (or with `None`, cycle) colour correction.
     Colour(choice: Option<ColourCorrection> as Choice<ColourCorrection>)
-        => "colour" | "color", "[off|thesis|skin]", "set or cycle colour correction", edit;
+        => "colour" | "color", "[off|thesis|skin]", "set or cycle colour correction", PostProcessing, edit;
     /// Drive the composite with a motion ("rest" for none).
-    Motion(motion: String as Word) => "motion", "NAME|rest", "drive the composite with a motion", edit;
+    Motion(motion: String as MotionName) => "motion", "NAME|rest", "drive the composite with a motion", Animation, edit;
     /// Switch to the next motion.
-    NextMotion => "next-motion", "", "next motion", edit;
+    NextMotion => "next-motion", "", "switch to the next motion", Animation, edit;
     /// Start playing at 25 FPS.
-    Play => "play", "", "play at 25 FPS", avatar;
+    Play => "play", "", "play at 25 FPS", Animation, avatar;
     /// Stop playing.
-    Pause => "pause", "", "pause", avatar;
+    Pause => "pause", "", "pause", Animation, avatar;
     /// Toggle playing.
-    TogglePlay => "toggle-play", "", "play or pause", avatar;
-    /// Step frames (negative steps back).
-    Step(frames: i64 as Integer) => "step", "N", "step N frames (negative: back)", avatar;
-    /// Go to a frame.
-    Frame(frame: usize as Index) => "frame", "N", "go to frame N", avatar;
+    TogglePlay => "toggle-play", "", "play or pause", Animation, avatar;
+    /// Step frames (negative steps back; wraps around the motion).
+    Step(frames: i64 as Integer) => "step", "N", "step N frames (negative: back)", Animation, avatar;
+    /// Go to a frame of the motion.
+    Frame(frame: usize as Index) => "frame", "N", "go to frame N of the motion", Animation, avatar;
     /// Set (or with `None`, toggle) the animation mode.
     Mode(choice: Option<AnimationMode> as Choice<AnimationMode>)
-        => "mode", "[fast|exact]", "set or toggle the animation mode", edit;
+        => "mode", "[fast|exact]", "set or toggle the animation mode", Animation, edit;
     /// Add an axis-angle rotation (radians) to a joint.
     Pose(joint: PoseJoint as Joint, angles: [f32; 3] as Angles)
-        => "pose", "jaw|neck|eyes X Y Z", "add a rotation (radians) to a joint", edit;
+        => "pose", "jaw|neck|eyes X Y Z", "add a rotation (radians) to a joint", Animation, edit;
     /// Add to one of the first five expression components.
     Expression(component: usize as ExpressionSlot, amount: f32 as Finite)
-        => "expression", "K DELTA", "add to expression component K (1-5)", edit;
+        => "expression", "K DELTA", "add to expression component K (1-5)", Animation, edit;
     /// Clear all pose and expression offsets.
-    ResetPose => "reset-pose", "", "clear pose and expression offsets", edit;
+    ResetPose => "reset-pose", "", "clear pose and expression offsets", Animation, edit;
     /// Orbit the camera (degrees of yaw and pitch).
-    Orbit(yaw: f32 as Finite, pitch: f32 as Finite) => "orbit", "DYAW DPITCH", "orbit the camera (degrees)";
+    Orbit(yaw: f32 as Finite, pitch: f32 as Finite) => "orbit", "DYAW DPITCH", "orbit the camera (degrees)", Camera;
     /// Multiply the camera distance.
-    Zoom(factor: f32 as Positive) => "zoom", "FACTOR", "multiply the camera distance";
-    /// Back to the default camera.
-    CameraReset => "camera-reset", "", "back to the default camera";
+    Zoom(factor: f32 as Positive) => "zoom", "FACTOR", "multiply the camera distance", Camera;
+    /// Back to the framed camera (keeping the chosen up axis).
+    CameraReset => "camera-reset", "", "back to the framed camera (keeps the up axis)", Camera;
     /// Toggle the thesis study limits (±45° yaw, ±15° pitch, radius 2.5).
-    CameraStudy => "camera-study", "", "toggle the thesis study camera limits", avatar;
+    CameraStudy => "camera-study", "", "toggle the thesis study camera limits", Camera, avatar;
     /// Set parts of the camera (target, radius, field of view, up axis, angles).
     SetCamera(settings: CameraOverrides as CameraSettings)
-        => "set-camera", "yaw=D pitch=D radius=R fov=D target=X,Y,Z up=+y|-y|+z|-z", "set parts of the camera";
+        => "set-camera", "yaw=D pitch=D radius=R fov=D target=X,Y,Z up=+y|-y|+z|-z", "set parts of the camera", Camera;
+    /// Turn the world's up axis upside down (+y and -y, +z and -z): for
+    /// captures that open upside down.
+    FlipUp => "flip-up", "", "turn the up axis upside down (y-down captures)", Camera;
     /// Move the camera and its target together (fractions of the orbit radius
     /// along the view direction, to the right and up on screen): free flight.
     Fly(forward: f32 as Finite, right: f32 as Finite, up: f32 as Finite)
-        => "fly", "FORWARD RIGHT UP", "move the camera and its target (fractions of the radius)";
+        => "fly", "FORWARD RIGHT UP", "move the camera and its target (fractions of the radius)", Camera;
     /// Turn the camera where it stands (degrees; positive turns right and up).
-    Look(yaw: f32 as Finite, pitch: f32 as Finite) => "look", "DYAW DPITCH", "turn the camera where it stands (degrees)";
+    Look(yaw: f32 as Finite, pitch: f32 as Finite) => "look", "DYAW DPITCH", "turn the camera where it stands (degrees)", Camera;
     /// Set (or with `None`, cycle down) the highest SH degree drawn.
-    ShDegree(degree: Option<u8> as Degree) => "sh-degree", "[0-3]", "set or cycle the SH degree drawn";
+    ShDegree(degree: Option<u8> as Degree) => "sh-degree", "[0-3]", "set or cycle the SH degree drawn", Debug;
     /// Multiply the debug Gaussian scale.
-    DebugScale(factor: f32 as Positive) => "debug-scale", "FACTOR", "multiply the Gaussian scale (debug view)";
+    DebugScale(factor: f32 as Positive) => "debug-scale", "FACTOR", "multiply every Gaussian's scale (debug view)", Debug;
     /// Toggle the mesh overlay.
-    ToggleMesh => "toggle-mesh", "", "toggle the mesh overlay", avatar;
+    ToggleMesh => "toggle-mesh", "", "draw the mesh instead of the Gaussians", Debug, avatar;
     /// Toggle highlighting the selected group's regions.
-    ToggleHighlight => "toggle-highlight", "", "toggle highlighting the selected group", avatar;
+    ToggleHighlight => "toggle-highlight", "", "highlight the selected group (Gaussians or mesh)", Debug, avatar;
     /// Write the recipe to a TOML file.
-    SaveRecipe(path: String as Word) => "save-recipe", "PATH", "write the recipe as TOML", avatar;
-    /// Write the current frame as a standard 3DGS PLY.
-    ExportPly(path: String as Word) => "export-ply", "PATH", "write the current frame as a 3DGS PLY";
-    /// Write the current view as a PNG.
-    Snapshot(path: String as Word) => "snapshot", "PATH", "write the current view as a PNG";
+    SaveRecipe(path: String as PathWord) => "save-recipe", "PATH", "write the recipe as TOML", Files, avatar;
+    /// Write the current frame as a 3DGS scene, in the format the path's
+    /// extension names (.ply, .compressed.ply, .splat, .spz).
+    ExportPly(path: String as PathWord) => "export-ply", "PATH", "write the current frame as a 3DGS scene (.ply .splat .spz …)", Files;
+    /// Write the current view as a PNG, at the session's render size unless
+    /// a size is given.
+    Snapshot(path: String as PathWord, size: Option<(u32, u32)> as OptionalSize)
+        => "snapshot", "PATH [WxH]", "write the view as a PNG (default: the session's render size)", Files;
 }
 
 impl Command {
@@ -536,12 +768,16 @@ impl Command {
     pub fn parse(line: &str) -> Result<Command, String> {
         let mut words = line.split_whitespace().peekable();
         let name = words.next().ok_or("empty command")?;
-        let command = Command::parse_arguments(name, &mut words)?;
+        let with_usage = |e: String| match CommandSpec::find(name) {
+            Some(spec) => format!("{}: {e} (usage: {})", spec.name, spec.usage()),
+            None => e,
+        };
+        let command = Command::parse_arguments(name, &mut words).map_err(with_usage)?;
         if let Some(extra) = words.next() {
-            return Err(format!(
-                "{name}: unexpected argument '{}'",
+            return Err(with_usage(format!(
+                "unexpected argument '{}'",
                 crate::text::printable(extra)
-            ));
+            )));
         }
         Ok(command)
     }
@@ -568,13 +804,22 @@ impl fmt::Display for Command {
     }
 }
 
-/// Command names starting with `prefix` (for prompt completion).
-pub fn complete(prefix: &str) -> Vec<&'static str> {
-    COMMANDS
-        .iter()
-        .map(|c| c.name)
-        .filter(|n| n.starts_with(prefix))
-        .collect()
+impl CommandSpec {
+    /// The command's usage line: name and arguments.
+    pub fn usage(&self) -> String {
+        if self.synopsis.is_empty() {
+            self.name.to_string()
+        } else {
+            format!("{} {}", self.name, self.synopsis)
+        }
+    }
+
+    /// The table entry named `name` (or one of its aliases).
+    pub fn find(name: &str) -> Option<&'static CommandSpec> {
+        COMMANDS
+            .iter()
+            .find(|c| c.name == name || c.aliases.contains(&name))
+    }
 }
 
 #[cfg(test)]
@@ -585,9 +830,11 @@ mod tests {
     fn every_listed_command_round_trips_through_text() {
         let samples = [
             "quit",
+            "quit!",
             "undo",
             "redo",
             "help",
+            "help set-shape",
             "prompt",
             "select-group eyes",
             "next-group",
@@ -621,6 +868,7 @@ mod tests {
             "zoom 0.9",
             "camera-reset",
             "camera-study",
+            "flip-up",
             "set-camera target=0,0.1,-0.25 radius=3 fov=20 up=-y yaw=-30 pitch=5",
             "fly 0.1 -0.05 0",
             "look 5 -2",
@@ -632,6 +880,7 @@ mod tests {
             "save-recipe out.toml",
             "export-ply out.ply",
             "snapshot view.png",
+            "snapshot view.png 640x480",
         ];
         for s in samples {
             let c = Command::parse(s).unwrap_or_else(|e| panic!("{s}: {e}"));
@@ -708,8 +957,54 @@ mod tests {
     }
 
     #[test]
-    fn completion_lists_matching_names() {
-        assert_eq!(complete("sna"), vec!["snapshot"]);
-        assert!(complete("set-").len() >= 3);
+    fn typos_suggest_the_nearest_commands() {
+        let e = Command::parse("smoothng thesis").unwrap_err();
+        assert!(e.contains("did you mean smoothing"), "{e}");
+        let e = Command::parse("snapshto a.png").unwrap_err();
+        assert!(e.contains("snapshot"), "{e}");
+        let e = Command::parse("xyzzy").unwrap_err();
+        assert!(e.contains("type ? for help"), "{e}");
+        assert_eq!(Command::parse("q").unwrap(), Command::Quit);
+        assert_eq!(Command::parse("q!").unwrap(), Command::ForceQuit);
+    }
+
+    #[test]
+    fn argument_errors_show_the_usage() {
+        let e = Command::parse("set-gaussians nose").unwrap_err();
+        assert!(
+            e.contains("missing source") && e.contains("usage: set-gaussians GROUP SOURCE"),
+            "{e}"
+        );
+        let e = Command::parse("snapshot a.png big").unwrap_err();
+        assert!(e.contains("WxH"), "{e}");
+        assert_eq!(parse_size("640x480"), Ok((640, 480)));
+        assert!(parse_size("0x4").is_err());
+    }
+
+    #[test]
+    fn every_command_has_an_area_and_argument_hints() {
+        for spec in COMMANDS {
+            let words = spec
+                .synopsis
+                .split_whitespace()
+                .filter(|w| *w != "...")
+                .count();
+            let repeats = spec.args.last().is_some_and(|a| a.repeats());
+            assert!(
+                repeats || words == spec.args.len() || spec.name == "pose",
+                "{}: synopsis '{}' against {} argument hints",
+                spec.name,
+                spec.synopsis,
+                spec.args.len()
+            );
+            assert!(!spec.front || !spec.journal, "{}", spec.name);
+        }
+        for area in Area::ALL {
+            assert!(
+                COMMANDS.iter().any(|c| c.area == area),
+                "no command in {}",
+                area.name()
+            );
+        }
     }
 }

@@ -4,6 +4,8 @@
 //! terminal front end (the `tui` module) and replay drive the same [`Editor`].
 
 pub mod command;
+pub mod complete;
+pub mod journal;
 pub mod pacing;
 pub mod replay;
 pub mod session;
@@ -16,7 +18,7 @@ use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
 use crate::pipeline::workbench::{FrameRequest, Workbench};
 use command::Command;
-use state::{Catalog, EditorState, Effect};
+use state::{Applied, Catalog, EditorState, Effect};
 
 /// The editor's state on a clock of logical ticks: what the live editor and
 /// headless replay both drive, one command at a time.
@@ -70,8 +72,9 @@ impl Editor {
         }
     }
 
-    /// Runs one command: the state's update, returning the effects it asks for.
-    pub fn step(&mut self, command: &Command) -> std::result::Result<Vec<Effect>, String> {
+    /// Runs one command: the state's update, returning the effects it asks
+    /// for and what it has to say.
+    pub fn step(&mut self, command: &Command) -> std::result::Result<Applied, String> {
         self.state.apply(&self.catalog, command)
     }
 
@@ -100,7 +103,8 @@ pub struct Performed {
 /// Performs an effect of a command — the one executor the live editor (on its
 /// render thread) and replay share. `place` maps the path the command named to
 /// the file to write (replay puts everything into its `--out` folder); `view`
-/// is the frame the editor shows, for snapshots.
+/// is the frame the editor shows at the session's render size, which a
+/// snapshot takes unless it names its own size.
 pub fn perform(
     effect: &Effect,
     recipe: &Recipe,
@@ -126,9 +130,15 @@ pub fn perform(
                 path,
             })
         }
-        Effect::Snapshot(p) => {
+        Effect::Snapshot(p, size) => {
             let path = place(p);
-            let image = bench.snapshot(view, &path)?;
+            let (width, height) = size.unwrap_or((view.width, view.height));
+            let sized = FrameRequest {
+                width,
+                height,
+                ..view.clone()
+            };
+            let image = bench.snapshot(&sized, &path)?;
             Ok(Performed {
                 message: format!(
                     "wrote {}x{} snapshot {}",

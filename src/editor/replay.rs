@@ -25,8 +25,6 @@ pub fn replay_commands(session: &Session, editor: &mut Editor) -> usize {
             }
         }
     }
-    editor.state.quit = false;
-    editor.state.prompt = None;
     failed
 }
 
@@ -100,9 +98,9 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
             Action::Command(c) => {
                 report.commands += 1;
                 match editor.step(c) {
-                    Ok(effects) => {
+                    Ok(applied) => {
                         let Some(dir) = out else { continue };
-                        for effect in effects {
+                        for effect in applied.effects {
                             let view = editor.frame_request(w, h, true);
                             let done = perform(
                                 &effect,
@@ -114,7 +112,7 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
                             .map_err(|e| {
                                 Error::input(format!("{}:{}: {e}", path.display(), line.line))
                             })?;
-                            if matches!(effect, Effect::Snapshot(_)) {
+                            if matches!(effect, Effect::Snapshot(..)) {
                                 report.snapshots.push(done.path.display().to_string());
                             }
                         }

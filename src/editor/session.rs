@@ -71,6 +71,10 @@ impl Protocol {
 /// Version written in the first line.
 pub const SESSION_VERSION: u32 = 1;
 
+/// The render size new sessions record (snapshots default to it, live and
+/// in replay); sessions without a `render` line keep 160x120.
+pub const NEW_SESSION_RENDER: (u32, u32) = (640, 480);
+
 /// Logical ticks per second.
 pub const TICKS_PER_SECOND: u64 = 25;
 
@@ -120,7 +124,7 @@ impl SessionHeader {
             scene: None,
             terminal,
             graphics,
-            render: (160, 120),
+            render: NEW_SESSION_RENDER,
         }
     }
 
@@ -162,7 +166,7 @@ impl SessionHeader {
                 out,
                 "scene {} up={}",
                 quote(&scene.path.display().to_string()),
-                scene.up.name()
+                scene.up.unwrap_or_default().name()
             )?;
             return self.write_view(out);
         }
@@ -260,6 +264,38 @@ impl Session {
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::input(format!("cannot read session {}: {e}", path.display())))?;
         Session::parse(&text, &path.display().to_string())
+    }
+
+    /// Reads a journal, which a kill may have cut in the middle of its last
+    /// line: that line (without its newline) is dropped. Returns the session
+    /// and the length in bytes of its whole lines.
+    pub fn load_journal(path: &Path) -> Result<(Session, u64)> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::input(format!("cannot read session {}: {e}", path.display())))?;
+        let whole = if text.ends_with('\n') {
+            text.len()
+        } else {
+            text.rfind('\n').map_or(0, |i| i + 1)
+        };
+        let session = Session::parse(&text[..whole], &path.display().to_string())?;
+        Ok((session, whole as u64))
+    }
+
+    /// Edits (and undos or redos) after the last `save-recipe`: what quitting
+    /// now would lose.
+    pub fn unsaved_edits(&self) -> usize {
+        let mut count = 0;
+        for line in &self.lines {
+            if let Action::Command(c) = &line.action {
+                match c {
+                    Command::SaveRecipe(_) => count = 0,
+                    Command::Undo | Command::Redo => count += 1,
+                    c if c.is_edit() => count += 1,
+                    _ => {}
+                }
+            }
+        }
+        count
     }
 
     /// Parses session text; `name` labels errors (`name:line: problem`).
@@ -438,7 +474,7 @@ fn parse_scene(rest: &str) -> std::result::Result<SceneSpec, String> {
             )
         })?;
     }
-    Ok(SceneSpec { path, up })
+    Ok(SceneSpec { path, up: Some(up) })
 }
 
 fn parse_expectation(text: &str) -> std::result::Result<Expectation, String> {
@@ -468,42 +504,114 @@ fn parse_expectation(text: &str) -> std::result::Result<Expectation, String> {
     }
 }
 
-/// Appends commands to a session file, one flushed line each.
+/// Journals commands into a session file, one synced line each, holding an
+/// exclusive lock on the file while it records (a second editor recording the
+/// same file is refused rather than interleaved).
 pub struct Recorder {
     file: File,
+    path: PathBuf,
 }
 
 impl Recorder {
-    /// Starts a new file with `header`, or appends to an existing session file
-    /// (its header is kept).
-    pub fn open(path: &Path, header: &SessionHeader) -> Result<Recorder> {
-        let existing = path.exists()
-            && std::fs::metadata(path)
-                .map(|m| m.len() > 0)
-                .unwrap_or(false);
-        if existing {
-            Session::load(path)?;
+    /// Starts a new journal at `path` with `header`, seeded with the commands
+    /// of `seed` (a session replayed before recording began, so that the
+    /// journal replays to what the screen shows). Refuses a file that already
+    /// holds a session: continuing one is [`Recorder::append`].
+    pub fn create(path: &Path, header: &SessionHeader, seed: &[SessionLine]) -> Result<Recorder> {
+        if std::fs::metadata(path).is_ok_and(|m| m.len() > 0) {
+            return Err(Error::input(format!(
+                "{} already holds a session: continue it with --record {0} alone, or record into a new file",
+                path.display()
+            )));
         }
-        let mut file = OpenOptions::new()
+        let file = OpenOptions::new()
             .create(true)
             .append(true)
             .open(path)
             .map_err(|e| Error::input(format!("cannot record to {}: {e}", path.display())))?;
-        if !existing {
-            header
-                .write(&mut file)
-                .and_then(|_| file.sync_data())
-                .map_err(|e| Error::input(format!("cannot record to {}: {e}", path.display())))?;
+        let mut recorder = Recorder::locked(file, path)?;
+        let mut text = Vec::new();
+        header
+            .write(&mut text)
+            .expect("writing into memory cannot fail");
+        for line in seed {
+            if let Action::Command(c) = &line.action {
+                if c.journalled() {
+                    writeln!(text, "{} {c}", line.tick).expect("writing into memory cannot fail");
+                }
+            }
         }
-        Ok(Recorder { file })
+        recorder
+            .file
+            .write_all(&text)
+            .and_then(|_| recorder.file.sync_data())
+            .map_err(|e| Error::input(format!("cannot record to {}: {e}", path.display())))?;
+        Ok(recorder)
     }
 
-    /// Journals a command run at `tick` and flushes it to disk.
+    /// Continues the journal at `path`: reads it (a last line cut short by a
+    /// kill is dropped from the file) and returns it with a recorder that
+    /// appends after it.
+    pub fn append(path: &Path) -> Result<(Recorder, Session)> {
+        let file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(path)
+            .map_err(|e| Error::input(format!("cannot record to {}: {e}", path.display())))?;
+        let mut recorder = Recorder::locked(file, path)?;
+        let (session, whole) = Session::load_journal(path)?;
+        let io =
+            |e: std::io::Error| Error::input(format!("cannot record to {}: {e}", path.display()));
+        recorder.file.set_len(whole).map_err(io)?;
+        std::io::Seek::seek(&mut recorder.file, std::io::SeekFrom::End(0)).map_err(io)?;
+        Ok((recorder, session))
+    }
+
+    fn locked(file: File, path: &Path) -> Result<Recorder> {
+        use std::os::fd::AsRawFd;
+        // SAFETY: flock on a file descriptor this function owns through `file`.
+        let locked = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0;
+        if !locked {
+            return Err(Error::input(format!(
+                "{} is being recorded by another visage: record into another file",
+                path.display()
+            )));
+        }
+        Ok(Recorder {
+            file,
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// The journal's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Journals a command run at `tick` and syncs it to disk.
     pub fn record(&mut self, tick: u64, command: &Command) -> std::io::Result<()> {
         writeln!(self.file, "{tick} {command}")?;
         self.file.flush()?;
         self.file.sync_data()
     }
+
+    /// Marks the journal as ended by the user (`# closed REASON`): the next
+    /// start does not offer to recover it.
+    pub fn close(mut self, reason: &str) -> std::io::Result<()> {
+        writeln!(self.file, "{CLOSED_MARK} {reason}")?;
+        self.file.sync_data()
+    }
+}
+
+/// The comment that ends a journal the user closed.
+pub const CLOSED_MARK: &str = "# closed";
+
+/// Whether a journal's last line says the user closed it.
+pub fn is_closed(text: &str) -> bool {
+    text.lines()
+        .rev()
+        .find(|l| !l.trim().is_empty())
+        .is_some_and(|l| l.trim_start().starts_with(CLOSED_MARK))
 }
 
 /// A header value as written: bare, or in double quotes (with `\"` and `\\`)
@@ -564,20 +672,43 @@ mod tests {
         let path = std::env::temp_dir().join(format!("visage-session-{}.vsg", std::process::id()));
         std::fs::remove_file(&path).ok();
         let header = SessionHeader::new(&DatabaseSpec::default(), (100, 30), Protocol::Kitty);
-        let mut r = Recorder::open(&path, &header).unwrap();
+        let mut r = Recorder::create(&path, &header, &[]).unwrap();
         r.record(0, &Command::parse("set-gaussians nose bram").unwrap())
             .unwrap();
         r.record(7, &Command::Play).unwrap();
+        // A second recorder on the same file is refused while the first holds it.
+        let e = Recorder::append(&path).err().unwrap().to_string();
+        assert!(e.contains("being recorded by another visage"), "{e}");
         drop(r);
-        // Appending keeps the header and adds lines.
-        let mut r = Recorder::open(&path, &header).unwrap();
+        // Creating over a session is refused; appending keeps the header and adds lines.
+        let e = Recorder::create(&path, &header, &[])
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("already holds a session"), "{e}");
+        let (mut r, before) = Recorder::append(&path).unwrap();
+        assert_eq!(before.lines.len(), 2);
         r.record(9, &Command::Pause).unwrap();
+        r.close("quit").unwrap();
         let s = Session::load(&path).unwrap();
-        std::fs::remove_file(&path).ok();
+        assert!(is_closed(&std::fs::read_to_string(&path).unwrap()));
         assert_eq!(s.header, header);
         assert_eq!(s.lines.len(), 3);
         assert_eq!(s.lines[1].tick, 7);
         assert_eq!(s.lines[2].action, Action::Command(Command::Pause));
+        // A line cut short by a kill is dropped, and appending starts after
+        // the last whole line.
+        let mut f = OpenOptions::new().append(true).open(&path).unwrap();
+        f.write_all(b"12 set-gaussians ey").unwrap();
+        drop(f);
+        let (mut r, cut) = Recorder::append(&path).unwrap();
+        assert_eq!(cut.lines.len(), 3);
+        r.record(14, &Command::Play).unwrap();
+        drop(r);
+        let s = Session::load(&path).unwrap();
+        assert_eq!(s.lines.len(), 4);
+        assert_eq!(s.lines[3].action, Action::Command(Command::Play));
+        std::fs::remove_file(&path).ok();
     }
 
     #[test]
@@ -617,7 +748,7 @@ mod tests {
     fn scene_headers_parse_back() {
         let subject = Subject::Scene(SceneSpec {
             path: "my scans/garden.ply".into(),
-            up: UpAxis::NegY,
+            up: Some(UpAxis::NegY),
         });
         let header = SessionHeader::for_subject(&subject, (90, 30), Protocol::Kitty);
         let mut text = Vec::new();
@@ -631,7 +762,7 @@ mod tests {
             panic!("a scene header opens a scene");
         };
         assert!(scene.path.is_absolute() && scene.path.ends_with("my scans/garden.ply"));
-        assert_eq!(scene.up, UpAxis::NegY);
+        assert_eq!(scene.up, Some(UpAxis::NegY));
     }
 
     #[test]

@@ -7,6 +7,7 @@ pub mod compressed_ply;
 pub mod fixtures;
 pub mod flame;
 pub mod folder;
+pub mod inria;
 pub mod npy;
 pub mod obj;
 pub mod pickle;

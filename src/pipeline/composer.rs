@@ -7,9 +7,11 @@
 
 use std::time::Instant;
 
+use crate::avatar::gaussians::{dc_to_rgb, rgb_to_dc, GaussianSet};
 use crate::compose::engine::{Composite, Engine, PosedMesh};
 use crate::compose::recipe::{Recipe, ResolvedRecipe};
 use crate::error::{Error, Result};
+use crate::model::regions::Group;
 use crate::render::image::RgbImage;
 use crate::render::reference::render_reference;
 use crate::render::settings::RenderSettings;
@@ -48,6 +50,8 @@ pub struct UpdateTimings {
     pub compose: f64,
     /// Posing the recipe's frame.
     pub pose: f64,
+    /// The composite changed (shape or Gaussians), so `compose` timed real work.
+    pub recomposed: bool,
 }
 
 impl Composer {
@@ -97,20 +101,30 @@ impl Composer {
     pub fn update(&mut self, recipe: &Recipe) -> Result<(ResolvedRecipe, UpdateTimings)> {
         let resolved = recipe.resolve(self.engine.database())?;
         let t = Instant::now();
-        match &mut self.composite {
+        let recomposed = match &mut self.composite {
             Some(c) => {
-                if self.engine.update(c, &resolved).gaussians {
+                let changes = self.engine.update(c, &resolved);
+                if changes.gaussians {
                     self.generation += 1;
                 }
+                changes.gaussians || changes.shape
             }
             None => {
                 self.composite = Some(self.engine.compose(&resolved));
                 self.generation += 1;
+                true
             }
-        }
+        };
         let compose = t.elapsed().as_secs_f64() * 1e3;
         let pose = self.pose(resolved.frame);
-        Ok((resolved, UpdateTimings { compose, pose }))
+        Ok((
+            resolved,
+            UpdateTimings {
+                compose,
+                pose,
+                recomposed,
+            },
+        ))
     }
 
     /// Poses another frame of the composite's motion; returns milliseconds spent.
@@ -156,6 +170,8 @@ impl Composer {
 enum Uploaded {
     /// A composer's Gaussians of this generation.
     Composite(u64),
+    /// The same with every group but one dimmed (the region highlight).
+    Highlighted(u64, Group),
     /// A world-space scene (a painter draws one scene for its lifetime).
     Scene,
 }
@@ -221,6 +237,26 @@ impl Painter {
         self.renderer.timings()
     }
 
+    /// Draws the composer's posed composite with every group but `group`
+    /// dimmed: the region highlight over the Gaussians (a Gaussian belongs
+    /// to the group of its parent triangle's region, as selection has it).
+    pub fn render_highlighted(
+        &mut self,
+        composer: &Composer,
+        group: Group,
+        camera: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<RgbImage> {
+        let key = Uploaded::Highlighted(composer.generation(), group);
+        if self.uploaded != Some(key) {
+            let set = highlighted(composer, group);
+            self.renderer.set_gaussians(&set)?;
+            self.uploaded = Some(key);
+        }
+        self.renderer
+            .render(&composer.posed().frames, camera, settings)
+    }
+
     /// Draws the composer's posed composite.
     pub fn render(
         &mut self,
@@ -232,6 +268,33 @@ impl Painter {
         self.renderer
             .render(&composer.posed().frames, camera, settings)
     }
+}
+
+/// Share of its colour a dimmed Gaussian keeps in the highlight.
+const DIMMED: f32 = 0.3;
+
+/// The composite's Gaussians with those outside `group` darkened towards
+/// black and their view-dependent colour damped, so the group stands out.
+fn highlighted(composer: &Composer, group: Group) -> GaussianSet {
+    let regions = &composer.engine().database().model.triangle_regions;
+    let mut set = composer.composite().gaussians.clone();
+    let stride = set.sh_stride();
+    for i in 0..set.len() {
+        let inside = regions
+            .get(set.binding[i] as usize)
+            .is_some_and(|r| r.group() == group);
+        if inside {
+            continue;
+        }
+        let sh = &mut set.sh[i * stride..(i + 1) * stride];
+        for dc in &mut sh[..3] {
+            *dc = rgb_to_dc(dc_to_rgb(*dc) * DIMMED);
+        }
+        for rest in &mut sh[3..] {
+            *rest *= DIMMED;
+        }
+    }
+    set
 }
 
 /// The f64 reference image of a composer's posed composite (the oracle).

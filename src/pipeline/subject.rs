@@ -13,14 +13,16 @@ use crate::io::Progress;
 use crate::render::Backend;
 use crate::scene::camera::{Orbit, UpAxis};
 use crate::scene::splats::SplatScene;
+use crate::scene::upright::{ground_up, nearest_up, UpReason};
 
 /// A scene file to view and the world axis that is up in it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SceneSpec {
-    /// A PLY (INRIA or SuperSplat's compressed) or `.splat` file.
+    /// A PLY (INRIA or SuperSplat's compressed), `.splat` or SPZ file.
     pub path: PathBuf,
-    /// Up on screen (`-y` for COLMAP / INRIA captures).
-    pub up: UpAxis,
+    /// Up on screen (`-y` for COLMAP / INRIA captures); `None`: detect it
+    /// (`crate::scene::upright`).
+    pub up: Option<UpAxis>,
 }
 
 /// A scene read from its file, with the camera it opens with.
@@ -32,6 +34,8 @@ pub struct ViewedScene {
     pub name: String,
     /// The framed camera (`camera-reset` returns to it).
     pub home: Orbit,
+    /// How its up axis was chosen.
+    pub up_reason: UpReason,
 }
 
 impl SceneSpec {
@@ -39,7 +43,8 @@ impl SceneSpec {
     pub fn load(&self, progress: Progress) -> Result<(ViewedScene, Duration)> {
         let start = Instant::now();
         let scene = crate::io::splat::read_scene_with(&self.path, progress)?;
-        let home = scene.home_orbit(None, self.up).ok_or_else(|| {
+        let (up, up_reason) = self.up_axis(&scene);
+        let home = scene.home_orbit(None, up).ok_or_else(|| {
             Error::input(format!(
                 "{} holds no Gaussian with a finite position",
                 self.path.display()
@@ -49,7 +54,33 @@ impl SceneSpec {
             || self.path.display().to_string(),
             |n| crate::text::printable(&n.to_string_lossy()),
         );
-        Ok((ViewedScene { scene, name, home }, start.elapsed()))
+        Ok((
+            ViewedScene {
+                scene,
+                name,
+                home,
+                up_reason,
+            },
+            start.elapsed(),
+        ))
+    }
+
+    /// The up axis: as given, else from the capture's cameras, else from the
+    /// ground, else +y.
+    fn up_axis(&self, scene: &SplatScene) -> (UpAxis, UpReason) {
+        if let Some(up) = self.up {
+            return (up, UpReason::Given);
+        }
+        let cameras = crate::io::inria::cameras_file(&self.path)
+            .and_then(|f| crate::io::inria::mean_camera_up(&f))
+            .and_then(nearest_up);
+        if let Some(up) = cameras {
+            return (up, UpReason::Cameras);
+        }
+        match ground_up(scene) {
+            Some(up) => (up, UpReason::Ground),
+            None => (UpAxis::default(), UpReason::Default),
+        }
     }
 
     /// The path made absolute (session headers replay from any folder).
@@ -70,12 +101,33 @@ pub enum Subject {
     Scene(SceneSpec),
 }
 
+impl Default for Subject {
+    /// The built-in database.
+    fn default() -> Self {
+        Subject::Avatars(DatabaseSpec::default())
+    }
+}
+
 impl Subject {
     /// What the subject is, for the "opening …" line.
     pub fn describe(&self) -> String {
         match self {
             Subject::Avatars(db) => format!("the {} database", db.db),
             Subject::Scene(s) => s.path.display().to_string(),
+        }
+    }
+
+    /// Whether a session recorded on `recorded` is about this subject: the
+    /// same database, or the same scene file (and up axis, when this one
+    /// names it).
+    pub fn agrees_with(&self, recorded: &Subject) -> bool {
+        match (self, recorded) {
+            (Subject::Avatars(a), Subject::Avatars(b)) => a == b,
+            (Subject::Scene(a), Subject::Scene(b)) => {
+                let (a, b) = (a.absolute(), b.absolute());
+                a.path == b.path && (a.up.is_none() || a.up == b.up)
+            }
+            _ => false,
         }
     }
 

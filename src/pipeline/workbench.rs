@@ -17,10 +17,10 @@ use crate::compose::recipe::Recipe;
 use crate::compose::state_hash;
 use crate::error::{Error, Result};
 use crate::io::obj::region_colour;
-use crate::io::ply::write_splat_ply;
 use crate::model::regions::Group;
 use crate::render::image::RgbImage;
 use crate::render::mesh_preview::render_mesh;
+use crate::render::reference::centre_depth;
 use crate::render::settings::RenderSettings;
 use crate::render::Backend;
 
@@ -74,6 +74,8 @@ pub struct FrameTimings {
     pub pose: f64,
     /// Rendering.
     pub render: f64,
+    /// The composite changed in this frame (`compose` timed real work).
+    pub recomposed: bool,
 }
 
 /// A rendered frame and what it cost.
@@ -173,6 +175,9 @@ impl Workbench {
         let t = Instant::now();
         let image = if request.debug.mesh {
             mesh_view(composer, &camera, request)
+        } else if request.debug.highlight {
+            self.painter
+                .render_highlighted(composer, request.group, &camera, &settings)?
         } else {
             self.painter.render(composer, &camera, &settings)?
         };
@@ -190,6 +195,7 @@ impl Workbench {
                 compose: timings.compose,
                 pose: timings.pose,
                 render,
+                recomposed: timings.recomposed,
             },
             gaussians: composite.gaussians.len(),
             visible: (!request.debug.mesh)
@@ -238,7 +244,7 @@ impl Workbench {
             Content::Composite(composer) => {
                 composer.update(recipe)?;
                 let scene = composer.scene();
-                write_splat_ply(path, &scene)?;
+                crate::io::splat::write_scene(path, &scene)?;
                 Ok(scene.len())
             }
             Content::Scene(viewed) => {
@@ -246,6 +252,25 @@ impl Workbench {
                 Ok(viewed.scene.len())
             }
         }
+    }
+
+    /// The depth (distance along the view axis) of what the centre pixel of
+    /// the request's view shows: where the accumulated opacity reaches one
+    /// half, front to back. `None` when the centre shows only background.
+    pub fn centre_depth(&mut self, request: &FrameRequest) -> Result<Option<f32>> {
+        let camera = request
+            .recipe
+            .camera
+            .camera(request.width.max(1), request.height.max(1));
+        let settings = settings_for(request);
+        let depth = match &mut self.content {
+            Content::Composite(composer) => {
+                composer.update(&request.recipe)?;
+                centre_depth(&composer.scene(), &camera, &settings)
+            }
+            Content::Scene(viewed) => centre_depth(&viewed.scene, &camera, &settings),
+        };
+        Ok(depth.map(|d| d as f32))
     }
 
     /// Renders an exact still and writes it as PNG.

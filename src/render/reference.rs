@@ -118,3 +118,38 @@ pub fn render_reference(
     let rgb = render_reference_f32(scene, camera, settings);
     RgbImage::from_f32(camera.width, camera.height, &rgb)
 }
+
+/// The depth of what the centre pixel shows: front to back over the
+/// Gaussians covering it (the reference's blending), the depth at which the
+/// accumulated opacity passes one half; `None` when it never does (the
+/// centre shows mostly background).
+pub fn centre_depth(scene: &SplatScene, camera: &Camera, settings: &RenderSettings) -> Option<f64> {
+    let cam = ProjectionCamera::new(camera);
+    let (px, py) = (camera.width as f64 / 2.0, camera.height as f64 / 2.0);
+    let mut hits: Vec<(f64, f64)> = (0..scene.len())
+        .into_par_iter()
+        .filter_map(|i| {
+            let opacity = scene.opacity[i] as f64;
+            if opacity.is_nan() || opacity <= 0.0 || !scene.position[i].is_finite() {
+                return None;
+            }
+            let splat = cam.project(
+                scene.position[i],
+                scene.rotation[i],
+                scene.scale[i] * settings.scale_modifier,
+                opacity.min(1.0),
+            )?;
+            let alpha = splat.alpha_at(opacity.min(1.0), px, py);
+            (alpha > 0.0).then_some((splat.depth, alpha))
+        })
+        .collect();
+    hits.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut transmittance = 1.0;
+    for (depth, alpha) in hits {
+        transmittance *= 1.0 - alpha;
+        if transmittance <= 0.5 {
+            return Some(depth);
+        }
+    }
+    None
+}

@@ -124,6 +124,17 @@ impl UpAxis {
             .map_or("+y", |(_, n)| n)
     }
 
+    /// The same axis pointing the other way: what turns an upside-down view
+    /// the right way up.
+    pub fn flipped(self) -> UpAxis {
+        match self {
+            UpAxis::PosY => UpAxis::NegY,
+            UpAxis::NegY => UpAxis::PosY,
+            UpAxis::PosZ => UpAxis::NegZ,
+            UpAxis::NegZ => UpAxis::PosZ,
+        }
+    }
+
     /// True for +y, the head frame (left out of recipe files).
     pub fn is_default(&self) -> bool {
         *self == UpAxis::PosY

@@ -5,3 +5,4 @@
 pub mod camera;
 pub mod splats;
 pub mod synthetic;
+pub mod upright;

@@ -1,47 +1,58 @@
-//! The interactive editor: terminal set-up and restore (quit, error, panic,
-//! SIGINT, SIGTERM, SIGHUP), the event loop on 25 Hz logical ticks, the render
-//! worker (only the latest frame in flight), adaptive resolution while moving,
-//! the `:` prompt, and the session journal.
+//! The interactive editor: opening the subject and its journal (recovering an
+//! unsaved session when there is one), the event loop on 25 Hz logical
+//! ticks, adaptive resolution while moving, and the front end's own state —
+//! the status line, the `:` prompt, the help overlay, the quit confirmation,
+//! source thumbnails and the orbit pivot after free flight. Drawing is in
+//! `view`, the render thread in `worker`, terminal plumbing in `terminal`.
 
-use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
-use crossterm::event::{
-    self, Event, KeyCode, KeyEventKind, MouseButton, MouseEvent, MouseEventKind,
-};
-use crossterm::{cursor, execute, terminal};
+use crossterm::event::{Event, KeyEvent, KeyEventKind, MouseButton, MouseEvent, MouseEventKind};
 use ratatui::backend::CrosstermBackend;
+use ratatui::layout::Rect;
 use ratatui::Terminal;
 
 use super::graphics::{
     detect, kitty_delete, place_image, GraphicsChoice, ImageTarget, Protocol, TerminalGraphics,
     SYNC_BEGIN, SYNC_END,
 };
+use super::help::{draw_help, help_page, help_rows, HelpOutcome, HelpOverlay, HelpRow};
 use super::keymap::Keymap;
-use super::view::{draw, layout, InfoPanel, ViewModel};
-use crate::editor::command::{complete, Command};
+use super::prompt::{History, Prompt, PromptOutcome};
+use super::terminal::{
+    ask_yes_no, enter_terminal, spawn_input_reader, terminal_hung_up, write_to_terminal, Collector,
+};
+use super::view::{draw, layout, source_slots, InfoPanel, Screen, ViewModel};
+use super::worker::{FrameJob, RenderWorker, Reply, Task};
+use crate::compose::recipe::Recipe;
+use crate::editor::command::{nearest_names, Command, CommandSpec};
+use crate::editor::journal::{
+    choose_subject, open_journal, state_dir, JournalFolder, JournalledEditor, KEEP_JOURNALS,
+};
 use crate::editor::pacing::next_scale;
 use crate::editor::replay::replay_commands;
-use crate::editor::session::{Recorder, Session, SessionHeader};
+use crate::editor::session::{Session, SessionHeader};
 use crate::editor::state::Effect;
-use crate::editor::{perform, Editor};
+use crate::editor::Editor;
 use crate::error::{Error, Result};
+use crate::model::regions::Group;
 use crate::pipeline::workbench::{
-    check_parent, source_swatches, FrameRequest, FrameResult, Workbench,
+    check_parent, source_swatches, DebugView, FrameRequest, Workbench,
 };
-use crate::pipeline::Subject;
+use crate::pipeline::{SceneSpec, Subject};
 use crate::render::image::RgbImage;
 use crate::render::Backend;
+use crate::scene::camera::{CameraOverrides, Orbit};
 
 /// Options of `visage edit` and `visage view`.
 #[derive(Clone, Debug)]
 pub struct EditOptions {
-    /// The database to compose from, or the scene to view.
-    pub subject: Subject,
+    /// The database or scene the command line named (`None`: the journal's
+    /// or resumed session's own, else the built-in database).
+    pub subject: Option<Subject>,
     /// Session to resume.
     pub session: Option<PathBuf>,
     /// Journal to record to.
@@ -60,174 +71,8 @@ pub struct EditOptions {
 /// Input within this long keeps the view "moving" (low resolution allowed).
 const SETTLE: Duration = Duration::from_millis(300);
 
-/// A job for the render worker.
-enum Job {
-    Frame(FrameJob),
-    /// A command's effect, with the recipe and the view it was asked in.
-    Effect(Effect, crate::compose::recipe::Recipe, FrameRequest),
-}
-
-struct FrameJob {
-    request: FrameRequest,
-    version: u64,
-    target: ImageTarget,
-}
-
-enum Reply {
-    Frame {
-        version: u64,
-        result: Box<FrameResult>,
-        encoded: Vec<u8>,
-        encode_ms: f64,
-        exact: bool,
-    },
-    Message(String),
-}
-
-/// The latest-frame slot shared with the worker plus a queue for effects.
-#[derive(Default)]
-struct Mailbox {
-    frame: Option<FrameJob>,
-    effects: Vec<Job>,
-    stop: bool,
-}
-
-fn worker(mut bench: Workbench, mailbox: Arc<(Mutex<Mailbox>, Condvar)>, replies: Sender<Reply>) {
-    loop {
-        let job = {
-            let (lock, cv) = &*mailbox;
-            let mut m = lock.lock().unwrap_or_else(|e| e.into_inner());
-            loop {
-                if m.stop {
-                    return;
-                }
-                if !m.effects.is_empty() {
-                    break m.effects.remove(0);
-                }
-                if let Some(f) = m.frame.take() {
-                    break Job::Frame(f);
-                }
-                m = cv.wait(m).unwrap_or_else(|e| e.into_inner());
-            }
-        };
-        let reply = match job {
-            Job::Frame(f) => match bench.render(&f.request) {
-                Ok(result) => {
-                    let t = Instant::now();
-                    let encoded = f.target.encode(&result.image).unwrap_or_default();
-                    Reply::Frame {
-                        version: f.version,
-                        encode_ms: t.elapsed().as_secs_f64() * 1e3,
-                        exact: f.request.exact,
-                        result: Box::new(result),
-                        encoded,
-                    }
-                }
-                Err(e) => Reply::Message(format!("render failed: {e}")),
-            },
-            Job::Effect(effect, recipe, view) => {
-                match perform(&effect, &recipe, &view, &mut bench, &|p| PathBuf::from(p)) {
-                    Ok(done) => Reply::Message(done.message),
-                    Err(e) => Reply::Message(format!("{}: {e}", effect_name(&effect))),
-                }
-            }
-        };
-        if replies.send(reply).is_err() {
-            return;
-        }
-    }
-}
-
-/// What failed, for the status line.
-fn effect_name(effect: &Effect) -> &'static str {
-    match effect {
-        Effect::SaveRecipe(_) => "saving the recipe failed",
-        Effect::ExportPly(_) => "export failed",
-        Effect::Snapshot(_) => "snapshot failed",
-    }
-}
-
-/// A `Write` that collects ratatui's output so a frame goes out in one write.
-#[derive(Clone, Default)]
-pub struct Collector(Arc<Mutex<Vec<u8>>>);
-
-impl Collector {
-    /// Takes the bytes collected so far.
-    pub fn take(&self) -> Vec<u8> {
-        std::mem::take(&mut *self.0.lock().unwrap_or_else(|e| e.into_inner()))
-    }
-}
-
-impl Write for Collector {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        self.0
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .extend_from_slice(buf);
-        Ok(buf.len())
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
-}
-
-/// Restores the terminal when dropped (normal exit, error, unwinding panic).
-pub(super) struct TerminalGuard {
-    pub(super) kitty: bool,
-}
-
-pub(super) fn restore_terminal(kitty: bool) {
-    let mut out = std::io::stdout();
-    if kitty {
-        let _ = out.write_all(&kitty_delete());
-    }
-    let _ = out.write_all(SYNC_END);
-    let _ = execute!(
-        out,
-        event::DisableMouseCapture,
-        terminal::LeaveAlternateScreen,
-        cursor::Show
-    );
-    let _ = terminal::disable_raw_mode();
-    let _ = out.flush();
-}
-
-impl Drop for TerminalGuard {
-    fn drop(&mut self) {
-        restore_terminal(self.kitty);
-    }
-}
-
-/// Takes over the terminal (raw mode, alternate screen, mouse, no cursor)
-/// until the guard drops, restoring it on panics too; the flag turns true
-/// when SIGINT, SIGTERM or SIGHUP arrives.
-pub(super) fn enter_terminal(kitty: bool) -> Result<(TerminalGuard, Arc<AtomicBool>)> {
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [
-        signal_hook::consts::SIGINT,
-        signal_hook::consts::SIGTERM,
-        signal_hook::consts::SIGHUP,
-    ] {
-        signal_hook::flag::register(signal, Arc::clone(&stop))
-            .map_err(|e| Error::terminal(format!("cannot install signal handler: {e}")))?;
-    }
-    let default_hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        restore_terminal(kitty);
-        default_hook(info);
-    }));
-    terminal::enable_raw_mode()
-        .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
-    let guard = TerminalGuard { kitty };
-    execute!(
-        std::io::stdout(),
-        terminal::EnterAlternateScreen,
-        event::EnableMouseCapture,
-        cursor::Hide
-    )
-    .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
-    Ok((guard, stop))
-}
+/// Terminal rows from which the source strip shows thumbnails.
+const THUMBNAIL_MIN_ROWS: u16 = 30;
 
 /// Runs the editor until the user quits or a signal arrives.
 pub fn run_editor(options: EditOptions) -> Result<()> {
@@ -236,84 +81,159 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
     if let Some(r) = &options.record {
         check_parent(r)?;
     }
-    let resume = options.session.as_deref().map(Session::load).transpose()?;
-    let subject = match &resume {
-        Some(s) => s.header.subject(),
-        None => options.subject.clone(),
+    let recorded = recorded_session(&options)?;
+    let mut subject = choose_subject(options.subject.as_ref(), recorded.as_ref())?;
+    let journals = JournalFolder::in_state_dir();
+    let recovered = match (&options.record, &options.session, &journals) {
+        (None, None, Ok(folder)) => offer_recovery(folder, &subject),
+        _ => None,
     };
+    if let Some(r) = &recovered {
+        subject = r.1.clone();
+    }
     let keymap = match subject {
         Subject::Avatars(_) => keymap,
         Subject::Scene(_) => Keymap::load_viewer(options.keymap.as_deref())?,
     };
     eprintln!("visage: opening {}…", subject.describe());
     let bench = open_with_progress(&subject, options.renderer)?;
-    let swatches = bench.engine().map(source_swatches).unwrap_or_default();
+    let subject = resolved_subject(subject, &bench);
+    let graphics = detect(options.graphics);
+    let size = crossterm::terminal::size().unwrap_or((120, 40));
+    let header = SessionHeader::for_subject(&subject, size, graphics.protocol);
+
+    let mut status = String::new();
+    let (recorder, replayed, auto) = match (&options.record, &recovered, &journals) {
+        (Some(record), _, _) => {
+            let (r, s) = open_journal(record, options.session.as_deref(), &header)?;
+            (Some(r), s, false)
+        }
+        (None, Some((path, _)), _) => {
+            let (r, s) = open_journal(path, None, &header)?;
+            (Some(r), s, true)
+        }
+        (None, None, Ok(folder)) => {
+            folder.prune(KEEP_JOURNALS);
+            match open_journal(
+                &folder.new_journal_path(),
+                options.session.as_deref(),
+                &header,
+            ) {
+                Ok((r, s)) => (Some(r), s, true),
+                Err(e) => {
+                    status = format!("not journalling this session: {e}");
+                    (
+                        None,
+                        options.session.as_deref().map(Session::load).transpose()?,
+                        false,
+                    )
+                }
+            }
+        }
+        (None, None, Err(e)) => {
+            status = format!("not journalling this session: {e}");
+            (
+                None,
+                options.session.as_deref().map(Session::load).transpose()?,
+                false,
+            )
+        }
+    };
     let mut editor = Editor::for_bench(&bench);
-    if let Some(session) = &resume {
+    let mut unsaved = 0;
+    let mut render_size = header.render;
+    if let Some(session) = &replayed {
         let failed = replay_commands(session, &mut editor);
-        editor.state.status = format!(
-            "resumed {} commands at tick {} ({failed} failed)",
+        unsaved = session.unsaved_edits();
+        render_size = session.header.render;
+        status = format!(
+            "resumed {} commands at tick {}{}",
             session.lines.len(),
-            editor.tick()
+            editor.tick(),
+            if failed > 0 {
+                format!(" ({failed} failed)")
+            } else {
+                String::new()
+            }
         );
     }
+    let swatches = bench.engine().map(source_swatches).unwrap_or_default();
     let renderer_name = bench.renderer_description();
-    let graphics = detect(options.graphics);
-    let size = terminal::size().unwrap_or((120, 40));
-    let mut recorder = match &options.record {
-        Some(path) => Some(Recorder::open(
-            path,
-            &SessionHeader::for_subject(&subject, size, graphics.protocol),
-        )?),
-        None => None,
-    };
+    let history = History::load(state_dir().map(|d| d.join("history")));
+    let help_rows = help_rows(&keymap, editor.catalog.scene.is_some());
 
     let kitty = graphics.protocol == Protocol::Kitty;
     let (_guard, stop) = enter_terminal(kitty)?;
-
-    let mailbox = Arc::new((Mutex::new(Mailbox::default()), Condvar::new()));
-    let (reply_tx, replies) = channel();
-    let handle = {
-        let mailbox = Arc::clone(&mailbox);
-        std::thread::spawn(move || worker(bench, mailbox, reply_tx))
-    };
     let mut app = App {
-        editor,
+        journal: JournalledEditor::new(editor, recorder),
+        auto_journal: auto,
+        user_journal: options.record.is_some(),
         swatches,
         keymap,
         graphics,
         renderer_name,
-        recorder,
-        mailbox,
-        replies,
-        version: 1,
-        requested: 0,
-        shown_version: 0,
-        last_input: Instant::now(),
-        scale: 1.0,
-        image: None,
-        encoded: Vec::new(),
-        image_dirty: true,
-        info: InfoPanel::default(),
-        frames_shown: 0,
-        fps_clock: Instant::now(),
-        last_exact: false,
-        edit_time: None,
+        worker: RenderWorker::spawn(bench),
+        picture: Picture::default(),
+        status,
+        prompt: None,
+        help: None,
+        help_rows,
+        history,
+        quit: false,
+        unsaved,
+        render_size,
+        pivot: Pivot::default(),
+        thumbnails: Thumbnails::default(),
         drag_from: None,
     };
     for command in options.initial {
-        app.run(command);
+        app.run(command, false);
     }
     let result = app.event_loop(&stop);
-    {
-        let (lock, cv) = &*app.mailbox;
-        lock.lock().unwrap_or_else(|e| e.into_inner()).stop = true;
-        cv.notify_all();
+    if app.auto_journal {
+        let closed = app.quit.then_some("quit");
+        app.journal.finish(closed, true);
     }
-    let _ = handle.join();
-    recorder = app.recorder.take();
-    drop(recorder);
+    drop(app);
     result
+}
+
+/// The session a live session starts from, read to learn its subject: the
+/// journal being continued, else the session being resumed.
+fn recorded_session(options: &EditOptions) -> Result<Option<Session>> {
+    if let Some(record) = options.record.as_deref() {
+        if std::fs::metadata(record).is_ok_and(|m| m.len() > 0) {
+            return Ok(Some(Session::load_journal(record)?.0));
+        }
+    }
+    options.session.as_deref().map(Session::load).transpose()
+}
+
+/// Offers the newest journal of `subject` that was not closed and holds
+/// unsaved edits; returns its path and subject when the user takes it. A
+/// declined journal is closed, so it is not offered again.
+fn offer_recovery(folder: &JournalFolder, subject: &Subject) -> Option<(PathBuf, Subject)> {
+    let newest = folder.unfinished(subject).into_iter().next()?;
+    if ask_yes_no(&format!("visage: {}: resume it?", newest.describe())) {
+        let subject = newest.session.header.subject();
+        return Some((newest.path, subject));
+    }
+    if let Ok((recorder, _)) = crate::editor::session::Recorder::append(&newest.path) {
+        let _ = recorder.close("declined");
+    }
+    None
+}
+
+/// The subject as opened: a scene's up axis as detected, so the journal
+/// replays with the same camera.
+fn resolved_subject(subject: Subject, bench: &Workbench) -> Subject {
+    match (subject, bench.scene()) {
+        (Subject::Scene(spec), Some(viewed)) => Subject::Scene(SceneSpec {
+            up: Some(viewed.home.up),
+            ..spec
+        }),
+        (subject, _) => subject,
+    }
 }
 
 /// Opens the subject, with a progress bar on standard error while a scene
@@ -349,49 +269,8 @@ fn drag_command(button: MouseButton, delta: (f32, f32)) -> Option<Command> {
     })
 }
 
-/// Reads terminal events on their own thread. crossterm's `poll` can spin
-/// without returning once the terminal hangs up; on this thread that costs
-/// nothing, since the editor loop notices the hang-up and the process exits.
-pub(super) fn spawn_input_reader() -> Receiver<Event> {
-    let (tx, rx) = channel();
-    std::thread::spawn(move || loop {
-        match event::poll(Duration::from_millis(50)) {
-            Ok(true) => match event::read() {
-                Ok(e) => {
-                    if tx.send(e).is_err() {
-                        return;
-                    }
-                }
-                Err(_) => return,
-            },
-            Ok(false) => {}
-            Err(_) => return,
-        }
-    });
-    rx
-}
-
-/// True when standard input's terminal has hung up or is gone.
-pub(super) fn terminal_hung_up() -> bool {
-    let mut fd = libc::pollfd {
-        fd: libc::STDIN_FILENO,
-        events: 0,
-        revents: 0,
-    };
-    // SAFETY: one valid pollfd, zero timeout; poll only writes `revents`.
-    let n = unsafe { libc::poll(&mut fd, 1, 0) };
-    n > 0 && fd.revents & (libc::POLLHUP | libc::POLLERR | libc::POLLNVAL) != 0
-}
-
-struct App {
-    editor: Editor,
-    swatches: Vec<[u8; 3]>,
-    keymap: Keymap,
-    graphics: TerminalGraphics,
-    renderer_name: String,
-    recorder: Option<Recorder>,
-    mailbox: Arc<(Mutex<Mailbox>, Condvar)>,
-    replies: Receiver<Reply>,
+/// The picture on screen and what it cost.
+struct Picture {
     /// Bumped on every change that affects the picture.
     version: u64,
     requested: u64,
@@ -400,17 +279,95 @@ struct App {
     scale: f64,
     image: Option<RgbImage>,
     encoded: Vec<u8>,
-    image_dirty: bool,
+    dirty: bool,
     info: InfoPanel,
     frames_shown: u32,
     fps_clock: Instant,
     last_exact: bool,
-    edit_time: Option<(u64, Instant)>,
+    /// The version an edit was made at, when, and what it said.
+    edit_time: Option<(u64, Instant, Option<String>)>,
+}
+
+impl Default for Picture {
+    fn default() -> Self {
+        Self {
+            version: 1,
+            requested: 0,
+            shown_version: 0,
+            last_input: Instant::now(),
+            scale: 1.0,
+            image: None,
+            encoded: Vec::new(),
+            dirty: true,
+            info: InfoPanel::default(),
+            frames_shown: 0,
+            fps_clock: Instant::now(),
+            last_exact: false,
+            edit_time: None,
+        }
+    }
+}
+
+/// Orbiting after free flight turns about what is at the centre of the
+/// view, not the old target: once the view settles after `fly` or `look`, the
+/// worker measures the depth under the centre; the next orbit first moves
+/// the target there (a journalled `set-camera`, so replays agree).
+#[derive(Default)]
+struct Pivot {
+    /// `fly` or `look` moved the camera since the target was last set.
+    free: bool,
+    /// The worker is measuring.
+    asked: bool,
+    /// The depth under the centre, for the camera it was measured at.
+    found: Option<(Orbit, f32)>,
+}
+
+/// Source thumbnails for graphics terminals.
+#[derive(Default)]
+struct Thumbnails {
+    asked: bool,
+    /// Encoded per source, in source order.
+    encoded: Vec<Vec<u8>>,
+    /// The cells each thumbnail takes.
+    cells: (u16, u16),
+    /// To be placed again (new, moved, or drawn over).
+    dirty: bool,
+}
+
+struct App {
+    journal: JournalledEditor,
+    /// The journal is one of the state folder's (closed on quit).
+    auto_journal: bool,
+    /// The user named the journal (`--record`): quitting loses nothing.
+    user_journal: bool,
+    swatches: Vec<[u8; 3]>,
+    keymap: Keymap,
+    graphics: TerminalGraphics,
+    renderer_name: String,
+    worker: RenderWorker,
+    picture: Picture,
+    status: String,
+    prompt: Option<Prompt>,
+    help: Option<HelpOverlay>,
+    help_rows: Vec<HelpRow>,
+    history: History,
+    /// The user asked to quit (rather than a signal or hang-up).
+    quit: bool,
+    /// Edits since the recipe was last saved.
+    unsaved: usize,
+    /// The session's render size: snapshots take it unless they name one.
+    render_size: (u32, u32),
+    pivot: Pivot,
+    thumbnails: Thumbnails,
     /// Where the mouse was at the last drag event.
     drag_from: Option<(f32, f32)>,
 }
 
 impl App {
+    fn editor(&self) -> &Editor {
+        &self.journal.editor
+    }
+
     fn event_loop(&mut self, stop: &AtomicBool) -> Result<()> {
         let collector = Collector::default();
         let mut term = Terminal::new(CrosstermBackend::new(collector.clone()))
@@ -419,7 +376,7 @@ impl App {
         let mut next_tick = Instant::now() + tick_len;
         let mut viewport = None;
         let input = spawn_input_reader();
-        while !self.editor.state.quit {
+        while !self.quit {
             // A closed terminal (SSH dropped, emulator killed) ends the editor even
             // if SIGHUP never arrives; the journal already holds every command.
             if stop.load(Ordering::Relaxed) || terminal_hung_up() {
@@ -428,12 +385,17 @@ impl App {
             let timeout = next_tick
                 .saturating_duration_since(Instant::now())
                 .min(Duration::from_millis(10));
+            let area = term
+                .size()
+                .map(|s| Rect::new(0, 0, s.width, s.height))
+                .unwrap_or_default();
             match input.recv_timeout(timeout) {
-                Ok(Event::Key(k)) if k.kind != KeyEventKind::Release => self.on_key(k),
-                Ok(Event::Mouse(m)) => self.on_mouse(m),
+                Ok(Event::Key(k)) if k.kind != KeyEventKind::Release => self.on_key(k, area),
+                Ok(Event::Mouse(m)) if self.help.is_none() => self.on_mouse(m),
                 Ok(Event::Resize(..)) => {
-                    self.version += 1;
-                    self.image_dirty = true;
+                    self.picture.version += 1;
+                    self.picture.dirty = true;
+                    self.thumbnails.dirty = true;
                     let _ = term.clear();
                 }
                 Ok(_) | Err(RecvTimeoutError::Timeout) => {}
@@ -441,73 +403,90 @@ impl App {
             }
             while Instant::now() >= next_tick {
                 next_tick += tick_len;
-                let next = self.editor.tick() + 1;
-                self.editor.advance_to(next);
-                if self.editor.state.playing {
-                    self.version += 1;
+                let next = self.editor().tick() + 1;
+                self.journal.editor.advance_to(next);
+                if self.editor().state.playing {
+                    self.picture.version += 1;
                 }
             }
             self.receive();
-            let area = term
-                .size()
-                .map(|s| ratatui::layout::Rect::new(0, 0, s.width, s.height))
-                .unwrap_or_default();
-            let new_viewport = layout(area).map(|a| a.viewport);
+            let new_viewport = layout(area, self.screen()).map(|a| a.viewport);
             if new_viewport != viewport {
                 viewport = new_viewport;
-                self.version += 1;
-                self.image_dirty = true;
+                self.picture.version += 1;
+                self.picture.dirty = true;
+                self.thumbnails.dirty = true;
             }
             if let Some(v) = viewport {
                 self.request_frame(v);
             }
-            self.present(&mut term, &collector, viewport)?;
+            self.present(&mut term, &collector, area)?;
         }
         Ok(())
     }
 
-    fn moving(&self) -> bool {
-        self.editor.state.playing || self.last_input.elapsed() < SETTLE
+    /// What the layout needs to know beyond the terminal's size.
+    fn screen(&self) -> Screen {
+        Screen {
+            thumbnails: self.thumbnails_shown(),
+        }
     }
 
-    fn on_key(&mut self, key: crossterm::event::KeyEvent) {
-        self.last_input = Instant::now();
-        if let Some(text) = self.editor.state.prompt.as_mut() {
-            match key.code {
-                KeyCode::Esc => self.editor.state.prompt = None,
-                KeyCode::Backspace => {
-                    text.pop();
-                }
-                KeyCode::Tab => {
-                    let matches = complete(text.trim());
-                    if matches.len() == 1 {
-                        *text = format!("{} ", matches[0]);
-                    } else if !matches.is_empty() {
-                        self.editor.state.status = matches.join(" ");
-                    }
-                }
-                KeyCode::Enter => {
-                    let line = text.clone();
-                    self.editor.state.prompt = None;
-                    match Command::parse(&line) {
-                        Ok(c) => self.run(c),
-                        Err(e) => self.editor.state.status = e,
-                    }
-                }
-                KeyCode::Char(c) if !c.is_control() => text.push(c),
-                _ => {}
+    /// Thumbnails replace swatches on graphics terminals tall enough.
+    fn thumbnails_shown(&self) -> Option<(u16, u16)> {
+        let rows = crossterm::terminal::size().map_or(0, |s| s.1);
+        (self.graphics.protocol != Protocol::Halfblocks
+            && self.editor().catalog.scene.is_none()
+            && rows >= THUMBNAIL_MIN_ROWS)
+            .then_some(self.thumbnails.cells)
+            .filter(|_| !self.thumbnails.encoded.is_empty())
+    }
+
+    fn moving(&self) -> bool {
+        self.editor().state.playing || self.picture.last_input.elapsed() < SETTLE
+    }
+
+    fn on_key(&mut self, key: KeyEvent, area: Rect) {
+        self.picture.last_input = Instant::now();
+        if let Some(help) = &mut self.help {
+            if help.on_key(&key, help_page(area)) == HelpOutcome::Close {
+                self.help = None;
+                self.redraw_images();
             }
             return;
         }
-        if self.editor.state.help && key.code == KeyCode::Esc {
-            self.editor.state.help = false;
-            // The image under the overlay was removed: draw a fresh one.
-            self.version += 1;
+        if let Some(prompt) = &mut self.prompt {
+            match prompt.on_key(&key, &self.journal.editor.catalog, &self.history) {
+                PromptOutcome::Editing => {}
+                PromptOutcome::Cancelled => self.prompt = None,
+                PromptOutcome::Submitted(line) => {
+                    self.prompt = None;
+                    self.history.push(&line);
+                    if line.trim().is_empty() {
+                        return;
+                    }
+                    let armed = self.status_quit_armed();
+                    match Command::parse(&line) {
+                        Ok(c) => self.run(c, armed),
+                        Err(e) => self.status = e,
+                    }
+                }
+            }
             return;
         }
         if let Some(c) = self.keymap.lookup(&key).cloned() {
-            self.run(c);
+            let armed = self.status_quit_armed();
+            if armed && c != Command::Quit {
+                self.status.clear();
+            }
+            self.run(c, armed);
         }
+    }
+
+    /// Whether the status line is asking to confirm quitting (a second quit
+    /// confirms it; any other key withdraws the question).
+    fn status_quit_armed(&self) -> bool {
+        self.status.starts_with(QUIT_QUESTION)
     }
 
     /// Mouse drags move the camera (left orbits, right looks, middle pans) and
@@ -533,159 +512,387 @@ impl App {
             _ => None,
         };
         if let Some(c) = command {
-            self.last_input = Instant::now();
-            self.run(c);
+            self.picture.last_input = Instant::now();
+            self.run(c, false);
         }
     }
 
-    fn run(&mut self, command: Command) {
-        match self.editor.step(&command) {
-            Ok(effects) => {
-                if command.journalled() {
-                    if let Some(r) = &mut self.recorder {
-                        if let Err(e) = r.record(self.editor.tick(), &command) {
-                            self.editor.state.status = format!("cannot journal the session: {e}");
-                        }
-                    }
+    /// Runs a command: the front end's own (quit, help, the prompt) here,
+    /// the rest through the journalled editor. `quit_armed`: the user was
+    /// just asked to confirm quitting.
+    fn run(&mut self, command: Command, quit_armed: bool) {
+        match &command {
+            Command::Quit => return self.ask_quit(quit_armed),
+            Command::ForceQuit => {
+                self.quit = true;
+                return;
+            }
+            Command::Help(topic) => return self.help(topic.as_deref()),
+            Command::Prompt => {
+                self.prompt = Some(Prompt::new());
+                return;
+            }
+            Command::Orbit(..) if self.pivot.free => self.repivot(),
+            Command::Fly(..) | Command::Look(..) => {
+                self.pivot = Pivot {
+                    free: true,
+                    ..Pivot::default()
+                };
+            }
+            _ => {}
+        }
+        let undoing = matches!(command, Command::Undo | Command::Redo);
+        let before = (command.is_edit() || undoing).then(|| self.editor().state.recipe.clone());
+        match self.journal.run(&command) {
+            Ok(applied) => {
+                if before.is_some_and(|b| b != self.editor().state.recipe) {
+                    self.unsaved += 1;
                 }
-                self.version += 1;
-                if command.is_edit() {
-                    self.edit_time = Some((self.version, Instant::now()));
+                self.picture.version += 1;
+                if command.is_edit() || undoing {
+                    self.picture.edit_time =
+                        Some((self.picture.version, Instant::now(), applied.message));
+                } else if let Some(m) = applied.message {
+                    self.status = m;
                 }
-                for effect in effects {
+                if matches!(
+                    command,
+                    Command::NextSource | Command::PrevSource | Command::SelectSource(_)
+                ) {
+                    self.thumbnails.dirty = true;
+                }
+                for effect in applied.effects {
                     self.effect(effect);
                 }
             }
-            Err(e) => self.editor.state.status = e,
+            Err(e) => self.status = e,
         }
     }
 
-    /// Hands an effect to the render thread with the recipe and view of now.
+    /// Quits, unless edits would be lost without being asked: then asks.
+    fn ask_quit(&mut self, armed: bool) {
+        if armed || self.unsaved == 0 || self.user_journal {
+            self.quit = true;
+            return;
+        }
+        let key = |line: &str, fallback: &str| {
+            self.keymap.key_for(line).unwrap_or_else(|| fallback.into())
+        };
+        self.status = format!(
+            "{QUIT_QUESTION} {} unsaved edit{}: {} again quits (the journal keeps them), :quit! quits at once, {} saves the recipe",
+            self.unsaved,
+            if self.unsaved == 1 { "" } else { "s" },
+            key("quit", ":quit"),
+            key("save-recipe recipe.toml", ":save-recipe PATH"),
+        );
+    }
+
+    /// `help`: the overlay; `help COMMAND`: its usage and keys on the status line.
+    fn help(&mut self, topic: Option<&str>) {
+        let Some(name) = topic else {
+            self.help = Some(HelpOverlay::default());
+            return;
+        };
+        self.status = match CommandSpec::find(name) {
+            Some(spec) => {
+                let keys: Vec<String> = self
+                    .keymap
+                    .bindings()
+                    .filter(|(_, line)| line.split_whitespace().next() == Some(spec.name))
+                    .map(|(k, line)| format!("{k} ({line})"))
+                    .collect();
+                format!(
+                    "{}: {}; keys: {}",
+                    spec.usage(),
+                    spec.summary,
+                    if keys.is_empty() {
+                        "none, type it at :".into()
+                    } else {
+                        keys.join(", ")
+                    }
+                )
+            }
+            None => {
+                let near = nearest_names(name);
+                format!(
+                    "help: no command '{}'{}",
+                    crate::text::printable(name),
+                    if near.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" (did you mean {}?)", near.join(" or "))
+                    }
+                )
+            }
+        };
+    }
+
+    /// Before an orbit after free flight: moves the target to the surface
+    /// under the centre of the view, keeping the eye where it is.
+    fn repivot(&mut self) {
+        let camera = self.editor().state.recipe.camera;
+        let Some((at, depth)) = self.pivot.found else {
+            return;
+        };
+        if at != camera || depth <= 0.0 || !depth.is_finite() {
+            return;
+        }
+        let eye = camera.eye();
+        let forward = (glam::Vec3::from(camera.target) - eye).normalize_or_zero();
+        let target = eye + forward * depth;
+        let settings = CameraOverrides {
+            target: Some(target.into()),
+            radius: Some(depth),
+            ..CameraOverrides::default()
+        };
+        self.pivot = Pivot::default();
+        self.run(Command::SetCamera(settings), false);
+    }
+
+    /// Hands an effect to the render thread with the recipe and the view of
+    /// now, at the session's render size.
     fn effect(&mut self, effect: Effect) {
-        let (w, h) = self.info.image_size;
-        let view = self.editor.frame_request(w.max(64), h.max(48), true);
-        let job = Job::Effect(effect, self.editor.state.recipe.clone(), view);
-        let (lock, cv) = &*self.mailbox;
-        lock.lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .effects
-            .push(job);
-        cv.notify_one();
+        let (w, h) = self.render_size;
+        let view = self.editor().frame_request(w, h, true);
+        let recipe = self.editor().state.recipe.clone();
+        self.worker
+            .ask(Task::Effect(effect, Box::new((recipe, view))));
+    }
+
+    /// The kitty image under an overlay was removed, and sixel or iTerm2
+    /// images were drawn over: draw them again.
+    fn redraw_images(&mut self) {
+        self.picture.version += 1;
+        self.picture.dirty = true;
+        self.thumbnails.dirty = true;
     }
 
     /// Asks for a new frame when the picture is out of date, or for a full-quality
-    /// one once the view has settled.
-    fn request_frame(&mut self, viewport: ratatui::layout::Rect) {
+    /// one once the view has settled (then also for the depth at the centre
+    /// after free flight).
+    fn request_frame(&mut self, viewport: Rect) {
+        let p = &self.picture;
         let moving = self.moving();
-        let refine = !moving && !self.last_exact && self.requested == self.shown_version;
-        if self.requested == self.version && !refine {
+        let refine = !moving && !p.last_exact && p.requested == p.shown_version;
+        if p.requested == p.version && !refine {
             return;
         }
         let target = ImageTarget::new(&self.graphics, (viewport.width, viewport.height));
         let full = target.full;
-        let scale = if moving { self.scale } else { 1.0 };
+        let scale = if moving { p.scale } else { 1.0 };
         let (w, h) = (
             ((full.0 as f64 * scale).round() as u32).max(8),
             ((full.1 as f64 * scale).round() as u32).max(8),
         );
-        let job = FrameJob {
-            request: self.editor.frame_request(w, h, !moving),
-            version: self.version,
+        let request = self.editor().frame_request(w, h, !moving);
+        if !moving && self.pivot.free && !self.pivot.asked && self.pivot.found.is_none() {
+            self.pivot.asked = true;
+            self.worker.ask(Task::Pivot(request.clone()));
+        }
+        self.worker.draw(FrameJob {
+            request,
+            version: self.picture.version,
             target,
-        };
-        let (lock, cv) = &*self.mailbox;
-        lock.lock().unwrap_or_else(|e| e.into_inner()).frame = Some(job);
-        cv.notify_one();
-        self.requested = self.version;
+        });
+        self.picture.requested = self.picture.version;
         if refine {
-            self.last_exact = true;
+            self.picture.last_exact = true;
         }
     }
 
     fn receive(&mut self) {
-        while let Ok(reply) = self.replies.try_recv() {
+        while let Some(reply) = self.worker.try_reply() {
             match reply {
-                Reply::Message(m) => self.editor.state.status = m,
+                Reply::Done {
+                    message,
+                    saved_recipe,
+                } => {
+                    if saved_recipe {
+                        self.unsaved = 0;
+                    }
+                    self.status = message;
+                }
+                Reply::Failed(message) => self.status = message,
+                Reply::Pivot(at, depth) => {
+                    self.pivot.asked = false;
+                    if at == self.editor().state.recipe.camera {
+                        self.pivot.found = depth.map(|d| (at, d));
+                    }
+                }
+                Reply::Thumbnails(thumbs) => {
+                    self.thumbnails.encoded = thumbs.into_iter().map(|(_, e)| e).collect();
+                    self.thumbnails.dirty = true;
+                    self.picture.version += 1;
+                }
                 Reply::Frame {
                     version,
                     result,
                     encoded,
                     encode_ms,
                     exact,
-                } => {
-                    self.last_exact = exact;
-                    self.shown_version = version;
-                    let t = &result.timings;
-                    let spent = t.compose + t.pose + t.render + encode_ms;
-                    if !exact {
-                        self.scale = next_scale(self.scale, spent);
-                    }
-                    if let Some((v, at)) = self.edit_time {
-                        if version >= v {
-                            self.editor.state.status =
-                                format!("edit shown in {:.0} ms", at.elapsed().as_secs_f64() * 1e3);
-                            self.edit_time = None;
-                        }
-                    }
-                    self.info = InfoPanel {
-                        gaussians: result.gaussians,
-                        visible: result.visible,
-                        stages: result.stages,
-                        extras: result.extras,
-                        timings: result.timings,
-                        encode_ms,
-                        fps: self.info.fps,
-                        image_size: (result.image.width, result.image.height),
-                        renderer: self.renderer_name.clone(),
-                    };
-                    self.image = Some(result.image);
-                    self.encoded = encoded;
-                    self.image_dirty = true;
-                    self.frames_shown += 1;
-                }
+                } => self.show_frame(version, *result, encoded, encode_ms, exact),
             }
         }
-        let elapsed = self.fps_clock.elapsed().as_secs_f64();
+        let p = &mut self.picture;
+        let elapsed = p.fps_clock.elapsed().as_secs_f64();
         if elapsed >= 1.0 {
-            self.info.fps = self.frames_shown as f64 / elapsed;
-            self.frames_shown = 0;
-            self.fps_clock = Instant::now();
+            p.info.fps = p.frames_shown as f64 / elapsed;
+            p.frames_shown = 0;
+            p.fps_clock = Instant::now();
         }
     }
 
-    /// Draws the cells and, for image protocols, the frame — one write in
-    /// synchronized output.
+    fn show_frame(
+        &mut self,
+        version: u64,
+        result: crate::pipeline::workbench::FrameResult,
+        encoded: Vec<u8>,
+        encode_ms: f64,
+        exact: bool,
+    ) {
+        let p = &mut self.picture;
+        p.last_exact = exact;
+        p.shown_version = version;
+        let t = &result.timings;
+        let spent = t.compose + t.pose + t.render + encode_ms;
+        if !exact {
+            p.scale = next_scale(p.scale, spent);
+        }
+        if let Some((v, at, message)) = &p.edit_time {
+            if version >= *v {
+                let ms = at.elapsed().as_secs_f64() * 1e3;
+                self.status = match message {
+                    Some(m) => format!("{m} (shown in {ms:.0} ms)"),
+                    None => format!("edit shown in {ms:.0} ms"),
+                };
+                p.edit_time = None;
+            }
+        }
+        let last_compose = if t.recomposed {
+            t.compose
+        } else {
+            p.info.last_compose
+        };
+        p.info = InfoPanel {
+            gaussians: result.gaussians,
+            visible: result.visible,
+            stages: result.stages,
+            extras: result.extras,
+            timings: result.timings,
+            last_compose,
+            encode_ms,
+            fps: p.info.fps,
+            image_size: (result.image.width, result.image.height),
+            renderer: self.renderer_name.clone(),
+        };
+        p.image = Some(result.image);
+        p.encoded = encoded;
+        p.dirty = true;
+        p.frames_shown += 1;
+        if !self.thumbnails.asked {
+            self.ask_thumbnails();
+        }
+    }
+
+    /// Renders each source's face once, small, for the source strip.
+    fn ask_thumbnails(&mut self) {
+        self.thumbnails.asked = true;
+        if self.graphics.protocol == Protocol::Halfblocks || self.editor().catalog.scene.is_some() {
+            return;
+        }
+        let (cw, ch) = self.graphics.cell_px;
+        let rows = 2u16;
+        let cols = ((rows as u32 * ch as u32) / (cw.max(1) as u32)).clamp(2, 8) as u16;
+        self.thumbnails.cells = (cols, rows);
+        let catalog = &self.editor().catalog;
+        let requests = catalog
+            .sources
+            .iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let target = ImageTarget::thumbnail(&self.graphics, (cols, rows), i);
+                let mut recipe = Recipe::unedited(name);
+                recipe.camera = Orbit {
+                    fov_deg: Orbit::STUDY.fov_deg * 0.8,
+                    ..Orbit::STUDY
+                };
+                let request = FrameRequest {
+                    recipe,
+                    debug: DebugView::default(),
+                    group: Group::Face,
+                    width: target.full.0.max(8),
+                    height: target.full.1.max(8),
+                    exact: true,
+                };
+                (request, target)
+            })
+            .collect();
+        self.worker.ask(Task::Thumbnails(requests));
+    }
+
+    /// Draws the cells and, for image protocols, the frame and thumbnails —
+    /// one write in synchronized output.
     fn present(
         &mut self,
         term: &mut Terminal<CrosstermBackend<Collector>>,
         collector: &Collector,
-        viewport: Option<ratatui::layout::Rect>,
+        area: Rect,
     ) -> Result<()> {
+        let screen = self.screen();
         let vm = ViewModel {
-            state: &self.editor.state,
-            catalog: &self.editor.catalog,
+            state: &self.journal.editor.state,
+            catalog: &self.journal.editor.catalog,
             swatches: &self.swatches,
             keymap: &self.keymap,
-            info: &self.info,
+            info: &self.picture.info,
             protocol: self.graphics.protocol,
-            image: self.image.as_ref(),
+            image: self.picture.image.as_ref(),
+            status: &self.status,
+            prompt: self.prompt.as_ref(),
+            screen,
+            overlay: self.help.is_some(),
+            journal: self.journal.journal(),
         };
-        term.draw(|f| draw(f, &vm))
-            .map_err(|e| Error::terminal(format!("cannot draw: {e}")))?;
+        let help = &mut self.help;
+        let rows = &self.help_rows;
+        term.draw(|f| {
+            draw(f, &vm);
+            if let Some(h) = help {
+                draw_help(f, f.area(), h, rows);
+            }
+        })
+        .map_err(|e| Error::terminal(format!("cannot draw: {e}")))?;
         let mut out = SYNC_BEGIN.to_vec();
         out.extend(collector.take());
-        if self.image_dirty && self.graphics.protocol != Protocol::Halfblocks {
-            if let Some(v) = viewport {
-                if self.editor.state.help {
-                    if self.graphics.protocol == Protocol::Kitty {
-                        out.extend_from_slice(&kitty_delete());
+        let images = self.graphics.protocol != Protocol::Halfblocks;
+        if let (true, Some(areas)) = (images, layout(area, screen)) {
+            if self.help.is_some() {
+                if self.picture.dirty && self.graphics.protocol == Protocol::Kitty {
+                    out.extend_from_slice(&kitty_delete());
+                }
+            } else {
+                if self.picture.dirty {
+                    place_image(&mut out, areas.viewport, &self.picture.encoded);
+                }
+                if self.thumbnails.dirty {
+                    if let Some(cells) = screen.thumbnails {
+                        let s = &self.journal.editor;
+                        for (i, slot) in source_slots(
+                            areas.sources,
+                            &s.catalog.sources,
+                            s.state.source,
+                            Some(cells),
+                        ) {
+                            if let Some(encoded) = self.thumbnails.encoded.get(i) {
+                                place_image(&mut out, slot, encoded);
+                            }
+                        }
                     }
-                } else {
-                    place_image(&mut out, v, &self.encoded);
+                    self.thumbnails.dirty = false;
                 }
             }
         }
-        self.image_dirty = false;
+        self.picture.dirty = false;
         if out.len() == SYNC_BEGIN.len() {
             return Ok(()); // nothing changed on screen
         }
@@ -694,14 +901,8 @@ impl App {
     }
 }
 
-/// Writes a frame's bytes to the terminal in one write.
-pub(super) fn write_to_terminal(bytes: &[u8]) -> Result<()> {
-    let mut stdout = std::io::stdout().lock();
-    stdout
-        .write_all(bytes)
-        .and_then(|_| stdout.flush())
-        .map_err(|e| Error::terminal(format!("cannot write to the terminal: {e}")))
-}
+/// How the quit question begins (so the next key knows it was asked).
+const QUIT_QUESTION: &str = "quit?";
 
 #[cfg(test)]
 mod tests {

@@ -132,6 +132,9 @@ pub fn tmux_wrap(escape: &[u8]) -> Vec<u8> {
 /// Image id visage's frames use with the kitty protocol.
 pub const KITTY_IMAGE_ID: u32 = 7331;
 
+/// Source thumbnails use the ids after the frame's, one each, at most this many.
+pub const KITTY_THUMBNAIL_IDS: u32 = 64;
+
 /// How kitty receives the pixels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum KittyTransport {
@@ -150,9 +153,19 @@ pub fn encode_kitty(
     cells: (u16, u16),
     transport: KittyTransport,
 ) -> std::io::Result<Vec<u8>> {
+    encode_kitty_with_id(image, cells, transport, KITTY_IMAGE_ID)
+}
+
+/// [`encode_kitty`] for the image `id` (thumbnails have their own ids).
+pub fn encode_kitty_with_id(
+    image: &RgbImage,
+    cells: (u16, u16),
+    transport: KittyTransport,
+    id: u32,
+) -> std::io::Result<Vec<u8>> {
     let b64 = base64::engine::general_purpose::STANDARD;
     let header = format!(
-        "a=T,f=24,s={},v={},i={KITTY_IMAGE_ID},p=1,q=2,C=1,c={},r={}",
+        "a=T,f=24,s={},v={},i={id},p=1,q=2,C=1,c={},r={}",
         image.width, image.height, cells.0, cells.1
     );
     let mut out = Vec::new();
@@ -198,9 +211,17 @@ pub fn encode_kitty(
     Ok(out)
 }
 
-/// Deletes visage's kitty image (before overlays are drawn over the viewport, and on exit).
+/// Deletes visage's kitty frame (before overlays are drawn over the viewport).
 pub fn kitty_delete() -> Vec<u8> {
     format!("\x1b_Ga=d,d=i,i={KITTY_IMAGE_ID},q=2\x1b\\").into_bytes()
+}
+
+/// Deletes every kitty image visage placed: the frame and the thumbnails
+/// (on exit).
+pub fn kitty_delete_all() -> Vec<u8> {
+    (KITTY_IMAGE_ID..=KITTY_IMAGE_ID + KITTY_THUMBNAIL_IDS)
+        .flat_map(|id| format!("\x1b_Ga=d,d=I,i={id},q=2\x1b\\").into_bytes())
+        .collect()
 }
 
 /// Encodes a frame as sixel: 256-colour palette (Wu), no dithering.
@@ -297,6 +318,8 @@ pub struct ImageTarget {
     pub kitty: KittyTransport,
     /// Wrap escapes for tmux passthrough.
     pub tmux: bool,
+    /// The kitty image id.
+    pub kitty_id: u32,
 }
 
 impl ImageTarget {
@@ -319,6 +342,22 @@ impl ImageTarget {
                 KittyTransport::TempFile
             },
             tmux: graphics.tmux,
+            kitty_id: KITTY_IMAGE_ID,
+        }
+    }
+
+    /// The target of source thumbnail `index`: its own kitty image id, sent
+    /// inline (thumbnails are small; a shared temporary file would race).
+    pub fn thumbnail(graphics: &TerminalGraphics, cells: (u16, u16), index: usize) -> ImageTarget {
+        let base = ImageTarget::new(graphics, cells);
+        ImageTarget {
+            kitty: if graphics.remote {
+                KittyTransport::Zlib
+            } else {
+                KittyTransport::Direct
+            },
+            kitty_id: KITTY_IMAGE_ID + 1 + (index as u32 % KITTY_THUMBNAIL_IDS),
+            ..base
         }
     }
 
@@ -327,9 +366,8 @@ impl ImageTarget {
     pub fn encode(&self, image: &RgbImage) -> Result<Vec<u8>, String> {
         let bytes = match self.protocol {
             Protocol::Halfblocks => return Ok(Vec::new()),
-            Protocol::Kitty => {
-                encode_kitty(image, self.cells, self.kitty).map_err(|e| e.to_string())?
-            }
+            Protocol::Kitty => encode_kitty_with_id(image, self.cells, self.kitty, self.kitty_id)
+                .map_err(|e| e.to_string())?,
             Protocol::Iterm2 => encode_iterm2(image, self.cells)?,
             Protocol::Sixel => {
                 if (image.width, image.height) != self.full {

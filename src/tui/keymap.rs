@@ -316,12 +316,14 @@ impl Keymap {
             .map(|(k, (text, _))| (k.to_string(), text.as_str()))
     }
 
-    /// The first key bound to a command line, for hints.
+    /// The shortest key bound to a command line, for hints (`q` rather
+    /// than `ctrl-c`).
     pub fn key_for(&self, command_line: &str) -> Option<String> {
         self.bindings
             .iter()
-            .find(|(_, (t, _))| t == command_line)
+            .filter(|(_, (t, _))| t == command_line)
             .map(|(k, _)| k.to_string())
+            .min_by_key(|k| k.chars().count())
     }
 }
 

@@ -18,12 +18,12 @@ use ratatui::text::Line;
 use ratatui::widgets::Paragraph;
 use ratatui::{Frame, Terminal};
 
-use super::app::{
-    enter_terminal, spawn_input_reader, terminal_hung_up, write_to_terminal, Collector,
-};
 use super::graphics::{
     detect, draw_halfblocks, place_image, reserve_cells, GraphicsChoice, ImageTarget, Protocol,
     TerminalGraphics, SYNC_BEGIN, SYNC_END,
+};
+use super::terminal::{
+    enter_terminal, spawn_input_reader, terminal_hung_up, write_to_terminal, Collector,
 };
 use crate::compose::composition::StudyGroup;
 use crate::compose::engine::Engine;
