@@ -632,6 +632,12 @@ fn flame_models_pickled_by_real_chumpy_load() {
     ]);
     assert_eq!(v["model"]["vertices"], 5143);
     assert_eq!(v["model"]["triangles"], 10144);
+    // Without the FLAME files, the error says what to pass rather than an
+    // array's shape.
+    expect_one_line_exit_2(
+        vec!["info".into(), "--db".into(), db.display().to_string()],
+        "5143 vertices (FLAME), not the built-in head's 5309: pass the FLAME model and masks",
+    );
 
     // generic_model.pkl style: shapedirs, posedirs, J and weights all chumpy, protocol 0.
     let small = visage::io::flame::load_flame(

@@ -288,13 +288,14 @@ fn malformed_datasets_fail_with_one_line_and_exit_2() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// Ctrl-C stops at an iteration boundary with a checkpoint and the avatar so
-/// far; `--resume` continues from there.
+/// Ctrl-C (SIGINT) or SIGTERM stops at an iteration boundary with a
+/// checkpoint and the avatar so far, and exits as shells expect (130, 143);
+/// `--resume` continues from there.
 #[test]
 fn ctrl_c_checkpoints_and_resume_continues() {
     let dir = small_capture("sigint");
     let out = dir.join("avatar");
-    let stopped_at = |resume: Option<&Path>| -> usize {
+    let stopped_at = |resume: Option<&Path>, signal: &str, code: i32| -> usize {
         let mut cmd = Command::new(env!("CARGO_BIN_EXE_visage"));
         cmd.args(["train", dir.to_str().unwrap(), "-o", out.to_str().unwrap()])
             .args([
@@ -312,12 +313,12 @@ fn ctrl_c_checkpoints_and_resume_continues() {
         let child = cmd.spawn().unwrap();
         std::thread::sleep(std::time::Duration::from_secs(3));
         Command::new("kill")
-            .args(["-INT", &child.id().to_string()])
+            .args([signal, &child.id().to_string()])
             .status()
             .unwrap();
         let o = child.wait_with_output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
-        assert!(o.status.success(), "{err}");
+        assert_eq!(o.status.code(), Some(code), "{err}");
         let line = err
             .lines()
             .find(|l| l.contains("stopped at iteration"))
@@ -329,10 +330,10 @@ fn ctrl_c_checkpoints_and_resume_continues() {
             .parse()
             .unwrap()
     };
-    let first = stopped_at(None);
+    let first = stopped_at(None, "-INT", 130);
     let checkpoint = out.join("checkpoint.npz");
     assert!(checkpoint.is_file() && out.join("point_cloud.ply").is_file());
-    let second = stopped_at(Some(&checkpoint));
+    let second = stopped_at(Some(&checkpoint), "-TERM", 143);
     assert!(second > first, "resumed from {first}, stopped at {second}");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -87,6 +87,38 @@ pub fn median_stages(
     }
 }
 
+/// A renderer opened for a benchmark, or — when the graphics device is
+/// missing and other renderers were asked for too — `None`, with the reason
+/// added to `skipped` (a machine without a GPU still measures its CPU).
+pub fn open_or_skip<T>(
+    opened: crate::error::Result<T>,
+    backend: crate::render::Backend,
+    asked: usize,
+    skipped: &mut Vec<serde_json::Value>,
+) -> crate::error::Result<Option<T>> {
+    match opened {
+        Ok(t) => Ok(Some(t)),
+        Err(e @ crate::error::Error::Device(_)) if asked > 1 => {
+            eprintln!("visage: skipping the {} renderer: {e}", backend.name());
+            skipped.push(serde_json::json!({ "renderer": backend, "reason": e.to_string() }));
+            Ok(None)
+        }
+        Err(e) => Err(e),
+    }
+}
+
+/// Prints the renderers a benchmark skipped, and why.
+pub fn print_skipped(doc: &serde_json::Value) {
+    for s in doc["skipped"].as_array().into_iter().flatten() {
+        println!(
+            "\n{} renderer skipped: {}",
+            s["renderer"].as_str().unwrap_or("?"),
+            s["reason"].as_str().unwrap_or("")
+        );
+    }
+}
+
+/// Median and 90th percentile of frame times.
 pub fn summarize(mut ms: Vec<f64>) -> (f64, f64) {
     ms.sort_by(f64::total_cmp);
     let at = |q: f64| ms[((ms.len() - 1) as f64 * q).round() as usize];

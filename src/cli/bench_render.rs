@@ -8,7 +8,7 @@ use std::time::Instant;
 use clap::Args;
 use serde_json::{json, Value};
 
-use super::bench::{median_stages, summarize};
+use super::bench::{median_stages, open_or_skip, print_skipped, summarize};
 use super::bench_scene::{bench_scene, peak_rss_mb, SceneSource, SCENE_SIZES};
 use super::compose::{build, build_from};
 use super::render::parse_size;
@@ -222,9 +222,14 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
         references.push((camera, image, t.elapsed().as_secs_f64() * 1e3));
     }
     let mut renderers = Vec::new();
+    let mut skipped = Vec::new();
     for &backend in &args.renderers {
         let t = Instant::now();
-        let mut painter = Painter::open(backend)?;
+        let opened = Painter::open(backend);
+        let Some(mut painter) = open_or_skip(opened, backend, args.renderers.len(), &mut skipped)?
+        else {
+            continue;
+        };
         let setup_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         painter.upload(&composer)?;
@@ -284,6 +289,7 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
         "load_ms": load_ms,
         "peak_rss_mb": peak_rss_mb(),
         "renderers": renderers,
+        "skipped": skipped,
     });
     print(&doc, args.json)
 }
@@ -380,6 +386,7 @@ fn print_tables(doc: &Value) {
     for r in doc["renderers"].as_array().into_iter().flatten() {
         print_renderer(r);
     }
+    print_skipped(doc);
 }
 
 fn print_renderer(doc: &Value) {

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use serde_json::{json, Value};
 
-use super::bench::{median_stages, summarize};
+use super::bench::{median_stages, open_or_skip, summarize};
 use crate::error::{Error, Result};
 use crate::render::image::{psnr_report, RgbImage};
 use crate::render::reference::render_reference;
@@ -100,9 +100,14 @@ pub fn bench_scene(
         references.push((camera, image, t.elapsed().as_secs_f64() * 1e3));
     }
     let mut docs = Vec::new();
+    let mut skipped = Vec::new();
     for &backend in renderers {
         let t = Instant::now();
-        let mut renderer = SplatRenderer::open(backend)?;
+        let opened = SplatRenderer::open(backend);
+        let Some(mut renderer) = open_or_skip(opened, backend, renderers.len(), &mut skipped)?
+        else {
+            continue;
+        };
         let setup_ms = t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         renderer.set_world_scene(&scene)?;
@@ -161,6 +166,7 @@ pub fn bench_scene(
         "load_peak_rss_mb": load_peak,
         "peak_rss_mb": peak_rss_mb(),
         "renderers": docs,
+        "skipped": skipped,
     }))
 }
 

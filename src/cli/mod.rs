@@ -75,9 +75,10 @@ enum Command {
 
 /// Parses the process arguments, runs the command and maps errors to exit codes.
 pub fn run() -> ExitCode {
-    let cli = match Cli::try_parse() {
+    let (args, moved) = hoist_subcommand(std::env::args_os().collect());
+    let cli = match Cli::try_parse_from(&args) {
         Ok(cli) => cli,
-        Err(e) => return usage_error(e),
+        Err(e) => return usage_error(e, moved.as_deref()),
     };
     match dispatch(cli) {
         Ok(()) => ExitCode::SUCCESS,
@@ -109,10 +110,42 @@ fn dispatch(cli: Cli) -> Result<()> {
     }
 }
 
+/// Options written before the subcommand they belong to (`visage --db DIR
+/// info`) would be read as the editor's: the subcommand moves to the front
+/// (`visage info --db DIR`), and the name of the subcommand moved is returned
+/// for messages.
+fn hoist_subcommand(
+    mut args: Vec<std::ffi::OsString>,
+) -> (Vec<std::ffi::OsString>, Option<String>) {
+    use clap::CommandFactory;
+    let starts_with_option = args
+        .get(1)
+        .is_some_and(|a| a.to_string_lossy().starts_with('-'));
+    if !starts_with_option {
+        return (args, None);
+    }
+    let names: Vec<String> = Cli::command()
+        .get_subcommands()
+        .map(|c| c.get_name().to_string())
+        .collect();
+    let found = args.iter().enumerate().skip(2).find(|(_, a)| {
+        let a = a.to_string_lossy();
+        names.iter().any(|n| *n == a) && !std::path::Path::new(a.as_ref()).exists()
+    });
+    let Some((at, _)) = found else {
+        return (args, None);
+    };
+    let name = args.remove(at);
+    let moved = name.to_string_lossy().into_owned();
+    args.insert(1, name);
+    (args, Some(moved))
+}
+
 /// Help and version go to stdout with exit 0; real usage errors become one line
-/// on stderr with exit 2.
-fn usage_error(e: clap::Error) -> ExitCode {
-    use clap::error::ErrorKind;
+/// on stderr with exit 2, naming what was wrong and the values allowed.
+/// `moved`: the subcommand [`hoist_subcommand`] moved to the front.
+fn usage_error(e: clap::Error, moved: Option<&str>) -> ExitCode {
+    use clap::error::{ContextKind, ContextValue, ErrorKind};
     if matches!(
         e.kind(),
         ErrorKind::DisplayHelp
@@ -123,15 +156,34 @@ fn usage_error(e: clap::Error) -> ExitCode {
         return ExitCode::SUCCESS;
     }
     let rendered = e.render().to_string();
-    let first = rendered
+    // The error's own lines up to the usage, joined: clap puts the missing
+    // arguments and the possible values on lines of their own.
+    let mut message: String = rendered
         .lines()
-        .find(|l| !l.trim().is_empty())
-        .unwrap_or("invalid arguments")
-        .trim_start_matches("error: ");
-    eprintln!(
-        "visage: {} (see visage --help)",
-        crate::text::printable(first)
-    );
+        .take_while(|l| !l.starts_with("Usage:"))
+        .map(str::trim)
+        .filter(|l| {
+            !l.is_empty() && !l.starts_with("tip:") && !l.starts_with("For more information")
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+        .trim_start_matches("error: ")
+        .to_string();
+    if message.is_empty() {
+        message = "invalid arguments".into();
+    }
+    if let Some(ContextValue::Strings(valid)) = e.get(ContextKind::ValidValue) {
+        if !message.contains("possible values") && !valid.is_empty() {
+            message.push_str(&format!(" (one of: {})", valid.join(", ")));
+        }
+    }
+    let hint = match (moved, e.kind()) {
+        (Some(sub), ErrorKind::UnknownArgument) => format!(
+            "; options before '{sub}' must be options of 'visage {sub}' (see visage {sub} --help)"
+        ),
+        _ => " (see visage --help)".into(),
+    };
+    eprintln!("visage: {}{hint}", crate::text::printable(&message));
     ExitCode::from(2)
 }
 

@@ -105,6 +105,12 @@ fn render_sequence(
             "with --frames the output path must contain {frame}, e.g. -o shots/frame-{frame}.png",
         ));
     }
+    composer.check_frames(start..end)?;
+    let first = PathBuf::from(pattern.replace("{frame}", &format!("{start:04}")));
+    if let Some(dir) = first.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::input(format!("cannot create {}: {e}", dir.display())))?;
+    }
     let mut painter = (!args.reference)
         .then(|| Painter::open(args.renderer))
         .transpose()?;
@@ -135,6 +141,18 @@ enum Subject {
 /// Runs `visage render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let overrides = args.camera.overrides()?;
+    // Checked before anything is rendered: the file must be a PNG.
+    if !args
+        .output
+        .to_string_lossy()
+        .to_ascii_lowercase()
+        .ends_with(".png")
+    {
+        return Err(Error::input(format!(
+            "render writes PNG images: name the output .png, not '{}'",
+            args.output.display()
+        )));
+    }
     let (mut subject, orbit) = if let Some(ply) = &args.ply {
         let scene = crate::io::splat::read_scene(ply)?;
         let orbit = scene

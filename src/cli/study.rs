@@ -121,7 +121,7 @@ fn run_status(args: &StatusArgs) -> Result<()> {
             let mut answered: Vec<u32> = answers.iter().map(|a| a.avatar).collect();
             answered.sort_unstable();
             answered.dedup();
-            let seconds: f64 = answers.iter().map(|a| a.seconds).sum();
+            let seconds = answers.iter().map(|a| a.seconds).fold(0.0, |a, b| a + b);
             serde_json::json!({
                 "participant": who,
                 "answered": answered.len(),

@@ -1,10 +1,12 @@
 //! `visage train` (a GaussianAvatars avatar from a dataset) and `visage eval`
 //! (its PSNR / SSIM on the dataset's held-out views, and a picture grid).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Args;
+
+use crate::tui::terminal::{signal_name, StopSignal};
 use serde_json::json;
 
 use super::render::parse_size;
@@ -125,17 +127,10 @@ impl HoleArgs {
 
 /// Runs `visage train`.
 pub fn run_train(args: &TrainArgs) -> Result<()> {
-    // Ctrl-C or a hang-up stops at the end of an iteration with a checkpoint
-    // (installed first, so a signal while loading is no crash either).
-    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    for signal in [
-        signal_hook::consts::SIGINT,
-        signal_hook::consts::SIGTERM,
-        signal_hook::consts::SIGHUP,
-    ] {
-        signal_hook::flag::register(signal, std::sync::Arc::clone(&stop))
-            .map_err(|e| Error::input(format!("cannot install a signal handler: {e}")))?;
-    }
+    // Ctrl-C, SIGTERM or a hang-up stops at the end of an iteration with a
+    // checkpoint, then exits 128 + the signal as shells expect (installed
+    // first, so a signal while loading is no crash either).
+    let stop = StopSignal::install()?;
     let dataset = Dataset::load(&args.dataset)?;
     let head = args.head.load(Some(&dataset))?;
     // Fail on an unwritable output before training, not after.
@@ -170,19 +165,25 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
         .progress_chars("=> "),
     );
     bar.set_position(first as u64);
+    // The rate and the time left count only this run's iterations, not the
+    // ones a resumed checkpoint brought.
+    bar.reset_eta();
     let mut smoothed: Option<(f64, f64)> = None;
     while trainer.iteration() < iterations {
-        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+        if let Some(signal) = stop.received() {
             bar.finish_and_clear();
             trainer.save_checkpoint(&checkpoint)?;
             trainer.export(&args.output)?;
-            eprintln!(
-                "visage: stopped at iteration {} of {iterations}; the avatar so far is in {}; continue with --resume {}",
-                trainer.iteration(),
-                args.output.display(),
-                checkpoint.display()
-            );
-            return Ok(());
+            return Err(StopSignal::stopped(
+                signal,
+                format!(
+                    "stopped by {} at iteration {} of {iterations}; the avatar so far is in {}; continue with --resume {}",
+                    signal_name(signal),
+                    trainer.iteration(),
+                    args.output.display(),
+                    checkpoint.display()
+                ),
+            ));
         }
         let r = trainer.step()?;
         if args.checkpoint_every > 0 && r.iteration % args.checkpoint_every == 0 {
@@ -250,6 +251,7 @@ pub fn run_eval(args: &EvalArgs) -> Result<()> {
     };
     let mut rows = Vec::new();
     let mut grid: Vec<RgbImage> = Vec::new();
+    let mut grid_rows: Vec<String> = Vec::new();
     for (split, views) in [("val", &dataset.val), ("test", &dataset.test)] {
         if views.is_empty() {
             continue;
@@ -267,6 +269,7 @@ pub fn run_eval(args: &EvalArgs) -> Result<()> {
                 let goal: Vec<f64> = target.pixels.iter().map(|&p| p as f64).collect();
                 grid.push(to_image(&image, w, h));
                 grid.push(to_image(&goal, w, h));
+                grid_rows.push(format!("{split} {k}: {psnr:.1} dB"));
             }
         }
         let n = views.len() as f64;
@@ -278,7 +281,10 @@ pub fn run_eval(args: &EvalArgs) -> Result<()> {
         }));
     }
     if let Some(path) = &args.grid {
-        write_grid(&grid, path)?;
+        if !grid.is_empty() {
+            crate::study::plot::labelled_grid(&grid, &["render", "truth"], &grid_rows)?
+                .save_png(path)?;
+        }
     }
     let holes = if args.holes {
         let (posed, cameras) = training_arc(&dataset, &head, HOLE_METRIC_SIDE)?;
@@ -362,25 +368,4 @@ fn to_image(values: &[f64], w: u32, h: u32) -> RgbImage {
             .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
             .collect(),
     }
-}
-
-/// Pairs (render, truth) side by side, one pair per row.
-fn write_grid(images: &[RgbImage], path: &Path) -> Result<()> {
-    let Some(first) = images.first() else {
-        return Ok(());
-    };
-    let (w, h) = (first.width, first.height);
-    let rows = images.len().div_ceil(2) as u32;
-    let mut out = RgbImage::new(2 * w, rows * h, [0, 0, 0]);
-    for (k, img) in images.iter().enumerate() {
-        let (ox, oy) = ((k as u32 % 2) * w, (k as u32 / 2) * h);
-        for y in 0..img.height.min(h) {
-            for x in 0..img.width.min(w) {
-                let src = ((y * img.width + x) * 3) as usize;
-                let dst = (((oy + y) * out.width + ox + x) * 3) as usize;
-                out.pixels[dst..dst + 3].copy_from_slice(&img.pixels[src..src + 3]);
-            }
-        }
-    }
-    out.save_png(path).map_err(Error::input)
 }

@@ -74,6 +74,28 @@ pub fn avatar_folders(dir: &Path) -> super::Result<Vec<(String, PathBuf)>> {
     Ok(out)
 }
 
+/// Avatars made on FLAME (5,023 vertices, 5,143 with GaussianAvatars'
+/// teeth) cannot load on the built-in head: say so, and what to pass, before
+/// an array's shape would.
+fn check_built_in_head(name: &str, dir: &Path, vertices: usize) -> super::Result<()> {
+    let Ok(arrays) = super::npy::read_npz(&dir.join("flame_param.npz")) else {
+        return Ok(()); // reading the avatar reports it
+    };
+    let theirs = ["static_offset", "dynamic_offset"]
+        .iter()
+        .filter_map(|k| arrays.get(*k))
+        .find_map(|a| (a.shape.len() == 3).then(|| a.shape[1]));
+    match theirs {
+        Some(v) if v != vertices => Err(super::FileError::Malformed(format!(
+            "avatar {name} was made on a head of {v} vertices (FLAME{}), not the built-in head's {vertices}: \
+             pass the FLAME model and masks it was trained with, --flame generic_model.pkl --masks FLAME_masks.pkl \
+             (or set flame and masks in ~/.config/visage/config.toml)",
+            if v == 5023 || v == 5143 { "" } else { "?" }
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// Loads a folder database. `flame` is (model, masks); `None` uses the built-in head.
 pub fn load_folder(dir: &Path, flame: Option<(&Path, &Path)>) -> super::Result<Database> {
     let folders = avatar_folders(dir)?;
@@ -87,6 +109,11 @@ pub fn load_folder(dir: &Path, flame: Option<(&Path, &Path)>) -> super::Result<D
         }
         None => build_head(),
     };
+    if flame.is_none() {
+        if let Some((name, path)) = folders.first() {
+            check_built_in_head(name, path, model.vertex_count())?;
+        }
+    }
     let mut sources = Vec::new();
     for (name, path) in &folders {
         for f in ["point_cloud.ply", "flame_param.npz"] {

@@ -83,6 +83,9 @@ impl Composer {
         let mut composer = Composer::new(Engine::new(db)?);
         let setup = t.elapsed().as_secs_f64() * 1e3;
         let (resolved, mut timings) = composer.update(&recipe)?;
+        if let Some(k) = frame {
+            composer.check_frames(k..k + 1)?;
+        }
         if let Some(k) = frame.filter(|&k| k != resolved.frame) {
             timings.pose = composer.pose(k);
         }
@@ -125,6 +128,33 @@ impl Composer {
                 recomposed,
             },
         ))
+    }
+
+    /// Fails unless the composite's motion has every frame of `frames` (the
+    /// rest pose has frame 0 only): a frame past the end is an error, never a
+    /// silent wrap.
+    pub fn check_frames(&self, frames: std::ops::Range<usize>) -> Result<()> {
+        let db = self.engine.database();
+        let motion = self
+            .composite
+            .as_ref()
+            .and_then(|c| c.recipe.motion)
+            .and_then(|m| db.motions.get(m));
+        let count = motion.map_or(1, |m| m.frames().max(1));
+        if frames.end <= count {
+            return Ok(());
+        }
+        let last = frames.end - 1;
+        Err(Error::input(match motion {
+            Some(m) => format!(
+                "frame {last} is past the end of the motion {} (frames 0-{})",
+                crate::text::printable(&m.name),
+                count - 1
+            ),
+            None => {
+                format!("frame {last}: the recipe is at rest (no motion), which has only frame 0")
+            }
+        }))
     }
 
     /// Poses another frame of the composite's motion; returns milliseconds spent.

@@ -53,6 +53,14 @@ impl Backend {
         (Backend::Cpu, "cpu"),
     ];
 
+    /// The backend's name (`auto`, `gpu`, `cpu`).
+    pub fn name(self) -> &'static str {
+        Self::ALL
+            .iter()
+            .find(|(b, _)| *b == self)
+            .map_or("auto", |(_, n)| n)
+    }
+
     /// Parses `auto`, `gpu` or `cpu`.
     pub fn parse(name: &str) -> std::result::Result<Backend, String> {
         Self::ALL

@@ -92,6 +92,60 @@ pub fn write_plots(analysis: &Analysis, dir: &Path) -> Result<Vec<PathBuf>> {
 
 type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
 
+/// Height of a labelled grid's header band, in pixels.
+const GRID_HEADER: u32 = 22;
+/// Width of a labelled grid's row-label band, in pixels.
+const GRID_LABELS: u32 = 150;
+
+/// Pictures in a labelled grid: `columns` pictures per row under the
+/// column titles, each row named on its left (e.g. an evaluation's render
+/// beside its ground truth, per held-out view).
+pub fn labelled_grid(
+    images: &[crate::render::image::RgbImage],
+    columns: &[&str],
+    row_labels: &[String],
+) -> Result<crate::render::image::RgbImage> {
+    register_font()?;
+    let cols = columns.len().max(1) as u32;
+    let (w, h) = images.first().map_or((1, 1), |i| (i.width, i.height));
+    let rows = (images.len() as u32).div_ceil(cols);
+    let size = (GRID_LABELS + cols * w, GRID_HEADER + rows * h);
+    let mut pixels = vec![255u8; (size.0 * size.1 * 3) as usize];
+    for (k, img) in images.iter().enumerate() {
+        let (ox, oy) = (
+            GRID_LABELS + (k as u32 % cols) * w,
+            GRID_HEADER + (k as u32 / cols) * h,
+        );
+        for y in 0..img.height.min(h) {
+            for x in 0..img.width.min(w) {
+                let src = ((y * img.width + x) * 3) as usize;
+                let dst = (((oy + y) * size.0 + ox + x) * 3) as usize;
+                pixels[dst..dst + 3].copy_from_slice(&img.pixels[src..src + 3]);
+            }
+        }
+    }
+    {
+        let area = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
+        let style = (FAMILY, 13).into_font().color(&BLACK);
+        for (c, title) in columns.iter().enumerate() {
+            let x = (GRID_LABELS + c as u32 * w + 4) as i32;
+            area.draw(&Text::new(title.to_string(), (x, 3), style.clone()))
+                .map_err(plot_error)?;
+        }
+        for (r, label) in row_labels.iter().enumerate().take(rows as usize) {
+            let y = (GRID_HEADER + r as u32 * h + h / 2) as i32 - 8;
+            area.draw(&Text::new(label.clone(), (4, y), style.clone()))
+                .map_err(plot_error)?;
+        }
+        area.present().map_err(plot_error)?;
+    }
+    Ok(crate::render::image::RgbImage {
+        width: size.0,
+        height: size.1,
+        pixels,
+    })
+}
+
 /// Top: one bar per avatar (sorted by score within its category; excluded
 /// avatars faded). Bottom: category means with their intervals, before and
 /// after exclusion.
@@ -209,9 +263,9 @@ fn regions_chart(area: &Area, analysis: &Analysis) -> DrawResult {
             })
             .collect();
         let title = if edited {
-            "Regions where edited"
+            "Regions where edited (whiskers: 95% bootstrap CI)"
         } else {
-            "Regions where not edited"
+            "Regions where not edited (whiskers: 95% bootstrap CI)"
         };
         grouped_bars(panel, title, &groups, true)?;
     }
@@ -241,10 +295,19 @@ fn grouped_bars(area: &Area, title: &str, groups: &[BarGroup], legend: bool) -> 
             }
             names.get(i as usize).cloned().unwrap_or_default()
         })
+        .x_desc("category")
         .y_desc("authenticity")
         .label_style((FAMILY, 13))
         .draw()?;
     for (g, (_, cells)) in groups.iter().enumerate() {
+        if cells.iter().all(|(_, e, _)| e.is_none()) {
+            chart.draw_series(std::iter::once(Text::new(
+                "no data".to_string(),
+                (g as f64 - 0.15, 0.05),
+                (FAMILY, 13),
+            )))?;
+            continue;
+        }
         let width = 0.8 / cells.len().max(1) as f64;
         for (k, (_, estimate, colour)) in cells.iter().enumerate() {
             let Some(e) = estimate else { continue };

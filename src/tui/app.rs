@@ -6,7 +6,6 @@
 //! `view`, the render thread in `worker`, terminal plumbing in `terminal`.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
@@ -23,7 +22,8 @@ use super::help::{draw_help, help_page, help_rows, HelpOutcome, HelpOverlay, Hel
 use super::keymap::Keymap;
 use super::prompt::{History, Prompt, PromptOutcome};
 use super::terminal::{
-    ask_yes_no, enter_terminal, spawn_input_reader, terminal_hung_up, write_to_terminal, Collector,
+    ask_yes_no, enter_terminal, signal_name, spawn_input_reader, terminal_hung_up,
+    write_to_terminal, Collector, StopSignal,
 };
 use super::view::{draw, layout, source_slots, InfoPanel, Screen, ViewModel};
 use super::worker::{FrameJob, RenderWorker, Reply, Task};
@@ -368,7 +368,10 @@ impl App {
         &self.journal.editor
     }
 
-    fn event_loop(&mut self, stop: &AtomicBool) -> Result<()> {
+    /// Runs until the user quits (`Ok`) or a signal or a hang-up ends the
+    /// session (an interruption: exit 128 + the signal; the journal is left
+    /// open, to be offered for recovery).
+    fn event_loop(&mut self, stop: &StopSignal) -> Result<()> {
         let collector = Collector::default();
         let mut term = Terminal::new(CrosstermBackend::new(collector.clone()))
             .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
@@ -379,8 +382,11 @@ impl App {
         while !self.quit {
             // A closed terminal (SSH dropped, emulator killed) ends the editor even
             // if SIGHUP never arrives; the journal already holds every command.
-            if stop.load(Ordering::Relaxed) || terminal_hung_up() {
-                break;
+            let signal = stop
+                .received()
+                .or_else(|| terminal_hung_up().then_some(libc::SIGHUP));
+            if let Some(signal) = signal {
+                return Err(self.interrupted(signal));
             }
             let timeout = next_tick
                 .saturating_duration_since(Instant::now())
@@ -399,7 +405,7 @@ impl App {
                     let _ = term.clear();
                 }
                 Ok(_) | Err(RecvTimeoutError::Timeout) => {}
-                Err(RecvTimeoutError::Disconnected) => break,
+                Err(RecvTimeoutError::Disconnected) => return Err(self.interrupted(libc::SIGHUP)),
             }
             while Instant::now() >= next_tick {
                 next_tick += tick_len;
@@ -423,6 +429,19 @@ impl App {
             self.present(&mut term, &collector, area)?;
         }
         Ok(())
+    }
+
+    /// The error a signal ends the session with, saying where the work is.
+    fn interrupted(&self, signal: i32) -> Error {
+        let kept = match self.journal.journal() {
+            Some(path) if self.auto_journal => format!(
+                "; the journal keeps the session and the next start offers it back ({})",
+                path.display()
+            ),
+            Some(path) => format!("; the journal keeps the session ({})", path.display()),
+            None => String::new(),
+        };
+        StopSignal::stopped(signal, format!("stopped by {}{kept}", signal_name(signal)))
     }
 
     /// What the layout needs to know beyond the terminal's size.

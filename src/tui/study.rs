@@ -6,7 +6,6 @@
 //! next avatar shows, so a kill or a dropped SSH connection loses nothing
 //! and the next start resumes. The category is never shown.
 
-use std::sync::atomic::Ordering;
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
@@ -15,7 +14,7 @@ use ratatui::backend::CrosstermBackend;
 use ratatui::layout::Rect;
 use ratatui::style::{Modifier, Style};
 use ratatui::text::Line;
-use ratatui::widgets::Paragraph;
+use ratatui::widgets::{Paragraph, Wrap};
 use ratatui::{Frame, Terminal};
 
 use super::graphics::{
@@ -23,8 +22,10 @@ use super::graphics::{
     TerminalGraphics, SYNC_BEGIN, SYNC_END,
 };
 use super::terminal::{
-    enter_terminal, spawn_input_reader, terminal_hung_up, write_to_terminal, Collector,
+    enter_terminal, signal_name, spawn_input_reader, terminal_hung_up, write_to_terminal,
+    Collector, StopSignal,
 };
+use super::view::MIN_SIZE;
 use crate::compose::composition::StudyGroup;
 use crate::compose::engine::Engine;
 use crate::compose::recipe::Recipe;
@@ -83,6 +84,8 @@ struct Showing {
     pitch: f32,
     stage: Stage,
     hint: String,
+    /// The previous avatar's answer is not final: `b` goes back to it.
+    can_go_back: bool,
 }
 
 /// Runs the participant's session; returns a summary line for the shell.
@@ -127,19 +130,38 @@ pub fn run_participant(options: RunOptions) -> Result<String> {
         total,
         done: total - todo.len(),
     };
-    let finished = session.run(&todo, &mut journal, &stop)?;
-    Ok(if finished {
-        format!(
+    let ended = session.run(&todo, &mut journal, &stop)?;
+    let answered = journal
+        .answers
+        .iter()
+        .map(|a| a.avatar)
+        .collect::<std::collections::BTreeSet<_>>()
+        .len();
+    let progress = format!(
+        "participant {participant} answered {answered} of {total}; run the same command to go on ({})",
+        path.display()
+    );
+    match ended {
+        Ended::Finished => Ok(format!(
             "thank you: participant {participant} answered all {total} avatars ({})",
             path.display()
-        )
-    } else {
-        format!(
-            "stopped: participant {participant} answered {} of {total}; run the same command to go on ({})",
-            journal.answers.len(),
-            path.display()
-        )
-    })
+        )),
+        Ended::Quit => Ok(format!("stopped: {progress}")),
+        Ended::Signal(signal) => Err(StopSignal::stopped(
+            signal,
+            format!("stopped by {}: {progress}", signal_name(signal)),
+        )),
+    }
+}
+
+/// How a participant's session ended.
+enum Ended {
+    /// Every avatar answered.
+    Finished,
+    /// The participant stopped (q or ctrl-c); the answers are saved.
+    Quit,
+    /// A signal or a hang-up stopped it; the answers are saved.
+    Signal(i32),
 }
 
 struct Session<'a> {
@@ -151,91 +173,111 @@ struct Session<'a> {
 }
 
 impl Session<'_> {
-    /// Shows the avatars in order; true when all were answered.
-    fn run(
-        &mut self,
-        todo: &[u32],
-        journal: &mut Journal,
-        stop: &std::sync::atomic::AtomicBool,
-    ) -> Result<bool> {
+    /// Shows the avatars in order. An answer is final once the next avatar
+    /// is answered: until then `b` goes back to it, and answering it again
+    /// replaces it (the journal keeps both lines; the last one counts).
+    fn run(&mut self, todo: &[u32], journal: &mut Journal, stop: &StopSignal) -> Result<Ended> {
         let collector = Collector::default();
         let mut term = Terminal::new(CrosstermBackend::new(collector.clone()))
             .map_err(|e| Error::terminal(format!("cannot use this terminal: {e}")))?;
         let input = spawn_input_reader();
-        for &id in todo {
-            let mut showing = self.show(id)?;
-            let mut drag_from: Option<(f32, f32)> = None;
-            // Draw at once, then once per frame of the loop or on input: no
-            // faster than the display's frame rate, which matters over SSH.
-            let mut dirty = true;
-            let mut next_frame = Instant::now();
-            loop {
-                if stop.load(Ordering::Relaxed) || terminal_hung_up() {
-                    return Ok(false);
-                }
-                let mut answered = None;
-                let mut wait = if dirty {
-                    Duration::ZERO
-                } else {
-                    next_frame
-                        .saturating_duration_since(Instant::now())
-                        .min(POLL)
-                };
-                loop {
-                    let event = match input.recv_timeout(wait) {
-                        Ok(event) => event,
-                        Err(RecvTimeoutError::Timeout) => break,
-                        Err(RecvTimeoutError::Disconnected) => return Ok(false),
-                    };
-                    wait = Duration::ZERO;
-                    dirty = true;
-                    match event {
-                        Event::Key(k) if k.kind != KeyEventKind::Release => {
-                            match on_key(&mut showing, k, &self.study.study.display) {
-                                KeyOutcome::Quit => return Ok(false),
-                                KeyOutcome::Answer(a) => answered = Some(a),
-                                KeyOutcome::Nothing => {}
-                            }
-                        }
-                        Event::Mouse(m) => {
-                            let at = (m.column as f32, m.row as f32);
-                            match m.kind {
-                                MouseEventKind::Down(_) => drag_from = Some(at),
-                                MouseEventKind::Up(_) => drag_from = None,
-                                MouseEventKind::Drag(_) => {
-                                    let from = drag_from.replace(at).unwrap_or(at);
-                                    turn(
-                                        &mut showing,
-                                        &self.study.study.display,
-                                        -DRAG_DEG_PER_CELL * (at.0 - from.0),
-                                        DRAG_DEG_PER_CELL * 2.0 * (at.1 - from.1),
-                                    );
-                                }
-                                _ => {}
-                            }
-                        }
-                        Event::Resize(..) => {
-                            let _ = term.clear();
-                        }
-                        _ => {}
-                    }
-                    if answered.is_some() {
-                        break;
-                    }
-                }
-                if let Some(answer) = answered {
+        let mut at = 0;
+        while at < todo.len() {
+            let mut showing = self.show(todo[at])?;
+            showing.can_go_back = at > 0;
+            match self.look(&mut showing, &input, &mut term, &collector, stop)? {
+                Step::Answer(answer) => {
                     journal.record(answer)?;
                     self.done += 1;
-                    break;
+                    at += 1;
                 }
-                if dirty || Instant::now() >= next_frame {
-                    self.present(&mut term, &collector, &showing)?;
-                    dirty = false;
-                    next_frame = next_frame_time(showing.since, self.study.study.display.fps);
+                Step::Back => {
+                    self.done -= 1;
+                    at -= 1;
                 }
+                Step::End(ended) => return Ok(ended),
             }
         }
-        Ok(true)
+        Ok(Ended::Finished)
+    }
+
+    /// Shows one avatar until the participant answers it, goes back, or the
+    /// session ends.
+    fn look(
+        &mut self,
+        showing: &mut Showing,
+        input: &std::sync::mpsc::Receiver<Event>,
+        term: &mut Terminal<CrosstermBackend<Collector>>,
+        collector: &Collector,
+        stop: &StopSignal,
+    ) -> Result<Step> {
+        let mut drag_from: Option<(f32, f32)> = None;
+        // Draw at once, then once per frame of the loop or on input: no
+        // faster than the display's frame rate, which matters over SSH.
+        let mut dirty = true;
+        let mut next_frame = Instant::now();
+        loop {
+            let signal = stop
+                .received()
+                .or_else(|| terminal_hung_up().then_some(libc::SIGHUP));
+            if let Some(signal) = signal {
+                return Ok(Step::End(Ended::Signal(signal)));
+            }
+            let mut wait = if dirty {
+                Duration::ZERO
+            } else {
+                next_frame
+                    .saturating_duration_since(Instant::now())
+                    .min(POLL)
+            };
+            loop {
+                let event = match input.recv_timeout(wait) {
+                    Ok(event) => event,
+                    Err(RecvTimeoutError::Timeout) => break,
+                    Err(RecvTimeoutError::Disconnected) => {
+                        return Ok(Step::End(Ended::Signal(libc::SIGHUP)))
+                    }
+                };
+                wait = Duration::ZERO;
+                dirty = true;
+                match event {
+                    Event::Key(k) if k.kind != KeyEventKind::Release => {
+                        match on_key(showing, k, &self.study.study.display) {
+                            KeyOutcome::Quit => return Ok(Step::End(Ended::Quit)),
+                            KeyOutcome::Answer(a) => return Ok(Step::Answer(a)),
+                            KeyOutcome::Back => return Ok(Step::Back),
+                            KeyOutcome::Nothing => {}
+                        }
+                    }
+                    Event::Mouse(m) => {
+                        let at = (m.column as f32, m.row as f32);
+                        match m.kind {
+                            MouseEventKind::Down(_) => drag_from = Some(at),
+                            MouseEventKind::Up(_) => drag_from = None,
+                            MouseEventKind::Drag(_) => {
+                                let from = drag_from.replace(at).unwrap_or(at);
+                                turn(
+                                    showing,
+                                    &self.study.study.display,
+                                    -DRAG_DEG_PER_CELL * (at.0 - from.0),
+                                    DRAG_DEG_PER_CELL * 2.0 * (at.1 - from.1),
+                                );
+                            }
+                            _ => {}
+                        }
+                    }
+                    Event::Resize(..) => {
+                        let _ = term.clear();
+                    }
+                    _ => {}
+                }
+            }
+            if dirty || Instant::now() >= next_frame {
+                self.present(term, collector, showing)?;
+                dirty = false;
+                next_frame = next_frame_time(showing.since, self.study.study.display.fps);
+            }
+        }
     }
 
     /// Puts an avatar on screen, facing the participant.
@@ -261,6 +303,7 @@ impl Session<'_> {
             pitch: 0.0,
             stage: Stage::Looking,
             hint: String::new(),
+            can_go_back: false,
         })
     }
 
@@ -275,6 +318,19 @@ impl Session<'_> {
             .size()
             .map_err(|e| Error::terminal(format!("cannot read the terminal size: {e}")))?;
         let area = Rect::new(0, 0, size.width, size.height);
+        // The editor's minimum: below it the face would be too small to judge.
+        if area.width < MIN_SIZE.0 || area.height < MIN_SIZE.1 {
+            let message = format!(
+                "The study needs a terminal of at least {}x{} cells (this one is {}x{}): please make it larger.",
+                MIN_SIZE.0, MIN_SIZE.1, area.width, area.height
+            );
+            term.draw(|f| f.render_widget(Paragraph::new(message).wrap(Wrap { trim: true }), area))
+                .map_err(|e| Error::terminal(format!("cannot draw: {e}")))?;
+            let mut out = SYNC_BEGIN.to_vec();
+            out.extend(collector.take());
+            out.extend_from_slice(SYNC_END);
+            return write_to_terminal(&out);
+        }
         let viewport = Rect::new(0, 1, area.width, area.height.saturating_sub(4));
         let target = ImageTarget::new(&self.graphics, (viewport.width, viewport.height));
         let image = if viewport.width >= 4 && viewport.height >= 2 {
@@ -332,6 +388,15 @@ enum KeyOutcome {
     Nothing,
     Quit,
     Answer(Answer),
+    /// Back to the previous avatar, whose answer is not final yet.
+    Back,
+}
+
+/// How showing one avatar ended.
+enum Step {
+    Answer(Answer),
+    Back,
+    End(Ended),
 }
 
 fn turn(showing: &mut Showing, display: &Display, yaw: f32, pitch: f32) {
@@ -361,6 +426,9 @@ fn on_key(showing: &mut Showing, key: KeyEvent, display: &Display) -> KeyOutcome
         })
     };
     match (showing.stage, key.code) {
+        (Stage::Looking, KeyCode::Char('b') | KeyCode::Backspace) if showing.can_go_back => {
+            KeyOutcome::Back
+        }
         (Stage::Looking, KeyCode::Char('n' | 'N')) => answer(showing, Vec::new()),
         (Stage::Looking, KeyCode::Char('y' | 'Y')) => {
             showing.stage = Stage::Choosing([false; 4]);
@@ -420,7 +488,14 @@ fn draw(
     let (question, keys) = match showing.stage {
         Stage::Looking => (
             "Is this face edited?   y = yes   n = no".to_string(),
-            "arrows or mouse drag: turn the head   q: stop (answers are saved)".to_string(),
+            format!(
+                "arrows or mouse drag: turn the head{}   q: stop (answers are saved)",
+                if showing.can_go_back {
+                    "   b: back to the last avatar"
+                } else {
+                    ""
+                }
+            ),
         ),
         Stage::Choosing(picked) => {
             let boxes: Vec<String> = StudyGroup::EDITABLE

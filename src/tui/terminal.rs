@@ -5,7 +5,7 @@
 //! before the terminal changes.
 
 use std::io::{BufRead, Write};
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::{channel, Receiver};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -69,19 +69,58 @@ impl Drop for TerminalGuard {
     }
 }
 
-/// Takes over the terminal (raw mode, alternate screen, mouse, no cursor)
-/// until the guard drops, restoring it on panics too; the flag turns true
-/// when SIGINT, SIGTERM or SIGHUP arrives.
-pub fn enter_terminal(kitty: bool) -> Result<(TerminalGuard, Arc<AtomicBool>)> {
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [
-        signal_hook::consts::SIGINT,
-        signal_hook::consts::SIGTERM,
-        signal_hook::consts::SIGHUP,
-    ] {
-        signal_hook::flag::register(signal, Arc::clone(&stop))
-            .map_err(|e| Error::terminal(format!("cannot install signal handler: {e}")))?;
+/// Which of SIGINT, SIGTERM or SIGHUP asked the program to stop: a long job
+/// polls it, saves its work and exits with 128 + the signal.
+#[derive(Clone, Debug)]
+pub struct StopSignal(Arc<AtomicUsize>);
+
+impl StopSignal {
+    /// Installs the handlers (instead of the default of dying at once).
+    pub fn install() -> Result<StopSignal> {
+        let flag = Arc::new(AtomicUsize::new(0));
+        for signal in [
+            signal_hook::consts::SIGINT,
+            signal_hook::consts::SIGTERM,
+            signal_hook::consts::SIGHUP,
+        ] {
+            signal_hook::flag::register_usize(signal, Arc::clone(&flag), signal as usize)
+                .map_err(|e| Error::terminal(format!("cannot install a signal handler: {e}")))?;
+        }
+        Ok(StopSignal(flag))
     }
+
+    /// The signal received, if any.
+    pub fn received(&self) -> Option<i32> {
+        match self.0.load(Ordering::Relaxed) {
+            0 => None,
+            s => Some(s as i32),
+        }
+    }
+
+    /// The error a job stopped by `signal` ends with (exit 128 + signal).
+    pub fn stopped(signal: i32, message: impl Into<String>) -> Error {
+        Error::Interrupted {
+            signal,
+            message: message.into(),
+        }
+    }
+}
+
+/// The name of a stop signal, for messages.
+pub fn signal_name(signal: i32) -> &'static str {
+    match signal {
+        libc::SIGINT => "SIGINT",
+        libc::SIGTERM => "SIGTERM",
+        libc::SIGHUP => "SIGHUP",
+        _ => "a signal",
+    }
+}
+
+/// Takes over the terminal (raw mode, alternate screen, mouse, no cursor)
+/// until the guard drops, restoring it on panics too; the returned flag
+/// tells when SIGINT, SIGTERM or SIGHUP arrives.
+pub fn enter_terminal(kitty: bool) -> Result<(TerminalGuard, StopSignal)> {
+    let stop = StopSignal::install()?;
     let default_hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
         restore_terminal(kitty);
