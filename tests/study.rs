@@ -321,19 +321,62 @@ fn two_participants_run_the_study_in_tmux_and_survive_a_kill() {
     let s = wait_file(&status, long);
     assert_eq!(s.trim(), "EXIT=0", "{}", alice.screen());
 
-    // Bob finds every face edited, around the eyes.
+    // Bob finds every face edited, around the eyes; at the third he goes
+    // back once to the second (not final yet) and answers it again.
     let bob = Tmux::new("study-bob");
     let bob_status = common::temp_path("study", "bob-status");
     run(&bob, "bob", &bob_status);
-    for k in 1..=14 {
-        bob.wait_for(&at(k), long, |s| {
+    let mut k = 1;
+    let mut went_back = false;
+    while k <= 14 {
+        let s = bob.wait_for(&at(k), long, |s| {
             s.contains(&at(k)) && s.contains("y = yes")
         });
+        if k == 1 {
+            assert!(!s.contains("b: back"), "nothing to go back to:\n{s}");
+        }
+        if k == 3 && !went_back {
+            assert!(s.contains("b: back to the last avatar"), "{s}");
+            went_back = true;
+            bob.keys(&["b"]);
+            k = 2;
+            continue;
+        }
         bob.keys(&["y"]);
         bob.wait_for("the parts", long, |s| s.contains("Which parts"));
         bob.keys(&["1", "Enter"]);
+        k += 1;
     }
     assert_eq!(wait_file(&bob_status, long).trim(), "EXIT=0");
+
+    // Carol's terminal is too small at first, then she is stopped by SIGTERM
+    // before answering: exit 143, and `status` counts her with 0 s (not -0 s).
+    let carol = Tmux::new("study-carol");
+    let carol_status = common::temp_path("study", "carol-status");
+    std::fs::remove_file(&carol_status).ok();
+    carol.start_sized(
+        &format!(
+            "{} study run {d} --participant carol --graphics halfblocks --renderer cpu 2>/dev/null; echo EXIT=$? > {}; sleep 60",
+            env!("CARGO_BIN_EXE_visage"),
+            carol_status.display()
+        ),
+        40,
+        10,
+    );
+    carol.wait_for("the size message", long, |s| {
+        s.contains("50x14") && s.contains("40x10")
+    });
+    carol.resize(100, 30);
+    carol.wait_for(&at(1), long, |s| s.contains(&at(1)));
+    let pid = carol.program_pid().expect("the study runs");
+    std::process::Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .unwrap();
+    assert_eq!(wait_file(&carol_status, long).trim(), "EXIT=143");
+    let status_text = stdout(&visage(&["study", "status", d]));
+    assert!(status_text.contains("carol"), "{status_text}");
+    assert!(!status_text.contains("-0 s"), "{status_text}");
 
     let answers = |who: &str| -> Vec<u64> {
         std::fs::read_to_string(dir.join(format!("answers/{who}.jsonl")))
@@ -349,6 +392,8 @@ fn two_participants_run_the_study_in_tmux_and_survive_a_kill() {
     };
     let (a, b) = (answers("alice"), answers("bob"));
     assert_eq!(a.len(), 14, "each avatar once, the kill lost nothing");
+    assert_eq!(b.len(), 15, "Bob answered his second avatar twice");
+    assert_eq!(b[1], b[2], "the second answer to it follows the first");
     let mut sorted = a.clone();
     sorted.sort();
     assert_eq!(sorted, (1..=14).collect::<Vec<u64>>());
@@ -364,7 +409,7 @@ fn two_participants_run_the_study_in_tmux_and_survive_a_kill() {
     ])))
     .unwrap();
     for avatar in json["avatars"].as_array().unwrap() {
-        assert_eq!(avatar["answers"], 2, "{avatar}");
+        assert_eq!(avatar["answers"], 2, "{avatar} (Carol answered nothing)");
         assert_eq!(avatar["authenticity"], 0.5, "{avatar}");
     }
     for c in json["categories"].as_array().unwrap() {

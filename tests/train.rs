@@ -184,7 +184,11 @@ fn train_eval_and_compose_from_the_command_line() {
         assert!(psnr > 8.0 && psnr.is_finite(), "{report}");
     }
     let picture = image::image_dimensions(&grid).unwrap();
-    assert_eq!(picture.0, 128, "render | truth, 64 px each");
+    assert_eq!(
+        picture,
+        (150 + 128, 22 + 3 * 64),
+        "a label column, render | truth at 64 px each under a header row, one row per view"
+    );
     // A built-in source exported beside it: the folder database composes both.
     let recipe = temp_path("train", "recipe.toml");
     std::fs::write(&recipe, "base = \"bram\"\n").unwrap();
@@ -321,7 +325,7 @@ fn ctrl_c_checkpoints_and_resume_continues() {
         assert_eq!(o.status.code(), Some(code), "{err}");
         let line = err
             .lines()
-            .find(|l| l.contains("stopped at iteration"))
+            .find(|l| l.contains("at iteration"))
             .unwrap_or_else(|| panic!("{err}"));
         line.split_whitespace()
             .skip_while(|w| *w != "iteration")
@@ -444,4 +448,69 @@ fn datasets_on_flame_files_train_with_flame_and_masks() {
     for p in [&dir, &fixtures] {
         std::fs::remove_dir_all(p).ok();
     }
+}
+
+/// After `--resume`, the progress bar's rate counts only this run's
+/// iterations: it must not start at thousands of iterations a second because
+/// the checkpoint's iterations appeared at once (before the fix: the rate
+/// shown was the checkpoint's iteration count over a few milliseconds).
+#[test]
+fn the_progress_rate_after_a_resume_is_this_runs_own() {
+    let dir = small_capture("rate");
+    let out = dir.join("avatar");
+    // A long run stopped by ctrl-c after a few seconds leaves a checkpoint
+    // some hundreds of iterations in.
+    let child = Command::new(env!("CARGO_BIN_EXE_visage"))
+        .args(["train", dir.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .args([
+            "--iterations",
+            "1000000",
+            "--size",
+            "16x16",
+            "--checkpoint-every",
+            "0",
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(130),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let tmux = common::tmux::Tmux::new("train-rate");
+    tmux.start(&format!(
+        "{} train {} -o {} --iterations 1000000 --size 16x16 --resume {}; sleep 60",
+        env!("CARGO_BIN_EXE_visage"),
+        dir.display(),
+        out.display(),
+        out.join("checkpoint.npz").display()
+    ));
+    let rate = |s: &str| -> Option<f64> {
+        let line = s.lines().find(|l| l.contains("/1000000"))?;
+        // indicatif's {per_sec}: "123.4567/s" (human-formatted, commas in thousands).
+        let word = line.split_whitespace().find(|w| w.ends_with("/s"))?;
+        word.trim_end_matches("/s").replace(',', "").parse().ok()
+    };
+    let s = tmux.wait_for(
+        "the progress bar",
+        std::time::Duration::from_secs(60),
+        |s| rate(s).is_some_and(|r| r > 0.0),
+    );
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let s2 = tmux.screen();
+    let r = rate(&s2).or(rate(&s)).unwrap();
+    assert!(
+        r < 1000.0,
+        "{r} it/s right after resuming from iteration 300:\n{s2}"
+    );
+    drop(tmux);
+    std::fs::remove_dir_all(&dir).ok();
 }

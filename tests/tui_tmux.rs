@@ -15,7 +15,8 @@ fn temp(name: &str) -> std::path::PathBuf {
 
 fn editor_command(extra: &str, status: &Path) -> String {
     format!(
-        "{} --graphics halfblocks --gaussians-per-avatar 11000 --source-count 4 {extra} 2>/dev/null; echo EXIT=$? > {}; sleep 60",
+        "XDG_STATE_HOME={} {} --graphics halfblocks --gaussians-per-avatar 11000 --source-count 4 {extra} 2>/dev/null; echo EXIT=$? > {}; sleep 60",
+        temp("state").display(),
         env!("CARGO_BIN_EXE_visage"),
         status.display()
     )
@@ -33,7 +34,7 @@ fn edit_undo_and_quit_in_a_real_terminal() {
     ));
     let long = Duration::from_secs(60);
     tmux.wait_for("the editor", long, |s| {
-        s.contains("composite") && s.contains("Gaussians (")
+        s.contains("composite") && s.contains("Gaussians, ")
     });
     // Select the nose group, the second source, and assign its Gaussians.
     tmux.keys(&["Down", "Down", "Down", "Down", "Down", "Right", "Enter"]);
@@ -91,7 +92,7 @@ fn sigterm_restores_the_terminal() {
         &status,
     ));
     tmux.wait_for("the editor", Duration::from_secs(60), |s| {
-        s.contains("composite") && s.contains("yaw -20° pitch 0° r 3.25 fov 9.0°")
+        s.contains("composite") && s.contains("yaw -20° pitch 0° r 3.25 fov 9°")
     });
     let journal = wait_file(&record, Duration::from_secs(5));
     assert!(
@@ -112,7 +113,11 @@ fn sigterm_restores_the_terminal() {
         .args(["-TERM", editor.trim()])
         .status()
         .unwrap();
-    assert_eq!(wait_file(&status, Duration::from_secs(20)).trim(), "EXIT=0");
+    assert_eq!(
+        wait_file(&status, Duration::from_secs(20)).trim(),
+        "EXIT=143",
+        "128 + SIGTERM, as shells report it"
+    );
     let s = tmux.screen();
     assert!(!s.contains("composite"), "alternate screen left:\n{s}");
     std::fs::remove_file(&status).ok();

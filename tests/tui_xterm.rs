@@ -142,6 +142,20 @@ fn find_viewport(shot: &RgbImage) -> Option<(u32, u32, u32, u32)> {
     Some((left, top, right + 1 - left, height))
 }
 
+/// Coloured pixels above the viewport (the source strip): thumbnails of
+/// faces have them, text and borders in default colours do not.
+fn thumbnail_pixels(shot: &RgbImage, (x, y, w, _): (u32, u32, u32, u32)) -> usize {
+    let strip = crop(shot, (x, 0, w, y.saturating_sub(20)));
+    strip
+        .pixels
+        .chunks(3)
+        .filter(|p| {
+            let (hi, lo) = (*p.iter().max().unwrap(), *p.iter().min().unwrap());
+            hi > 90 && hi - lo > 40
+        })
+        .count()
+}
+
 fn crop(image: &RgbImage, (x0, y0, w, h): (u32, u32, u32, u32)) -> RgbImage {
     let mut out = RgbImage::new(w, h, [0; 3]);
     for y in 0..h {
@@ -261,9 +275,14 @@ fn xterm_vt340_shows_the_rendered_view_as_sixel() {
         }
         let shown = crop(&shot, viewport);
         let db = psnr(&shown, expected.as_ref().unwrap()).expect("same size");
-        last = format!("viewport {viewport:?} at {db:.1} dB");
-        // Sixel through 256 colour registers without dithering: ~40 dB here.
-        if db >= 30.0 {
+        let faces = thumbnail_pixels(&shot, viewport);
+        last = format!(
+            "viewport {viewport:?} at {db:.1} dB, {faces} coloured pixels in the source strip"
+        );
+        // Sixel through 256 colour registers without dithering: ~40 dB here;
+        // the source strip shows each source's face (skin, hair, lips: colour
+        // that the strip's text and borders never have).
+        if db >= 30.0 && faces > 300 {
             eprintln!("xterm showed the view: {last}");
             shown.save_png(&dir.join("viewport.png")).unwrap();
             let marker = journal.display().to_string();

@@ -11,8 +11,9 @@ use crate::editor::replay::replay;
 use crate::error::{Error, Result};
 use crate::pipeline::{SceneSpec, Subject};
 use crate::render::Backend;
-use crate::tui::app::{run_editor, EditOptions};
+use crate::tui::app::run_editor;
 use crate::tui::graphics::GraphicsChoice;
+use crate::tui::launch::EditOptions;
 
 /// What the editor and the viewer share: sessions, keys, graphics, renderer
 /// and the starting camera.
@@ -109,7 +110,18 @@ fn run_terminal(subject: Option<Subject>, args: &TerminalArgs) -> Result<()> {
             )));
         }
     }
+    if let Some(Subject::Avatars(db)) = &subject {
+        if db.db != "builtin" && !std::path::Path::new(&db.db).is_dir() {
+            return Err(Error::input(format!(
+                "database folder {} does not exist",
+                db.db
+            )));
+        }
+    }
     crate::tui::keymap::Keymap::load(args.keymap.as_deref())?;
+    if let Some(record) = &args.record {
+        crate::editor::journal::check_record_and_resume(record, args.session.as_deref())?;
+    }
     if !std::io::stdout().is_terminal() || !std::io::stdin().is_terminal() {
         return Err(Error::input(
             "the editor needs a terminal; for scripts use 'visage replay SESSION' or 'visage render'",

@@ -100,15 +100,8 @@ pub fn open_journal(
     resume: Option<&Path>,
     header: &SessionHeader,
 ) -> Result<(Recorder, Option<Session>)> {
-    let exists = std::fs::metadata(record).is_ok_and(|m| m.len() > 0);
-    if exists {
-        if let Some(other) = resume.filter(|r| !same_file(r, record)) {
-            return Err(Error::input(format!(
-                "{} already holds a session, and --session {} is another: record into a new file, or continue {0} with --record {0} alone",
-                record.display(),
-                other.display()
-            )));
-        }
+    check_record_and_resume(record, resume)?;
+    if std::fs::metadata(record).is_ok_and(|m| m.len() > 0) {
         let (recorder, session) = Recorder::append(record)?;
         return Ok((recorder, Some(session)));
     }
@@ -127,6 +120,20 @@ pub fn open_journal(
     let seed = base.as_ref().map_or(&[][..], |b| &b.lines[..]);
     let recorder = Recorder::create(record, &header, seed)?;
     Ok((recorder, base))
+}
+
+/// Refuses to resume one session while recording into another that exists:
+/// the journal would no longer replay to what the screen shows.
+pub fn check_record_and_resume(record: &Path, resume: Option<&Path>) -> Result<()> {
+    let exists = std::fs::metadata(record).is_ok_and(|m| m.len() > 0);
+    match resume.filter(|r| exists && !same_file(r, record)) {
+        Some(other) => Err(Error::input(format!(
+            "{} already holds a session, and --session {} is another: record into a new file, or continue {0} with --record {0} alone",
+            record.display(),
+            other.display()
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// The subject a live session opens: the journal's or resumed session's own,

@@ -5,7 +5,6 @@
 //! source thumbnails and the orbit pivot after free flight. Drawing is in
 //! `view`, the render thread in `worker`, terminal plumbing in `terminal`.
 
-use std::path::PathBuf;
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
@@ -15,58 +14,29 @@ use ratatui::layout::Rect;
 use ratatui::Terminal;
 
 use super::graphics::{
-    detect, kitty_delete, place_image, GraphicsChoice, ImageTarget, Protocol, TerminalGraphics,
-    SYNC_BEGIN, SYNC_END,
+    kitty_delete, place_image, ImageTarget, Protocol, TerminalGraphics, SYNC_BEGIN, SYNC_END,
 };
 use super::help::{draw_help, help_page, help_rows, HelpOutcome, HelpOverlay, HelpRow};
 use super::keymap::Keymap;
+use super::launch::{launch, EditOptions, Launched};
 use super::prompt::{History, Prompt, PromptOutcome};
 use super::terminal::{
-    ask_yes_no, enter_terminal, signal_name, spawn_input_reader, terminal_hung_up,
-    write_to_terminal, Collector, StopSignal,
+    enter_terminal, signal_name, spawn_input_reader, terminal_hung_up, write_to_terminal,
+    Collector, StopSignal,
 };
 use super::view::{draw, layout, source_slots, InfoPanel, Screen, ViewModel};
 use super::worker::{FrameJob, RenderWorker, Reply, Task};
 use crate::compose::recipe::Recipe;
 use crate::editor::command::{nearest_names, Command, CommandSpec};
-use crate::editor::journal::{
-    choose_subject, open_journal, state_dir, JournalFolder, JournalledEditor, KEEP_JOURNALS,
-};
+use crate::editor::journal::{state_dir, JournalledEditor};
 use crate::editor::pacing::next_scale;
-use crate::editor::replay::replay_commands;
-use crate::editor::session::{Session, SessionHeader};
 use crate::editor::state::Effect;
 use crate::editor::Editor;
 use crate::error::{Error, Result};
 use crate::model::regions::Group;
-use crate::pipeline::workbench::{
-    check_parent, source_swatches, DebugView, FrameRequest, Workbench,
-};
-use crate::pipeline::{SceneSpec, Subject};
+use crate::pipeline::workbench::{source_swatches, DebugView, FrameRequest};
 use crate::render::image::RgbImage;
-use crate::render::Backend;
 use crate::scene::camera::{CameraOverrides, Orbit};
-
-/// Options of `visage edit` and `visage view`.
-#[derive(Clone, Debug)]
-pub struct EditOptions {
-    /// The database or scene the command line named (`None`: the journal's
-    /// or resumed session's own, else the built-in database).
-    pub subject: Option<Subject>,
-    /// Session to resume.
-    pub session: Option<PathBuf>,
-    /// Journal to record to.
-    pub record: Option<PathBuf>,
-    /// Extra keymap layer.
-    pub keymap: Option<PathBuf>,
-    /// Graphics protocol choice.
-    pub graphics: GraphicsChoice,
-    /// Renderer.
-    pub renderer: Backend,
-    /// Commands run (and journalled) before the first key, e.g. the camera
-    /// the command line asked for.
-    pub initial: Vec<Command>,
-}
 
 /// Input within this long keeps the view "moving" (low resolution allowed).
 const SETTLE: Duration = Duration::from_millis(300);
@@ -76,87 +46,17 @@ const THUMBNAIL_MIN_ROWS: u16 = 30;
 
 /// Runs the editor until the user quits or a signal arrives.
 pub fn run_editor(options: EditOptions) -> Result<()> {
-    // Everything that can fail on bad input fails before the terminal changes.
-    let keymap = Keymap::load(options.keymap.as_deref())?;
-    if let Some(r) = &options.record {
-        check_parent(r)?;
-    }
-    let recorded = recorded_session(&options)?;
-    let mut subject = choose_subject(options.subject.as_ref(), recorded.as_ref())?;
-    let journals = JournalFolder::in_state_dir();
-    let recovered = match (&options.record, &options.session, &journals) {
-        (None, None, Ok(folder)) => offer_recovery(folder, &subject),
-        _ => None,
-    };
-    if let Some(r) = &recovered {
-        subject = r.1.clone();
-    }
-    let keymap = match subject {
-        Subject::Avatars(_) => keymap,
-        Subject::Scene(_) => Keymap::load_viewer(options.keymap.as_deref())?,
-    };
-    eprintln!("visage: opening {}…", subject.describe());
-    let bench = open_with_progress(&subject, options.renderer)?;
-    let subject = resolved_subject(subject, &bench);
-    let graphics = detect(options.graphics);
-    let size = crossterm::terminal::size().unwrap_or((120, 40));
-    let header = SessionHeader::for_subject(&subject, size, graphics.protocol);
-
-    let mut status = String::new();
-    let (recorder, replayed, auto) = match (&options.record, &recovered, &journals) {
-        (Some(record), _, _) => {
-            let (r, s) = open_journal(record, options.session.as_deref(), &header)?;
-            (Some(r), s, false)
-        }
-        (None, Some((path, _)), _) => {
-            let (r, s) = open_journal(path, None, &header)?;
-            (Some(r), s, true)
-        }
-        (None, None, Ok(folder)) => {
-            folder.prune(KEEP_JOURNALS);
-            match open_journal(
-                &folder.new_journal_path(),
-                options.session.as_deref(),
-                &header,
-            ) {
-                Ok((r, s)) => (Some(r), s, true),
-                Err(e) => {
-                    status = format!("not journalling this session: {e}");
-                    (
-                        None,
-                        options.session.as_deref().map(Session::load).transpose()?,
-                        false,
-                    )
-                }
-            }
-        }
-        (None, None, Err(e)) => {
-            status = format!("not journalling this session: {e}");
-            (
-                None,
-                options.session.as_deref().map(Session::load).transpose()?,
-                false,
-            )
-        }
-    };
-    let mut editor = Editor::for_bench(&bench);
-    let mut unsaved = 0;
-    let mut render_size = header.render;
-    if let Some(session) = &replayed {
-        let failed = replay_commands(session, &mut editor);
-        unsaved = session.unsaved_edits();
-        render_size = session.header.render;
-        status = format!(
-            "resumed {} commands at tick {}{}",
-            session.lines.len(),
-            editor.tick(),
-            if failed > 0 {
-                format!(" ({failed} failed)")
-            } else {
-                String::new()
-            }
-        );
-    }
+    let Launched {
+        bench,
+        editor,
+        recorder,
+        auto_journal,
+        status,
+        unsaved,
+        render_size,
+        keymap,
+        graphics,
+    } = launch(&options)?;
     let swatches = bench.engine().map(source_swatches).unwrap_or_default();
     let renderer_name = bench.renderer_description();
     let history = History::load(state_dir().map(|d| d.join("history")));
@@ -166,7 +66,7 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
     let (_guard, stop) = enter_terminal(kitty)?;
     let mut app = App {
         journal: JournalledEditor::new(editor, recorder),
-        auto_journal: auto,
+        auto_journal,
         user_journal: options.record.is_some(),
         swatches,
         keymap,
@@ -198,63 +98,6 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
     result
 }
 
-/// The session a live session starts from, read to learn its subject: the
-/// journal being continued, else the session being resumed.
-fn recorded_session(options: &EditOptions) -> Result<Option<Session>> {
-    if let Some(record) = options.record.as_deref() {
-        if std::fs::metadata(record).is_ok_and(|m| m.len() > 0) {
-            return Ok(Some(Session::load_journal(record)?.0));
-        }
-    }
-    options.session.as_deref().map(Session::load).transpose()
-}
-
-/// Offers the newest journal of `subject` that was not closed and holds
-/// unsaved edits; returns its path and subject when the user takes it. A
-/// declined journal is closed, so it is not offered again.
-fn offer_recovery(folder: &JournalFolder, subject: &Subject) -> Option<(PathBuf, Subject)> {
-    let newest = folder.unfinished(subject).into_iter().next()?;
-    if ask_yes_no(&format!("visage: {}: resume it?", newest.describe())) {
-        let subject = newest.session.header.subject();
-        return Some((newest.path, subject));
-    }
-    if let Ok((recorder, _)) = crate::editor::session::Recorder::append(&newest.path) {
-        let _ = recorder.close("declined");
-    }
-    None
-}
-
-/// The subject as opened: a scene's up axis as detected, so the journal
-/// replays with the same camera.
-fn resolved_subject(subject: Subject, bench: &Workbench) -> Subject {
-    match (subject, bench.scene()) {
-        (Subject::Scene(spec), Some(viewed)) => Subject::Scene(SceneSpec {
-            up: Some(viewed.home.up),
-            ..spec
-        }),
-        (subject, _) => subject,
-    }
-}
-
-/// Opens the subject, with a progress bar on standard error while a scene
-/// file loads (big scenes take a while to read from a slow disk).
-fn open_with_progress(subject: &Subject, renderer: Backend) -> Result<Workbench> {
-    let bar = indicatif::ProgressBar::new(0).with_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} reading {bytes}/{total_bytes} [{bar:30}] {bytes_per_sec}, {eta} left",
-        )
-        .expect("the template is valid")
-        .progress_chars("=> "),
-    );
-    let progress = |done: u64, all: u64| {
-        bar.set_length(all);
-        bar.set_position(done);
-    };
-    let bench = subject.open(renderer, &progress);
-    bar.finish_and_clear();
-    bench
-}
-
 /// The camera command for a drag of `delta` cells with a button (a cell is
 /// about twice as tall as wide, so rows count double).
 fn drag_command(button: MouseButton, delta: (f32, f32)) -> Option<Command> {
@@ -279,6 +122,8 @@ struct Picture {
     scale: f64,
     image: Option<RgbImage>,
     encoded: Vec<u8>,
+    /// The cells `encoded` covers.
+    encoded_cells: (u16, u16),
     dirty: bool,
     info: InfoPanel,
     frames_shown: u32,
@@ -298,6 +143,7 @@ impl Default for Picture {
             scale: 1.0,
             image: None,
             encoded: Vec::new(),
+            encoded_cells: (0, 0),
             dirty: true,
             info: InfoPanel::default(),
             frames_shown: 0,
@@ -418,6 +264,11 @@ impl App {
             self.receive();
             let new_viewport = layout(area, self.screen()).map(|a| a.viewport);
             if new_viewport != viewport {
+                // The layout moved (a resize, thumbnails arriving): redraw
+                // every cell, since cells left to images are never diffed.
+                if viewport.is_some() {
+                    let _ = term.clear();
+                }
                 viewport = new_viewport;
                 self.picture.version += 1;
                 self.picture.dirty = true;
@@ -747,9 +598,13 @@ impl App {
                     version,
                     result,
                     encoded,
+                    cells,
                     encode_ms,
                     exact,
-                } => self.show_frame(version, *result, encoded, encode_ms, exact),
+                } => {
+                    self.show_frame(version, *result, encoded, encode_ms, exact);
+                    self.picture.encoded_cells = cells;
+                }
             }
         }
         let p = &mut self.picture;
@@ -890,7 +745,9 @@ impl App {
                     out.extend_from_slice(&kitty_delete());
                 }
             } else {
-                if self.picture.dirty {
+                let fits =
+                    self.picture.encoded_cells == (areas.viewport.width, areas.viewport.height);
+                if self.picture.dirty && fits {
                     place_image(&mut out, areas.viewport, &self.picture.encoded);
                 }
                 if self.thumbnails.dirty {

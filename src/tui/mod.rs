@@ -9,6 +9,7 @@ pub mod app;
 pub mod graphics;
 pub mod help;
 pub mod keymap;
+pub mod launch;
 pub mod prompt;
 pub mod study;
 pub mod terminal;

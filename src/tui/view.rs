@@ -296,7 +296,7 @@ fn fmt_weights(shape: &std::collections::BTreeMap<String, f64>) -> String {
     let mut w: Vec<_> = shape.iter().filter(|(_, x)| **x > 0.0).collect();
     w.sort_by(|a, b| b.1.total_cmp(a.1));
     w.iter()
-        .map(|(n, x)| format!("{} {}", n, weight_text(**x)))
+        .map(|(n, x)| format!("{}\u{a0}{}", n, weight_text(**x)))
         .collect::<Vec<_>>()
         .join(" ")
 }
@@ -314,28 +314,37 @@ fn section(title: &str, lines: Vec<String>) -> Section {
     }
 }
 
-/// Greedy word wrap to `width` columns; continuation lines are indented;
-/// a word longer than a line is cut with `…`.
+/// Greedy word wrap to `width` columns, keeping the text's own spacing
+/// within a line; continuation lines are indented; a word longer than a
+/// line is cut with `…`. Words joined by a no-break space stay together.
 fn wrap(text: &str, width: usize, indent: usize) -> Vec<String> {
     let width = width.max(indent + 4);
     if text.chars().count() <= width {
         return vec![text.to_string()];
     }
+    // (spaces before, word) pairs.
+    let mut words: Vec<(usize, &str)> = Vec::new();
+    let mut rest = text;
+    while !rest.is_empty() {
+        let spaces = rest.len() - rest.trim_start_matches(' ').len();
+        rest = &rest[spaces..];
+        let end = rest.find(' ').unwrap_or(rest.len());
+        if end > 0 {
+            words.push((spaces, &rest[..end]));
+        }
+        rest = &rest[end..];
+    }
     let mut lines = Vec::new();
-    let mut line = if text.starts_with(' ') {
-        " ".to_string()
-    } else {
-        String::new()
-    };
+    let mut line = String::new();
     let mut has_word = false;
-    for word in text.split(' ').filter(|w| !w.is_empty()) {
+    for (spaces, word) in words {
         let word_len = word.chars().count();
-        if has_word && line.chars().count() + 1 + word_len > width {
+        if has_word && line.chars().count() + spaces + word_len > width {
             lines.push(std::mem::replace(&mut line, " ".repeat(indent)));
             has_word = false;
         }
-        if has_word {
-            line.push(' ');
+        if has_word || lines.is_empty() {
+            line.push_str(&" ".repeat(spaces));
         }
         let room = width.saturating_sub(line.chars().count());
         if word_len > room {
@@ -698,6 +707,11 @@ mod tests {
         assert_eq!(
             wrap(" smoothing crossfade colour skin base ada", 20, 3),
             [" smoothing crossfade", "   colour skin base", "   ada"]
+        );
+        assert_eq!(
+            wrap(" eyes   ada   cleo\u{a0}0.7 bram\u{a0}0.2", 24, 3),
+            [" eyes   ada   cleo\u{a0}0.7", "   bram\u{a0}0.2"],
+            "column spacing kept, pairs kept together"
         );
         assert_eq!(wrap("short", 20, 3), ["short"]);
         assert_eq!(wrap("averyveryverylongword", 10, 3), ["averyvery…"]);

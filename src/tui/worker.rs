@@ -48,6 +48,9 @@ pub enum Reply {
         result: Box<FrameResult>,
         /// The frame encoded for the terminal.
         encoded: Vec<u8>,
+        /// The cells the encoded frame covers (a frame for another layout
+        /// must not be placed: it would overflow and scroll the terminal).
+        cells: (u16, u16),
         /// Encoding time (ms).
         encode_ms: f64,
         /// Drawn at full accuracy.
@@ -174,6 +177,7 @@ fn draw(bench: &mut Workbench, job: FrameJob) -> Reply {
                 exact: job.request.exact,
                 result: Box::new(result),
                 encoded,
+                cells: job.target.cells,
             }
         }
         Err(e) => Reply::Failed(format!("render failed: {e}")),

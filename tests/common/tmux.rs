@@ -41,7 +41,45 @@ impl Tmux {
 
     /// Starts `command` in a detached 110×36 session.
     pub fn start(&self, command: &str) {
-        self.cmd(&["new-session", "-d", "-x", "110", "-y", "36", command]);
+        self.start_sized(command, 110, 36);
+    }
+
+    /// Starts `command` in a detached session of `columns` × `rows`.
+    pub fn start_sized(&self, command: &str, columns: u16, rows: u16) {
+        let (c, r) = (columns.to_string(), rows.to_string());
+        self.cmd(&["new-session", "-d", "-x", &c, "-y", &r, command]);
+    }
+
+    /// Resizes the session's window.
+    pub fn resize(&self, columns: u16, rows: u16) {
+        let (c, r) = (columns.to_string(), rows.to_string());
+        self.cmd(&["resize-window", "-x", &c, "-y", &r]);
+    }
+
+    /// Types text character by character (spaces as `Space`).
+    pub fn type_text(&self, text: &str) {
+        let keys: Vec<String> = text
+            .chars()
+            .map(|c| match c {
+                ' ' => "Space".to_string(),
+                ';' => "\\;".to_string(),
+                c => c.to_string(),
+            })
+            .collect();
+        self.keys(&keys.iter().map(String::as_str).collect::<Vec<_>>());
+    }
+
+    /// The process id of the program the pane's shell runs.
+    pub fn program_pid(&self) -> Option<String> {
+        let shell = self.cmd(&["display-message", "-p", "#{pane_pid}"]);
+        let out = Command::new("pgrep")
+            .args(["-P", shell.trim()])
+            .output()
+            .ok()?;
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .next()
+            .map(|l| l.trim().to_string())
     }
 
     /// The visible screen as text.
