@@ -199,3 +199,40 @@ fn editor_files_follow_their_names_and_the_highlight_shows_over_gaussians() {
         centre(&plain)
     );
 }
+
+/// Without a graphics adapter (no Vulkan driver found), `bench render`
+/// measures the CPU and says the GPU was skipped, instead of failing.
+#[test]
+fn bench_render_without_a_graphics_adapter_measures_the_cpu() {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_visage"))
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+        .env("NODEVICE_SELECT", "1")
+        .args([
+            "bench",
+            "render",
+            "--sizes",
+            "32x24",
+            "--iterations",
+            "1",
+            "--warmup",
+            "0",
+            "--no-knobs",
+            "--gaussians-per-avatar",
+            "2000",
+            "--source-count",
+            "2",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("skipping the gpu renderer"), "{err}");
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["skipped"][0]["renderer"], "gpu", "{v}");
+    let renderers = v["renderers"].as_array().unwrap();
+    assert_eq!(renderers.len(), 1, "{v}");
+    assert_eq!(renderers[0]["renderer"], "cpu");
+    assert!(renderers[0]["rows"][0]["psnr_db"].as_f64().unwrap() > 40.0);
+}

@@ -292,6 +292,37 @@ fn malformed_datasets_fail_with_one_line_and_exit_2() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Trains for a long time, sends `signal` after three seconds and returns
+/// what the process did.
+fn interrupted_run(
+    dir: &Path,
+    out: &Path,
+    resume: Option<&Path>,
+    signal: &str,
+) -> std::process::Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_visage"));
+    cmd.args(["train", dir.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .args([
+            "--iterations",
+            "1000000",
+            "--size",
+            "16x16",
+            "--checkpoint-every",
+            "0",
+        ])
+        .stderr(std::process::Stdio::piped());
+    if let Some(r) = resume {
+        cmd.arg("--resume").arg(r);
+    }
+    let child = cmd.spawn().unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    Command::new("kill")
+        .args([signal, &child.id().to_string()])
+        .status()
+        .unwrap();
+    child.wait_with_output().unwrap()
+}
+
 /// Ctrl-C (SIGINT) or SIGTERM stops at an iteration boundary with a
 /// checkpoint and the avatar so far, and exits as shells expect (130, 143);
 /// `--resume` continues from there.
@@ -300,27 +331,7 @@ fn ctrl_c_checkpoints_and_resume_continues() {
     let dir = small_capture("sigint");
     let out = dir.join("avatar");
     let stopped_at = |resume: Option<&Path>, signal: &str, code: i32| -> usize {
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_visage"));
-        cmd.args(["train", dir.to_str().unwrap(), "-o", out.to_str().unwrap()])
-            .args([
-                "--iterations",
-                "1000000",
-                "--size",
-                "16x16",
-                "--checkpoint-every",
-                "0",
-            ])
-            .stderr(std::process::Stdio::piped());
-        if let Some(r) = resume {
-            cmd.arg("--resume").arg(r);
-        }
-        let child = cmd.spawn().unwrap();
-        std::thread::sleep(std::time::Duration::from_secs(3));
-        Command::new("kill")
-            .args([signal, &child.id().to_string()])
-            .status()
-            .unwrap();
-        let o = child.wait_with_output().unwrap();
+        let o = interrupted_run(&dir, &out, resume, signal);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(code), "{err}");
         let line = err
@@ -452,33 +463,15 @@ fn datasets_on_flame_files_train_with_flame_and_masks() {
 
 /// After `--resume`, the progress bar's rate counts only this run's
 /// iterations: it must not start at thousands of iterations a second because
-/// the checkpoint's iterations appeared at once (before the fix: the rate
-/// shown was the checkpoint's iteration count over a few milliseconds).
+/// the checkpoint's iterations appeared at once (the bar's estimator is reset
+/// after the bar is moved to the checkpoint's iteration).
 #[test]
 fn the_progress_rate_after_a_resume_is_this_runs_own() {
     let dir = small_capture("rate");
     let out = dir.join("avatar");
     // A long run stopped by ctrl-c after a few seconds leaves a checkpoint
     // some hundreds of iterations in.
-    let child = Command::new(env!("CARGO_BIN_EXE_visage"))
-        .args(["train", dir.to_str().unwrap(), "-o", out.to_str().unwrap()])
-        .args([
-            "--iterations",
-            "1000000",
-            "--size",
-            "16x16",
-            "--checkpoint-every",
-            "0",
-        ])
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(std::time::Duration::from_secs(3));
-    Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    let o = child.wait_with_output().unwrap();
+    let o = interrupted_run(&dir, &out, None, "-INT");
     assert_eq!(
         o.status.code(),
         Some(130),

@@ -874,6 +874,18 @@ mod tests {
         assert_eq!(s.group_edit(Group::Nose).gaussians, "bram");
         assert_eq!(s.history(), (1, 0));
         assert!(s.apply(&catalog(), &Command::Redo).is_err());
+        // Undo and redo say what they undid.
+        run(&mut s, &["set-shape eyes bram=0.5 ada=0.5"]);
+        let said = s.apply(&catalog(), &Command::Undo).unwrap().message;
+        assert_eq!(
+            said.as_deref(),
+            Some("undone: set-shape eyes bram=0.5 ada=0.5")
+        );
+        let said = s.apply(&catalog(), &Command::Redo).unwrap().message;
+        assert_eq!(
+            said.as_deref(),
+            Some("redone: set-shape eyes bram=0.5 ada=0.5")
+        );
     }
 
     #[test]
@@ -904,6 +916,9 @@ mod tests {
             "set-shape nose ada=0",
             "motion dance",
             "select-source zed",
+            "frame 3",
+            "snapshot view.jpg",
+            "export-ply scene.obj",
         ] {
             assert!(
                 s.apply(&catalog(), &Command::parse(line).unwrap()).is_err(),
@@ -911,6 +926,11 @@ mod tests {
             );
         }
         assert_eq!(s, before);
+        // A frame past the motion's end is refused, not wrapped.
+        run(&mut s, &["motion talk", "frame 124"]);
+        let e = s.apply(&catalog(), &Command::Frame(125)).unwrap_err();
+        assert!(e.contains("past the end of talk (frames 0-124)"), "{e}");
+        assert_eq!(s.recipe.animation.frame, 124);
     }
 
     #[test]

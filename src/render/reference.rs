@@ -17,6 +17,28 @@ struct Projected {
     index: usize,
 }
 
+/// Gaussian `i` projected in f64 with its opacity (clamped to 1), or `None`
+/// when it cannot show (transparent, NaN, not finite, culled).
+fn project(
+    scene: &SplatScene,
+    i: usize,
+    cam: &ProjectionCamera,
+    settings: &RenderSettings,
+) -> Option<(Splat2D, f64)> {
+    let opacity = scene.opacity[i] as f64;
+    if opacity.is_nan() || opacity <= 0.0 || !scene.position[i].is_finite() {
+        return None;
+    }
+    let opacity = opacity.min(1.0);
+    let splat = cam.project(
+        scene.position[i],
+        scene.rotation[i],
+        scene.scale[i] * settings.scale_modifier,
+        opacity,
+    )?;
+    Some((splat, opacity))
+}
+
 /// Renders `scene` with the reference rasteriser and returns float RGB per pixel.
 pub fn render_reference_f32(
     scene: &SplatScene,
@@ -28,22 +50,13 @@ pub fn render_reference_f32(
     let mut projected: Vec<Projected> = (0..scene.len())
         .into_par_iter()
         .filter_map(|i| {
-            let opacity = scene.opacity[i] as f64;
-            if opacity.is_nan() || opacity <= 0.0 || !scene.position[i].is_finite() {
-                return None;
-            }
-            let splat = cam.project(
-                scene.position[i],
-                scene.rotation[i],
-                scene.scale[i] * settings.scale_modifier,
-                opacity.min(1.0),
-            )?;
+            let (splat, opacity) = project(scene, i, &cam, settings)?;
             let dir = (scene.position[i].as_dvec3() - cam.eye).normalize_or_zero();
             let rgb = eval_rgb(scene.sh_of(i), degree, dir.to_array());
             Some(Projected {
                 splat,
                 rgb,
-                opacity: opacity.min(1.0),
+                opacity,
                 index: i,
             })
         })
@@ -129,17 +142,8 @@ pub fn centre_depth(scene: &SplatScene, camera: &Camera, settings: &RenderSettin
     let mut hits: Vec<(f64, f64)> = (0..scene.len())
         .into_par_iter()
         .filter_map(|i| {
-            let opacity = scene.opacity[i] as f64;
-            if opacity.is_nan() || opacity <= 0.0 || !scene.position[i].is_finite() {
-                return None;
-            }
-            let splat = cam.project(
-                scene.position[i],
-                scene.rotation[i],
-                scene.scale[i] * settings.scale_modifier,
-                opacity.min(1.0),
-            )?;
-            let alpha = splat.alpha_at(opacity.min(1.0), px, py);
+            let (splat, opacity) = project(scene, i, &cam, settings)?;
+            let alpha = splat.alpha_at(opacity, px, py);
             (alpha > 0.0).then_some((splat.depth, alpha))
         })
         .collect();
