@@ -42,6 +42,7 @@ impl Default for SyntheticOptions {
 pub const SYNTHETIC_SH_DEGREE: u8 = 3;
 
 /// The appearance of one synthetic person (sRGB colours in 0..1).
+#[derive(Clone, Copy)]
 struct Look {
     name: &'static str,
     skin: [f32; 3],
@@ -579,16 +580,42 @@ pub fn surface_radiance(
     normal: Vec3,
     occlusion: f32,
 ) -> [f32; 3] {
+    surface_radiance_toned(index, index, region, texel, normal, occlusion)
+}
+
+/// [`surface_radiance`] of source `index` wearing the skin of source
+/// `skin_of`: its skin tone and skin detail (freckles), with `index`'s own
+/// lips, iris, brows, hair, beard and clothes — a composite's appearance
+/// when its skin tone is matched to its base.
+pub fn surface_radiance_toned(
+    index: usize,
+    skin_of: usize,
+    region: Region,
+    texel: Vec3,
+    normal: Vec3,
+    occlusion: f32,
+) -> [f32; 3] {
     let cell = (texel / 0.0005).round().as_ivec3();
     let seed = (cell.x as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
         ^ (cell.y as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f)
         ^ (cell.z as u64).wrapping_mul(0x1656_67b1_9e37_79f9);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let look = &LOOKS[index % LOOKS.len()];
+    let skin = &LOOKS[skin_of % LOOKS.len()];
+    let look = Look {
+        skin: skin.skin,
+        freckles: skin.freckles,
+        ..LOOKS[index % LOOKS.len()]
+    };
     scale(
-        surface_colour(look, region, texel, &mut rng),
+        surface_colour(&look, region, texel, &mut rng),
         baked_light(normal, occlusion),
     )
+}
+
+/// The index of the built-in person called `name` (their appearance), if any:
+/// a trained avatar of a built-in source wears the same surface.
+pub fn look_index(name: &str) -> Option<usize> {
+    LOOKS.iter().position(|l| l.name == name)
 }
 
 /// Direction of the studio key light baked into the synthetic captures.

@@ -9,14 +9,28 @@ use clap::Args;
 use super::render::parse_size;
 use crate::error::Result;
 use crate::pipeline::DatabaseSpec;
-use crate::train::capture::{capture, CaptureOptions};
+use crate::train::capture::{capture_sitter, CaptureOptions};
+use crate::train::sitter::{Seams, Sitter, Tone};
 
 /// Arguments of `visage capture`.
 #[derive(Args, Debug, Clone)]
 pub struct CaptureArgs {
     /// Built-in source to capture.
-    #[arg(long, default_value = "ada")]
+    #[arg(long, default_value = "ada", conflicts_with = "recipe")]
     source: String,
+    /// Capture the ground truth of a composite instead: the ideal avatar of
+    /// the person this recipe describes over the built-in people.
+    #[arg(long, value_name = "RECIPE")]
+    recipe: Option<PathBuf>,
+    /// The composite's appearance: each region as its source has it
+    /// (`source`), or the base's skin tone and detail with each source's own
+    /// lips, eyes, brows, hair and beard (`base`).
+    #[arg(long, value_parser = Tone::parse, requires = "recipe", value_name = "source|base")]
+    tone: Option<Tone>,
+    /// How sources meet at a group border: `hard`, or `smooth` (cross-blended
+    /// over about 1 cm of template surface).
+    #[arg(long, value_parser = Seams::parse, requires = "recipe", value_name = "hard|smooth")]
+    seams: Option<Seams>,
     /// Image size.
     #[arg(long, value_parser = parse_size, default_value = "256x256", value_name = "WxH")]
     size: (u32, u32),
@@ -57,7 +71,41 @@ pub fn run(args: &CaptureArgs) -> Result<()> {
         .expect("the template is valid")
         .progress_chars("=> "),
     );
-    let summary = capture(
+    if args.recipe.is_none() && (args.tone.is_some() || args.seams.is_some()) {
+        return Err(crate::error::Error::input(
+            "--tone and --seams describe a composite's ground truth: they go with --recipe",
+        ));
+    }
+    let sitter = match &args.recipe {
+        Some(path) => {
+            let recipe = crate::compose::recipe::Recipe::load(path)?;
+            let (tone, seams) = (
+                args.tone.unwrap_or_default(),
+                args.seams.unwrap_or_default(),
+            );
+            Sitter::composite(&db, &recipe, tone, seams)
+                .map_err(|e| crate::error::Error::input(format!("{}: {e}", path.display())))?
+        }
+        None => {
+            let index = db
+                .sources
+                .iter()
+                .position(|s| s.name == args.source)
+                .ok_or_else(|| {
+                    crate::error::Error::input(format!(
+                        "unknown source '{}' (sources: {})",
+                        crate::text::printable(&args.source),
+                        db.sources
+                            .iter()
+                            .map(|s| s.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                })?;
+            Sitter::source(&db, index)
+        }
+    };
+    let summary = capture_sitter(
         &db,
         &CaptureOptions {
             source: args.source.clone(),
@@ -67,6 +115,7 @@ pub fn run(args: &CaptureArgs) -> Result<()> {
             motion: args.motion.clone(),
             ring: args.ring,
         },
+        &sitter,
         &args.output,
         &|done, all| {
             bar.set_length(all);
@@ -77,7 +126,10 @@ pub fn run(args: &CaptureArgs) -> Result<()> {
     eprintln!(
         "visage: captured {} images of {} over {} timesteps into {} in {:.1} s",
         summary.images,
-        args.source,
+        match &args.recipe {
+            Some(r) => format!("the composite of {}", r.display()),
+            None => args.source.clone(),
+        },
         summary.timesteps,
         args.output.display(),
         start.elapsed().as_secs_f64()

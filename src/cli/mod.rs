@@ -13,6 +13,7 @@ mod compose;
 mod convert;
 mod db;
 mod edit;
+mod eval_composite;
 mod info;
 mod random;
 mod render;

@@ -217,10 +217,30 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
 /// Arguments of `visage eval`.
 #[derive(Args, Debug, Clone)]
 pub struct EvalArgs {
-    /// Avatar folder (point_cloud.ply + flame_param.npz).
+    /// Avatar folder (point_cloud.ply + flame_param.npz); with --composite,
+    /// the recipe of the composite.
+    #[arg(value_name = "AVATAR|RECIPE")]
     avatar: PathBuf,
-    /// Dataset folder.
+    /// Dataset folder (with --composite: the composite's ground truth from
+    /// `visage capture --recipe`).
     dataset: PathBuf,
+    /// Evaluate a composite built in-process from the trained sources of
+    /// --db against its ground truth: per split, view and group, border band
+    /// against interior, leak, the ceiling and the decomposition.
+    #[arg(long, requires = "db")]
+    pub(super) composite: bool,
+    /// With --composite: the folder of trained sources (GaussianAvatars
+    /// avatars named like the built-in people).
+    #[arg(long, value_name = "DIR", requires = "composite")]
+    pub(super) db: Option<PathBuf>,
+    /// With --composite: pixels within this many of a change of source are
+    /// the border band.
+    #[arg(long, default_value_t = 3, requires = "composite")]
+    pub(super) border_px: u32,
+    /// With --composite: ground truth, composite and an error map side by
+    /// side for a few views, as PNG.
+    #[arg(long, value_name = "PNG", requires = "composite")]
+    pub(super) picture: Option<PathBuf>,
     #[command(flatten)]
     head: HeadArgs,
     /// Side-by-side grid (render | ground truth) of the first views, as PNG.
@@ -238,8 +258,28 @@ pub struct EvalArgs {
     json: bool,
 }
 
+impl EvalArgs {
+    /// The recipe (with --composite).
+    pub(super) fn recipe(&self) -> &std::path::Path {
+        &self.avatar
+    }
+
+    /// The dataset.
+    pub(super) fn dataset(&self) -> &std::path::Path {
+        &self.dataset
+    }
+
+    /// Print JSON.
+    pub(super) fn json(&self) -> bool {
+        self.json
+    }
+}
+
 /// Runs `visage eval`.
 pub fn run_eval(args: &EvalArgs) -> Result<()> {
+    if args.composite {
+        return super::eval_composite::run(args);
+    }
     let dataset = Dataset::load(&args.dataset)?;
     let head = args.head.load(Some(&dataset))?;
     let avatar = crate::io::avatar::read_avatar(&args.avatar, "avatar", &head)?;

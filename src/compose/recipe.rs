@@ -172,6 +172,19 @@ fn default_version() -> u32 {
 }
 
 impl Recipe {
+    /// Every source the recipe names (base, Gaussians, shape weights), sorted.
+    pub fn source_names(&self) -> Vec<String> {
+        let mut names: Vec<String> =
+            std::iter::once(self.base.clone())
+                .chain(self.groups.values().flat_map(|g| {
+                    std::iter::once(g.gaussians.clone()).chain(g.shape.keys().cloned())
+                }))
+                .collect();
+        names.sort();
+        names.dedup();
+        names
+    }
+
     /// The recipe that shows `base` unedited.
     pub fn unedited(base: &str) -> Self {
         Self {

@@ -12,8 +12,9 @@ use glam::Vec3;
 use serde_json::{json, Value};
 
 use super::project::TrainCamera;
+use super::sitter::{Sitter, SurfacePoint};
 use crate::avatar::database::Database;
-use crate::avatar::synthetic::{cavity_occlusion, surface_radiance, vertex_normals};
+use crate::avatar::synthetic::{cavity_occlusion, vertex_normals};
 use crate::error::{Error, Result};
 use crate::io::avatar::{write_flame_params, AvatarParams, FrameParams};
 use crate::model::head::HeadModel;
@@ -94,18 +95,33 @@ pub fn rig(count: usize, ring: bool, size: [u32; 2]) -> (Vec<TrainCamera>, Train
     (cameras, rig_camera(0.5 * step + 3.0, 2.0, size))
 }
 
-/// Per-vertex surface attributes the capture interpolates.
-struct Surface<'a> {
+/// A sitter's surface as the capture draws it: per-vertex normals and
+/// ambient occlusion of its neutral, interpolated over the posed mesh. Also
+/// what evaluations draw ground truth with at any pose and camera.
+pub struct Surface<'a> {
     model: &'a HeadModel,
-    source: usize,
+    sitter: &'a Sitter,
     normals: Vec<Vec3>,
     occlusion: Vec<f32>,
 }
 
-impl Surface<'_> {
+impl<'a> Surface<'a> {
+    /// The surface of `sitter` on `model`.
+    pub fn new(model: &'a HeadModel, sitter: &'a Sitter) -> Self {
+        let neutral = sitter.neutral(model);
+        let normals = vertex_normals(&neutral, &model.triangles);
+        let occlusion = cavity_occlusion(&neutral, &normals, &model.triangles);
+        Self {
+            model,
+            sitter,
+            normals,
+            occlusion,
+        }
+    }
+
     /// Draws the posed mesh: a premultiplied RGB image on black and its
     /// coverage mask, antialiased by supersampling.
-    fn draw(&self, posed: &[Vec3], camera: &TrainCamera) -> (RgbImage, Vec<u8>) {
+    pub fn draw(&self, posed: &[Vec3], camera: &TrainCamera) -> (RgbImage, Vec<u8>) {
         let [w, h] = camera.size;
         let (sw, sh) = (w * SUPERSAMPLE, h * SUPERSAMPLE);
         let mut fine = *camera;
@@ -152,13 +168,15 @@ impl Surface<'_> {
         let occlusion: f32 = (0..3)
             .map(|k| bary[k] * self.occlusion[tri[k] as usize])
             .sum();
-        surface_radiance(
-            self.source,
-            self.model.triangle_regions[triangle as usize],
+        let point = SurfacePoint {
+            triangle,
+            vertices: tri,
+            bary,
             texel,
             normal,
             occlusion,
-        )
+        };
+        self.sitter.shade(self.model, &point)
     }
 }
 
@@ -277,7 +295,8 @@ pub struct CaptureSummary {
     pub timesteps: usize,
 }
 
-/// Writes the dataset into `out`. `progress` hears (images done, images in all).
+/// Writes the dataset of built-in source `options.source` into `out`.
+/// `progress` hears (images done, images in all).
 pub fn capture(
     db: &Database,
     options: &CaptureOptions,
@@ -286,22 +305,24 @@ pub fn capture(
 ) -> Result<CaptureSummary> {
     let source_names: Vec<&str> = db.sources.iter().map(|s| s.name.as_str()).collect();
     let source = find(&source_names, &options.source, "source")?;
+    capture_sitter(db, options, &Sitter::source(db, source), out, progress)
+}
+
+/// Writes the dataset of `sitter` into `out` (`options.source` is not read).
+pub fn capture_sitter(
+    db: &Database,
+    options: &CaptureOptions,
+    sitter: &Sitter,
+    out: &Path,
+    progress: &dyn Fn(u64, u64),
+) -> Result<CaptureSummary> {
     let motion_names: Vec<&str> = db.motions.iter().map(|m| m.name.as_str()).collect();
     let motion = &db.motions[find(&motion_names, &options.motion, "motion")?];
     if options.cameras == 0 || options.frames == 0 {
         return Err(Error::input("--cameras and --frames must be at least 1"));
     }
-    let avatar = &db.sources[source];
     let model = &db.model;
-    let neutral = model.neutral(&avatar.shape, Some(&avatar.static_offset));
-    let normals = vertex_normals(&neutral, &model.triangles);
-    let occlusion = cavity_occlusion(&neutral, &normals, &model.triangles);
-    let surface = Surface {
-        model,
-        source,
-        normals,
-        occlusion,
-    };
+    let surface = Surface::new(model, sitter);
     for dir in ["images", "fg_masks", "flame_param"] {
         let d = out.join(dir);
         std::fs::create_dir_all(&d)
@@ -325,13 +346,13 @@ pub fn capture(
     let mut done = 0u64;
     for (t, &frame) in timesteps.iter().enumerate() {
         let (expression, pose) = motion.frame(frame);
-        let posed = model.forward(&avatar.shape, Some(&avatar.static_offset), expression, pose);
+        let posed = model.forward(&sitter.shape, Some(&sitter.static_offset), expression, pose);
         let flame_path = format!("flame_param/{t:05}.npz");
         write_flame_params(
             &out.join(&flame_path),
             &AvatarParams {
-                shape: &avatar.shape,
-                static_offset: &avatar.static_offset,
+                shape: &sitter.shape,
+                static_offset: &sitter.static_offset,
                 frames: &[FrameParams {
                     expression: expression.to_vec(),
                     pose: *pose,
@@ -381,6 +402,14 @@ pub fn capture(
     }
     let [w, h] = options.size;
     let focal = cameras[0].focal;
+    let mut builtin = json!({
+        "source": sitter.name,
+        "motion": motion.name,
+        "seed_note": "captured from visage's built-in database; train it without FLAME files",
+    });
+    if let Some(note) = &sitter.note {
+        builtin["composite"] = note.clone();
+    }
     for (split, frames) in ["train", "val", "test"].iter().zip(splits) {
         let doc = json!({
             "camera_angle_x": 2.0 * (0.5 * w as f64 / focal[0]).atan(),
@@ -390,11 +419,7 @@ pub fn capture(
             "cy": 0.5 * h as f64,
             "w": w,
             "h": h,
-            "visage_builtin_head": {
-                "source": avatar.name,
-                "motion": motion.name,
-                "seed_note": "captured from visage's built-in database; train it without FLAME files",
-            },
+            "visage_builtin_head": builtin,
             "frames": frames,
         });
         let path = out.join(format!("transforms_{split}.json"));
@@ -405,8 +430,8 @@ pub fn capture(
     write_flame_params(
         &out.join("canonical_flame_param.npz"),
         &AvatarParams {
-            shape: &avatar.shape,
-            static_offset: &avatar.static_offset,
+            shape: &sitter.shape,
+            static_offset: &sitter.static_offset,
             frames: &[],
         },
     )?;

@@ -46,6 +46,9 @@ pub struct Dataset {
     /// The built-in source it was captured from, when `visage capture` made it
     /// (it needs no FLAME files).
     pub builtin_source: Option<String>,
+    /// What `visage capture --recipe` recorded: the composite whose ground
+    /// truth this is (recipe TOML, tone, seams), when it is one.
+    pub composite: Option<Value>,
 }
 
 impl Dataset {
@@ -59,6 +62,7 @@ impl Dataset {
         }
         let mut flame_params = BTreeMap::new();
         let mut builtin_source = None;
+        let mut composite = None;
         let mut splits: [Vec<View>; 3] = Default::default();
         for (split, views) in ["train", "val", "test"].iter().zip(&mut splits) {
             let path = root.join(format!("transforms_{split}.json"));
@@ -77,6 +81,7 @@ impl Dataset {
                 .and_then(Value::as_str)
             {
                 builtin_source = Some(source.to_string());
+                composite = doc["visage_builtin_head"].get("composite").cloned();
             }
             let frames = doc
                 .get("frames")
@@ -106,6 +111,7 @@ impl Dataset {
             test,
             flame_params,
             builtin_source,
+            composite,
         })
     }
 }

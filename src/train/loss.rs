@@ -69,8 +69,14 @@ fn channel(image: &[f64], ch: usize) -> Vec<f64> {
     image.iter().skip(ch).step_by(3).copied().collect()
 }
 
-/// SSIM of one channel and, when asked, ∂(Σ SSIM map)/∂x.
-fn ssim_channel(x: &[f64], y: &[f64], width: usize, height: usize, grad: bool) -> (f64, Vec<f64>) {
+/// The SSIM map of one channel and, when asked, ∂(Σ SSIM map)/∂x.
+fn ssim_channel(
+    x: &[f64],
+    y: &[f64],
+    width: usize,
+    height: usize,
+    grad: bool,
+) -> (Vec<f64>, Vec<f64>) {
     let w = window();
     let product = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(p, q)| p * q).collect::<Vec<_>>();
     let mu_x = blur(x, width, height, &w);
@@ -79,7 +85,7 @@ fn ssim_channel(x: &[f64], y: &[f64], width: usize, height: usize, grad: bool) -
     let m_yy = blur(&product(y, y), width, height, &w);
     let m_xy = blur(&product(x, y), width, height, &w);
     let n = x.len();
-    let mut sum = 0.0;
+    let mut map = vec![0.0; n];
     let (mut d_mu, mut d_m2, mut d_mxy) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
     for p in 0..n {
         let (mx, my) = (mu_x[p], mu_y[p]);
@@ -91,7 +97,7 @@ fn ssim_channel(x: &[f64], y: &[f64], width: usize, height: usize, grad: bool) -
         let c = mx * mx + my * my + C1;
         let d = sxx + syy + C2;
         let s = a * b / (c * d);
-        sum += s;
+        map[p] = s;
         if grad {
             let ds_dmx = 2.0 * my * b / (c * d) - s * 2.0 * mx / c;
             let ds_dsxy = 2.0 * a / (c * d);
@@ -103,7 +109,7 @@ fn ssim_channel(x: &[f64], y: &[f64], width: usize, height: usize, grad: bool) -
         }
     }
     if !grad {
-        return (sum, Vec::new());
+        return (map, Vec::new());
     }
     // The window is symmetric and zero padding makes the blur its own transpose.
     let (b_mu, b_m2, b_mxy) = (
@@ -114,7 +120,28 @@ fn ssim_channel(x: &[f64], y: &[f64], width: usize, height: usize, grad: bool) -
     let g = (0..n)
         .map(|p| b_mu[p] + 2.0 * x[p] * b_m2[p] + y[p] * b_mxy[p])
         .collect();
-    (sum, g)
+    (map, g)
+}
+
+/// The SSIM of `image` against `target` at each pixel, averaged over the
+/// three channels (for SSIM over a mask: the mean of this map over it).
+pub fn ssim_map(image: &[f64], target: &[f64], width: usize, height: usize) -> Vec<f64> {
+    let maps: Vec<Vec<f64>> = (0..3)
+        .into_par_iter()
+        .map(|ch| {
+            ssim_channel(
+                &channel(image, ch),
+                &channel(target, ch),
+                width,
+                height,
+                false,
+            )
+            .0
+        })
+        .collect();
+    (0..width * height)
+        .map(|p| (maps[0][p] + maps[1][p] + maps[2][p]) / 3.0)
+        .collect()
 }
 
 /// The loss of `image` against `target` (both `width × height` RGB) and, when
@@ -147,15 +174,15 @@ pub fn photometric_loss(
     } else {
         Vec::new()
     };
-    let channels: Vec<(f64, Vec<f64>)> = (0..3)
+    let channels: Vec<(Vec<f64>, Vec<f64>)> = (0..3)
         .into_par_iter()
         .map(|ch| {
             let (x, y) = (channel(image, ch), channel(target, ch));
             ssim_channel(&x, &y, width, height, grad)
         })
         .collect();
-    for (ch, (s, g)) in channels.into_iter().enumerate() {
-        ssim_sum += s;
+    for (ch, (map, g)) in channels.into_iter().enumerate() {
+        ssim_sum += map.iter().sum::<f64>();
         for (p, gp) in g.iter().enumerate() {
             gradient[p * 3 + ch] -= LAMBDA_DSSIM * gp / count;
         }

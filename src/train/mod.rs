@@ -8,6 +8,7 @@
 
 pub mod adam;
 pub mod capture;
+pub mod composite_eval;
 pub mod dataset;
 pub mod dual;
 pub mod hole_metrics;
@@ -17,4 +18,5 @@ pub mod model;
 pub mod project;
 pub mod raster;
 pub mod raster_gpu;
+pub mod sitter;
 pub mod trainer;

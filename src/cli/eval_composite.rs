@@ -1,0 +1,113 @@
+//! `visage eval --composite`: a composite built in-process from trained
+//! sources against its ground truth (see `train::composite_eval`), printed
+//! as tables or one JSON document, with an optional picture.
+
+use super::train::EvalArgs;
+use crate::error::{Error, Result};
+use crate::pipeline::DatabaseSpec;
+use crate::train::composite_eval::{evaluate_composite, CompositeReport, EvalOptions, Quality};
+use crate::train::dataset::Dataset;
+
+/// Runs `visage eval --composite --db TRAINED RECIPE DATASET`.
+pub fn run(args: &EvalArgs) -> Result<()> {
+    let trained_dir = args
+        .db
+        .as_ref()
+        .expect("clap requires --db with --composite");
+    let recipe = crate::compose::recipe::Recipe::load(args.recipe())?;
+    let dataset = Dataset::load(args.dataset())?;
+    let spec = DatabaseSpec {
+        db: trained_dir.display().to_string(),
+        ..DatabaseSpec::default()
+    };
+    let (trained, _) = spec.load()?;
+    for name in recipe.source_names() {
+        if !trained.sources.iter().any(|s| s.name == name) {
+            return Err(Error::input(format!(
+                "{} has no trained source '{}', which the recipe needs: train it into that folder first",
+                trained_dir.display(),
+                crate::text::printable(&name)
+            )));
+        }
+    }
+    let options = EvalOptions {
+        border_px: args.border_px,
+        picture_views: if args.picture.is_some() { 3 } else { 0 },
+    };
+    let (report, pictures) = evaluate_composite(&trained, &recipe, &dataset, &options)?;
+    if let Some(path) = &args.picture {
+        let mut images = Vec::new();
+        let mut rows = Vec::new();
+        for (label, views) in pictures {
+            // Small images are enlarged so the column titles fit over them.
+            let factor = 96u32.div_ceil(views[0].width.max(1)).max(1);
+            images.extend(views.map(|v| v.resized(v.width * factor, v.height * factor)));
+            rows.push(label);
+        }
+        crate::study::plot::labelled_grid(&images, &["truth", "composite", "dE 0-20"], &rows)?
+            .save_png(path)?;
+    }
+    if args.json() {
+        println!(
+            "{}",
+            serde_json::to_string(&report).expect("reports serialise")
+        );
+    } else {
+        print_report(&report);
+    }
+    Ok(())
+}
+
+fn row(name: &str, q: &Quality) -> String {
+    format!(
+        "  {name:<16} {:>7.2} dB  SSIM {:.4}  ΔE {:>5.2}  ({} px)",
+        q.psnr_db, q.ssim, q.delta_e, q.pixels
+    )
+}
+
+fn print_report(r: &CompositeReport) {
+    println!(
+        "composite against its ground truth: {} views, band {} px",
+        r.views, r.border_px
+    );
+    println!("{}", row("head", &r.quality));
+    for (split, q) in &r.splits {
+        println!("{}", row(split, q));
+    }
+    println!("{}", row("ceiling", &r.ceiling));
+    println!("{}", row("border band", &r.border));
+    println!("{}", row("interior", &r.interior));
+    println!("{}", row("skin", &r.skin));
+    println!("{}", row("non-skin", &r.non_skin));
+    println!(
+        "  leak             {:.2} % of colour from another source ({:.2} % of {} interior px over 5 %)",
+        100.0 * r.leak.mean,
+        100.0 * r.leak.over_5_percent,
+        r.leak.pixels
+    );
+    println!("groups (source; PSNR against the ceiling of that source on itself):");
+    for g in &r.groups {
+        println!(
+            "{}  ceiling {:.2} dB",
+            row(&format!("{} ({})", g.group, g.source), &g.quality),
+            g.ceiling_psnr_db
+        );
+    }
+    println!("sources on their own ground truth:");
+    for s in &r.sources {
+        println!("{}", row(&s.source, &s.quality));
+    }
+    println!("decomposition (head / border / interior PSNR, skin / non-skin ΔE):");
+    for s in &r.decomposition {
+        println!(
+            "  {:<12} {:>6.2} {:>6.2} {:>6.2} dB   ΔE {:>5.2} {:>5.2}",
+            s.step,
+            s.quality.psnr_db,
+            s.border.psnr_db,
+            s.interior.psnr_db,
+            s.skin.delta_e,
+            s.non_skin.delta_e
+        );
+    }
+    println!("evaluated in {:.1} s", r.eval_ms / 1e3);
+}

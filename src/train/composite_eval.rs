@@ -1,0 +1,779 @@
+//! How good is a composite? A composite of built-in people, built from
+//! separately trained sources, against its ground truth (`capture --recipe`,
+//! method §13): masked PSNR, SSIM and CIE76 ΔE over the head, per split, view
+//! and group; the border band (pixels near a change of source) against the
+//! interior; leak (the share of a pixel's colour from Gaussians of a source
+//! other than the one assigned there, by rendering one-hot source colours);
+//! the ceiling (each source's own trained avatar against its own ground truth
+//! at the same views); and the decomposition swap → +shape → +smoothing →
+//! +colour.
+
+use std::collections::BTreeMap;
+
+use glam::{DVec3, Vec3};
+use serde::Serialize;
+
+use super::capture::{visible_triangles, Surface};
+use super::dataset::{Dataset, View};
+use super::hole_metrics::lab;
+use super::holes::Obscurer;
+use super::loss::ssim_map;
+use super::model::{Render, Trainable, SH_STRIDE};
+use super::project::TrainCamera;
+use super::raster::Rasterizer;
+use super::sitter::Sitter;
+use super::trainer::load_target;
+use crate::avatar::database::Database;
+use crate::avatar::synthetic::look_index;
+use crate::compose::engine::{Composite, Engine, PosedMesh};
+use crate::compose::recipe::{
+    AnimationMode, ColourCorrection, PostProcess, Recipe, ResolvedRecipe, Smoothing,
+};
+use crate::error::{Error, Result};
+use crate::io::avatar::read_flame_params;
+use crate::model::head::{HeadModel, Pose};
+use crate::model::regions::{Group, Region};
+use crate::render::image::RgbImage;
+
+/// What to measure.
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
+    /// Pixels within this many of a change of source are the border band.
+    pub border_px: u32,
+    /// Views drawn for the picture (ground truth, composite, error), at most.
+    pub picture_views: usize,
+}
+
+/// Image quality over a set of pixels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Quality {
+    /// PSNR in dB over the pixels (100 at most).
+    pub psnr_db: f64,
+    /// Mean SSIM (11×11 Gaussian window, as the training loss) over the pixels.
+    pub ssim: f64,
+    /// Mean CIE76 ΔE over the pixels.
+    pub delta_e: f64,
+    /// How many pixels.
+    pub pixels: usize,
+}
+
+/// Sums that become a [`Quality`].
+#[derive(Clone, Copy, Debug, Default)]
+struct Sums {
+    squared: f64,
+    ssim: f64,
+    delta_e: f64,
+    pixels: usize,
+}
+
+impl Sums {
+    fn add(&mut self, squared: f64, ssim: f64, delta_e: f64) {
+        self.squared += squared;
+        self.ssim += ssim;
+        self.delta_e += delta_e;
+        self.pixels += 1;
+    }
+
+    fn merge(&mut self, other: &Sums) {
+        self.squared += other.squared;
+        self.ssim += other.ssim;
+        self.delta_e += other.delta_e;
+        self.pixels += other.pixels;
+    }
+
+    fn quality(&self) -> Quality {
+        let n = self.pixels.max(1) as f64;
+        let mse = self.squared / (3.0 * n);
+        Quality {
+            psnr_db: if mse > 0.0 {
+                (10.0 * (1.0 / mse).log10()).min(100.0)
+            } else {
+                100.0
+            },
+            ssim: self.ssim / n,
+            delta_e: self.delta_e / n,
+            pixels: self.pixels,
+        }
+    }
+}
+
+/// One view's figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct ViewQuality {
+    /// train, val or test.
+    pub split: &'static str,
+    /// The timestep.
+    pub timestep: usize,
+    /// The rig camera.
+    pub camera: usize,
+    /// Over the head.
+    pub quality: Quality,
+}
+
+/// One group's figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct GroupQuality {
+    /// The group.
+    pub group: &'static str,
+    /// Whose Gaussians it shows.
+    pub source: String,
+    /// Over the group's pixels.
+    pub quality: Quality,
+    /// Its source's own trained avatar against its own ground truth, over the
+    /// pixels of this group in its own images: the best this region can be.
+    pub ceiling_psnr_db: f64,
+}
+
+/// Where colour comes from another source than the one assigned.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Leak {
+    /// Mean share of colour from other sources, at interior pixels (0-1).
+    pub mean: f64,
+    /// Share of interior pixels where it exceeds 5 %.
+    pub over_5_percent: f64,
+    /// Interior pixels measured.
+    pub pixels: usize,
+}
+
+/// One step of the decomposition.
+#[derive(Clone, Debug, Serialize)]
+pub struct Step {
+    /// swap, +shape, +smoothing or +colour.
+    pub step: &'static str,
+    /// Over the head.
+    pub quality: Quality,
+    /// Over the border band.
+    pub border: Quality,
+    /// Over the interior.
+    pub interior: Quality,
+    /// Over skin pixels (ΔE matters most here for colour correction).
+    pub skin: Quality,
+    /// Over the other pixels (lips, eyes, brows, hair, teeth, clothes).
+    pub non_skin: Quality,
+}
+
+/// A source's ceiling over its own ground truth.
+#[derive(Clone, Debug, Serialize)]
+pub struct SourceCeiling {
+    /// The source.
+    pub source: String,
+    /// Its trained avatar against its own ground truth, over the head.
+    pub quality: Quality,
+}
+
+/// Everything `eval --composite` measures.
+#[derive(Clone, Debug, Serialize)]
+pub struct CompositeReport {
+    /// Views measured (all splits).
+    pub views: usize,
+    /// Border band width in pixels.
+    pub border_px: u32,
+    /// The full recipe over the head.
+    pub quality: Quality,
+    /// Per split.
+    pub splits: BTreeMap<&'static str, Quality>,
+    /// Per view.
+    pub per_view: Vec<ViewQuality>,
+    /// Per group.
+    pub groups: Vec<GroupQuality>,
+    /// Over the border band.
+    pub border: Quality,
+    /// Over the interior (outside the band).
+    pub interior: Quality,
+    /// Skin pixels.
+    pub skin: Quality,
+    /// Non-skin pixels.
+    pub non_skin: Quality,
+    /// Leak at interior pixels.
+    pub leak: Leak,
+    /// The ceiling: every group as good as its source on itself, combined.
+    pub ceiling: Quality,
+    /// Each source's own figures.
+    pub sources: Vec<SourceCeiling>,
+    /// swap → +shape → +smoothing → +colour.
+    pub decomposition: Vec<Step>,
+    /// Milliseconds the evaluation took.
+    pub eval_ms: f64,
+}
+
+/// Pictures for a few views: ground truth, composite, error map.
+pub type Pictures = Vec<(String, [RgbImage; 3])>;
+
+/// Regions whose surface is skin (their pixels are "skin" for ΔE): the face,
+/// nose, ears, neck and the skin around the eyes. Lips, mouth, teeth, eyes,
+/// hair and the clothes' boundary are not.
+pub fn is_skin(region: Region) -> bool {
+    matches!(
+        region,
+        Region::Skin
+            | Region::Nose
+            | Region::LeftEar
+            | Region::RightEar
+            | Region::Neck
+            | Region::LeftEyeRegion
+            | Region::RightEyeRegion
+    )
+}
+
+/// Checks that `dataset` is the ground truth of `recipe` (its base as it is,
+/// for an unedited recipe), both resolved against `trained`.
+pub fn check_dataset(dataset: &Dataset, recipe: &ResolvedRecipe, trained: &Database) -> Result<()> {
+    let name = |i: usize| trained.sources[i].name.clone();
+    match &dataset.composite {
+        Some(note) => {
+            let text = note["recipe"].as_str().unwrap_or_default();
+            let theirs = Recipe::from_toml(text)
+                .and_then(|r| r.resolve(trained))
+                .map_err(|e| {
+                    Error::input(format!("{}: its recipe: {e}", dataset.root.display()))
+                })?;
+            let same = theirs.base == recipe.base
+                && theirs.gaussians == recipe.gaussians
+                && theirs
+                    .shape
+                    .iter()
+                    .zip(&recipe.shape)
+                    .all(|(a, b)| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9));
+            if same {
+                Ok(())
+            } else {
+                Err(Error::input(format!(
+                    "{} is the ground truth of another recipe (base {}); capture this one with visage capture --recipe",
+                    dataset.root.display(),
+                    name(theirs.base)
+                )))
+            }
+        }
+        None => {
+            let source = dataset.builtin_source.as_deref().ok_or_else(|| {
+                Error::input(format!(
+                    "{} was not captured from the built-in people: there is no ground truth to compare with",
+                    dataset.root.display()
+                ))
+            })?;
+            if super::sitter::is_unedited(recipe) && name(recipe.base) == source {
+                Ok(())
+            } else {
+                Err(Error::input(format!(
+                    "{} is the ground truth of {source} unedited, not of this recipe; capture it with visage capture --recipe",
+                    dataset.root.display()
+                )))
+            }
+        }
+    }
+}
+
+/// The four steps of the decomposition, as recipes.
+fn steps(recipe: &Recipe) -> Vec<(&'static str, Recipe)> {
+    let mut swap = recipe.clone();
+    for edit in swap.groups.values_mut() {
+        edit.shape = BTreeMap::from([(recipe.base.clone(), 1.0)]);
+    }
+    swap.post = PostProcess {
+        smoothing: Smoothing::Off,
+        colour: ColourCorrection::Off,
+    };
+    let mut shape = recipe.clone();
+    shape.post = swap.post;
+    let mut smoothing = recipe.clone();
+    smoothing.post.colour = ColourCorrection::Off;
+    vec![
+        ("swap", swap),
+        ("+shape", shape),
+        ("+smoothing", smoothing),
+        ("+colour", recipe.clone()),
+    ]
+}
+
+/// Per timestep: the expression and pose, and the ground-truth posed mesh.
+struct Timestep {
+    expression: Vec<f32>,
+    pose: Pose,
+    truth: Vec<Vec3>,
+}
+
+fn timesteps(
+    dataset: &Dataset,
+    model: &HeadModel,
+    views: &[&View],
+) -> Result<BTreeMap<usize, Timestep>> {
+    let mut out = BTreeMap::new();
+    for view in views {
+        if out.contains_key(&view.timestep) {
+            continue;
+        }
+        let path = dataset.flame_params.get(&view.timestep).ok_or_else(|| {
+            Error::input(format!(
+                "timestep {} has no FLAME parameters",
+                view.timestep
+            ))
+        })?;
+        let params = read_flame_params(path, "dataset", model)?;
+        let (expression, pose) = params.motion.frame(0);
+        let truth = model.forward(&params.shape, Some(&params.static_offset), expression, pose);
+        out.insert(
+            view.timestep,
+            Timestep {
+                expression: expression.to_vec(),
+                pose: *pose,
+                truth,
+            },
+        );
+    }
+    Ok(out)
+}
+
+/// Per pixel: what the ground truth shows there.
+struct Labels {
+    /// The head (mask over half) with a triangle under it.
+    head: Vec<bool>,
+    /// The region shown.
+    region: Vec<Option<Region>>,
+    /// The source assigned there (`u32::MAX` off the head).
+    source: Vec<u32>,
+    /// Within the border band.
+    band: Vec<bool>,
+}
+
+fn labels(
+    truth: &[Vec3],
+    model: &HeadModel,
+    camera: &TrainCamera,
+    mask: &[u8],
+    recipe: &ResolvedRecipe,
+    border_px: u32,
+) -> Labels {
+    let shown = visible_triangles(truth, &model.triangles, camera);
+    let region: Vec<Option<Region>> = shown
+        .iter()
+        .map(|t| t.map(|t| model.triangle_regions[t as usize]))
+        .collect();
+    let head: Vec<bool> = region
+        .iter()
+        .zip(mask)
+        .map(|(r, &m)| r.is_some() && m > 127)
+        .collect();
+    let source: Vec<u32> = region
+        .iter()
+        .map(|r| r.map_or(u32::MAX, |r| recipe.gaussians[r.group().index()] as u32))
+        .collect();
+    let band = band(&source, camera.size, border_px);
+    Labels {
+        head,
+        region,
+        source,
+        band,
+    }
+}
+
+/// Pixels within `k` pixels (a square window) of a pixel showing another
+/// source (background does not count as a source).
+pub fn band(source: &[u32], size: [u32; 2], k: u32) -> Vec<bool> {
+    let [w, h] = [size[0] as i64, size[1] as i64];
+    let k = k as i64;
+    let mut out = vec![false; source.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let s = source[(y * w + x) as usize];
+            if s == u32::MAX {
+                continue;
+            }
+            'search: for dy in -k..=k {
+                for dx in -k..=k {
+                    let (xx, yy) = (x + dx, y + dy);
+                    if xx < 0 || yy < 0 || xx >= w || yy >= h {
+                        continue;
+                    }
+                    let o = source[(yy * w + xx) as usize];
+                    if o != u32::MAX && o != s {
+                        out[(y * w + x) as usize] = true;
+                        break 'search;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+fn render(
+    model: &Trainable,
+    frames: &[crate::avatar::binding::TriangleFrame],
+    camera: &TrainCamera,
+) -> Vec<f64> {
+    Render::new(
+        model,
+        frames,
+        camera,
+        [0.0; 3],
+        &Obscurer::None,
+        &mut Rasterizer::Cpu,
+    )
+    .expect("the CPU rasteriser does not fail")
+    .image()
+    .to_vec()
+}
+
+fn rgb(image: &[f64], p: usize) -> DVec3 {
+    DVec3::new(image[3 * p], image[3 * p + 1], image[3 * p + 2])
+}
+
+/// The composite posed at a timestep, as the composer animates it.
+fn posed(engine: &Engine, composite: &Composite, t: &Timestep) -> PosedMesh {
+    let mut out = PosedMesh::default();
+    engine.pose_with(
+        composite,
+        &t.expression,
+        &t.pose,
+        AnimationMode::Fast,
+        &mut out,
+    );
+    out
+}
+
+/// The composite's Gaussians with those of `source` (all, for `None`) white
+/// and the others black: rendered on black, a pixel's value is the share of
+/// its colour that `source` gives.
+fn one_hot(model: &Trainable, composite: &Composite, source: Option<usize>) -> Trainable {
+    let mut out = model.clone();
+    let c0 = crate::render::sh::C0;
+    for block in &composite.blocks {
+        let white = source.is_none_or(|s| block.source == s);
+        let value = if white { 0.5 / c0 } else { -0.5 / c0 };
+        for i in block.start..block.end {
+            let sh = &mut out.sh[i * SH_STRIDE..(i + 1) * SH_STRIDE];
+            sh.fill(0.0);
+            sh[..3].fill(value);
+        }
+    }
+    out.sh_degree = 0;
+    out
+}
+
+/// The composites of the decomposition (swap, +shape, +smoothing, +colour),
+/// the full recipe last.
+pub fn decomposition(engine: &Engine, recipe: &Recipe) -> Result<Vec<(&'static str, Composite)>> {
+    steps(recipe)
+        .into_iter()
+        .map(|(name, r)| Ok((name, engine.compose(&r.resolve(engine.database())?))))
+        .collect()
+}
+
+/// Evaluates the composite of `recipe` over the sources of `trained` against
+/// the ground truth `dataset`.
+pub fn evaluate_composite(
+    trained: &Database,
+    recipe: &Recipe,
+    dataset: &Dataset,
+    options: &EvalOptions,
+) -> Result<(CompositeReport, Pictures)> {
+    let engine = Engine::new(trained.clone())?;
+    let variants = decomposition(&engine, recipe)?;
+    evaluate_variants(&engine, recipe, dataset, options, &variants)
+}
+
+/// [`evaluate_composite`] of composites already built (the decomposition's
+/// four, the full recipe last) on `engine`.
+pub fn evaluate_variants(
+    engine: &Engine,
+    recipe: &Recipe,
+    dataset: &Dataset,
+    options: &EvalOptions,
+    variants: &[(&'static str, Composite)],
+) -> Result<(CompositeReport, Pictures)> {
+    let start = std::time::Instant::now();
+    let trained = engine.database();
+    let resolved = recipe.resolve(trained)?;
+    check_dataset(dataset, &resolved, trained)?;
+    let model = &trained.model;
+    let models: Vec<Trainable> = variants
+        .iter()
+        .map(|(_, c)| Trainable::from_set(&c.gaussians))
+        .collect();
+    let last = variants.len() - 1;
+    let (full, full_model) = (&variants[last].1, &models[last]);
+    let used: Vec<usize> = {
+        let mut u = resolved.gaussians.to_vec();
+        u.sort_unstable();
+        u.dedup();
+        u
+    };
+    // Each used source's own trained avatar and ground truth surface.
+    let own: Vec<(usize, Trainable, Sitter)> = used
+        .iter()
+        .map(|&s| {
+            let avatar = &trained.sources[s];
+            let look = look_index(&avatar.name).ok_or_else(|| {
+                Error::input(format!(
+                    "source '{}' is not one of the built-in people: it has no ground truth",
+                    avatar.name
+                ))
+            })?;
+            Ok((
+                s,
+                Trainable::from_set(&avatar.gaussians),
+                Sitter::avatar(avatar, look, model.triangle_count()),
+            ))
+        })
+        .collect::<Result<_>>()?;
+    let surfaces: Vec<Surface> = own
+        .iter()
+        .map(|(_, _, sitter)| Surface::new(model, sitter))
+        .collect();
+
+    let views: Vec<(&'static str, &View)> = [
+        ("train", &dataset.train),
+        ("val", &dataset.val),
+        ("test", &dataset.test),
+    ]
+    .into_iter()
+    .flat_map(|(name, list)| list.iter().map(move |v| (name, v)))
+    .collect();
+    let all: Vec<&View> = views.iter().map(|(_, v)| *v).collect();
+    let times = timesteps(dataset, model, &all)?;
+
+    let mut overall = Sums::default();
+    let mut splits: BTreeMap<&'static str, Sums> = BTreeMap::new();
+    let mut per_view = Vec::new();
+    let mut groups = [Sums::default(); Group::COUNT];
+    let mut ceilings = [Sums::default(); Group::COUNT];
+    let mut source_sums = vec![Sums::default(); own.len()];
+    let mut step_sums = vec![[Sums::default(); 5]; variants.len()];
+    let (mut leak_sum, mut leak_over, mut leak_pixels) = (0.0, 0usize, 0usize);
+    let mut pictures = Vec::new();
+
+    for (split, view) in &views {
+        let t = &times[&view.timestep];
+        let target = load_target(view, None, [0.0; 3])?;
+        let goal: Vec<f64> = target.pixels.iter().map(|&p| p as f64).collect();
+        let camera = &target.camera;
+        let [w, h] = camera.size;
+        let mask = read_mask(view, (w * h) as usize)?;
+        let labels = labels(&t.truth, model, camera, &mask, &resolved, options.border_px);
+        let mut view_sums = Sums::default();
+        for (k, ((_, composite), m)) in variants.iter().zip(&models).enumerate() {
+            let pose = posed(engine, composite, t);
+            let image = render(m, &pose.frames, camera);
+            let ssim = ssim_map(&image, &goal, w as usize, h as usize);
+            for p in (0..labels.head.len()).filter(|&p| labels.head[p]) {
+                let (a, b) = (rgb(&image, p), rgb(&goal, p));
+                let (sq, de) = ((a - b).length_squared(), (lab(a) - lab(b)).length());
+                let s = &mut step_sums[k];
+                s[0].add(sq, ssim[p], de);
+                s[if labels.band[p] { 1 } else { 2 }].add(sq, ssim[p], de);
+                let skin = labels.region[p].is_some_and(is_skin);
+                s[if skin { 3 } else { 4 }].add(sq, ssim[p], de);
+                if k == last {
+                    view_sums.add(sq, ssim[p], de);
+                    if let Some(r) = labels.region[p] {
+                        groups[r.group().index()].add(sq, ssim[p], de);
+                    }
+                }
+            }
+            if k == last
+                && pictures.len() < options.picture_views
+                && (*split != "train" || pictures.is_empty())
+            {
+                pictures.push((
+                    format!("{split} t{} c{}", view.timestep, view.camera_index),
+                    picture(&goal, &image, &labels.head, w, h),
+                ));
+            }
+        }
+        // Leak: the colour share of each assigned source against all of it
+        // (one-hot renders: a source's Gaussians white, the rest black).
+        let pose = posed(engine, full, t);
+        let everything = render(&one_hot(full_model, full, None), &pose.frames, camera);
+        let shares: Vec<(usize, Vec<f64>)> = used
+            .iter()
+            .map(|&s| {
+                (
+                    s,
+                    render(&one_hot(full_model, full, Some(s)), &pose.frames, camera),
+                )
+            })
+            .collect();
+        for p in (0..labels.head.len()).filter(|&p| labels.head[p] && !labels.band[p]) {
+            let total = everything[3 * p];
+            if total < 0.5 {
+                continue;
+            }
+            let assigned = shares
+                .iter()
+                .find(|(s, _)| *s as u32 == labels.source[p])
+                .map_or(0.0, |(_, img)| img[3 * p]);
+            let leak = (1.0 - assigned / total).clamp(0.0, 1.0);
+            leak_sum += leak;
+            leak_over += usize::from(leak > 0.05);
+            leak_pixels += 1;
+        }
+        // The ceiling: each used source on its own ground truth.
+        for (k, ((s, trainable, sitter), surface)) in own.iter().zip(&surfaces).enumerate() {
+            let truth = model.forward(
+                &sitter.shape,
+                Some(&sitter.static_offset),
+                &t.expression,
+                &t.pose,
+            );
+            let (truth_image, truth_mask) = surface.draw(&truth, camera);
+            let truth_goal: Vec<f64> = truth_image
+                .pixels
+                .iter()
+                .map(|&v| v as f64 / 255.0)
+                .collect();
+            let frames = crate::avatar::binding::triangle_frames(&truth, &model.triangles);
+            let image = render(trainable, &frames, camera);
+            let ssim = ssim_map(&image, &truth_goal, w as usize, h as usize);
+            let shown = visible_triangles(&truth, &model.triangles, camera);
+            for p in 0..shown.len() {
+                let Some(tri) = shown[p].filter(|_| truth_mask[p] > 127) else {
+                    continue;
+                };
+                let (a, b) = (rgb(&image, p), rgb(&truth_goal, p));
+                let (sq, de) = ((a - b).length_squared(), (lab(a) - lab(b)).length());
+                source_sums[k].add(sq, ssim[p], de);
+                let g = model.triangle_regions[tri as usize].group();
+                if resolved.gaussians[g.index()] == *s {
+                    ceilings[g.index()].add(sq, ssim[p], de);
+                }
+            }
+        }
+        overall.merge(&view_sums);
+        splits.entry(*split).or_default().merge(&view_sums);
+        per_view.push(ViewQuality {
+            split,
+            timestep: view.timestep,
+            camera: view.camera_index,
+            quality: view_sums.quality(),
+        });
+    }
+    let mut ceiling = Sums::default();
+    ceilings.iter().for_each(|c| ceiling.merge(c));
+    let final_step = &step_sums[last];
+    let report = CompositeReport {
+        views: views.len(),
+        border_px: options.border_px,
+        quality: overall.quality(),
+        splits: splits.iter().map(|(k, v)| (*k, v.quality())).collect(),
+        per_view,
+        groups: Group::ALL
+            .iter()
+            .filter(|g| groups[g.index()].pixels > 0)
+            .map(|g| GroupQuality {
+                group: g.name(),
+                source: trained.sources[resolved.gaussians[g.index()]].name.clone(),
+                quality: groups[g.index()].quality(),
+                ceiling_psnr_db: ceilings[g.index()].quality().psnr_db,
+            })
+            .collect(),
+        border: final_step[1].quality(),
+        interior: final_step[2].quality(),
+        skin: final_step[3].quality(),
+        non_skin: final_step[4].quality(),
+        leak: Leak {
+            mean: leak_sum / leak_pixels.max(1) as f64,
+            over_5_percent: leak_over as f64 / leak_pixels.max(1) as f64,
+            pixels: leak_pixels,
+        },
+        ceiling: ceiling.quality(),
+        sources: own
+            .iter()
+            .zip(&source_sums)
+            .map(|((s, _, _), sums)| SourceCeiling {
+                source: trained.sources[*s].name.clone(),
+                quality: sums.quality(),
+            })
+            .collect(),
+        decomposition: variants
+            .iter()
+            .zip(&step_sums)
+            .map(|((name, _), s)| Step {
+                step: name,
+                quality: s[0].quality(),
+                border: s[1].quality(),
+                interior: s[2].quality(),
+                skin: s[3].quality(),
+                non_skin: s[4].quality(),
+            })
+            .collect(),
+        eval_ms: start.elapsed().as_secs_f64() * 1e3,
+    };
+    Ok((report, pictures))
+}
+
+/// A view's foreground mask (all foreground without one).
+fn read_mask(view: &View, pixels: usize) -> Result<Vec<u8>> {
+    match &view.mask {
+        None => Ok(vec![255; pixels]),
+        Some(path) => Ok(image::open(path)
+            .map_err(|e| Error::input(format!("cannot read mask {}: {e}", path.display())))?
+            .to_luma8()
+            .into_raw()),
+    }
+}
+
+/// Ground truth, composite and an error map (ΔE, 0 black to 20 and more
+/// bright yellow) of one view.
+fn picture(goal: &[f64], image: &[f64], head: &[bool], w: u32, h: u32) -> [RgbImage; 3] {
+    let to_image = |v: &[f64]| RgbImage {
+        width: w,
+        height: h,
+        pixels: v
+            .iter()
+            .map(|x| (x.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect(),
+    };
+    let mut heat = RgbImage::new(w, h, [0, 0, 0]);
+    for (p, &on) in head.iter().enumerate() {
+        if !on {
+            continue;
+        }
+        let de = (lab(rgb(image, p)) - lab(rgb(goal, p))).length();
+        let t = (de / 20.0).clamp(0.0, 1.0);
+        let c = [
+            255.0 * (2.0 * t).min(1.0),
+            255.0 * (2.0 * t - 1.0).max(0.0),
+            40.0 * (1.0 - t),
+        ];
+        heat.pixels[3 * p..3 * p + 3].copy_from_slice(&c.map(|x| x.round() as u8));
+    }
+    [to_image(goal), to_image(image), heat]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_band_is_where_sources_change_and_nowhere_else() {
+        // Two sources side by side over a background row.
+        let m = u32::MAX;
+        let source = [
+            0, 0, 0, 1, 1, 1, //
+            0, 0, 0, 1, 1, 1, //
+            m, m, m, m, m, m,
+        ];
+        let b = band(&source, [6, 3], 1);
+        let expect = [
+            false, false, true, true, false, false, //
+            false, false, true, true, false, false, //
+            false, false, false, false, false, false,
+        ];
+        assert_eq!(b, expect);
+        assert!(
+            band(&[2; 9], [3, 3], 2).iter().all(|&x| !x),
+            "one source has no band"
+        );
+    }
+
+    #[test]
+    fn sums_give_psnr_and_means() {
+        let mut s = Sums::default();
+        s.add(3.0 * 0.01, 0.9, 2.0);
+        s.add(3.0 * 0.01, 0.7, 4.0);
+        let q = s.quality();
+        assert!((q.psnr_db - 20.0).abs() < 1e-9);
+        assert!((q.ssim - 0.8).abs() < 1e-12 && (q.delta_e - 3.0).abs() < 1e-12);
+        assert_eq!(Sums::default().quality().psnr_db, 100.0);
+    }
+}
