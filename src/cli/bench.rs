@@ -37,6 +37,9 @@ enum BenchWhat {
     Train(super::bench_train::TrainBenchArgs),
     /// Hole filling: leak, coverage and PSNR of plain, obscuring, culling, both.
     Holes(super::bench_holes::HolesBenchArgs),
+    /// Composites against their ground truth: a fixed set of recipes over
+    /// trained (cached) sources, every composite metric per recipe.
+    Composites(super::bench_composites::CompositesBenchArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -65,6 +68,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         BenchWhat::Terminal(a) => super::bench_terminal::run(a),
         BenchWhat::Train(a) => super::bench_train::run(a),
         BenchWhat::Holes(a) => super::bench_holes::run(a),
+        BenchWhat::Composites(a) => super::bench_composites::run(a),
     }
 }
 

@@ -2,6 +2,7 @@
 //! contract (0 ok, 1 a check failed, 2 bad input, always one line on stderr).
 
 mod bench;
+mod bench_composites;
 mod bench_holes;
 mod bench_render;
 mod bench_scene;

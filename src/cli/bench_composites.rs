@@ -1,0 +1,348 @@
+//! `visage bench composites`: how far composites are from their ground
+//! truth. A fixed set of recipes (`recipes/bench/`: random composites by the
+//! thesis's rules and hard cases chosen on purpose), sources captured and
+//! trained once and cached, each recipe's ground truth captured and the
+//! composite evaluated (`eval --composite`); one row per recipe and the mean,
+//! as a table or one JSON document.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::Args;
+use serde::Serialize;
+
+use super::render::parse_size;
+use crate::avatar::database::Database;
+use crate::compose::recipe::{ColourCorrection, Recipe, Smoothing};
+use crate::error::{Error, Result};
+use crate::pipeline::DatabaseSpec;
+use crate::render::Backend;
+use crate::train::capture::{capture, capture_sitter, CaptureOptions};
+use crate::train::composite_eval::{evaluate_composite, CompositeReport, EvalOptions, Quality};
+use crate::train::dataset::Dataset;
+use crate::train::sitter::{Seams, Sitter, Tone};
+use crate::train::trainer::{TrainOptions, Trainer};
+
+/// Arguments of `visage bench composites`.
+#[derive(Args, Debug, Clone)]
+pub struct CompositesBenchArgs {
+    /// Folder of recipes to measure (one composite per `.toml`).
+    #[arg(long, default_value = "recipes/bench", value_name = "DIR")]
+    recipes: PathBuf,
+    /// Image size of the captures (training and ground truth).
+    #[arg(long, value_parser = parse_size, default_value = "128x128", value_name = "WxH")]
+    size: (u32, u32),
+    /// Cameras of the rig.
+    #[arg(long, default_value_t = 8)]
+    cameras: usize,
+    /// Timesteps of the motion captured.
+    #[arg(long, default_value_t = 4)]
+    frames: usize,
+    /// Training iterations per source.
+    #[arg(long, default_value_t = 1500)]
+    iterations: usize,
+    /// Where trained sources are kept between runs (one folder per capture
+    /// and training setting).
+    #[arg(long, default_value = "target/composite-sources", value_name = "DIR")]
+    cache: PathBuf,
+    /// Rasteriser the sources train with.
+    #[arg(long, value_parser = Backend::parse, default_value = "auto")]
+    renderer: Backend,
+    /// Border band width in pixels.
+    #[arg(long, default_value_t = 3)]
+    border_px: u32,
+    /// Print one JSON document.
+    #[arg(long)]
+    json: bool,
+}
+
+/// One trained source.
+#[derive(Clone, Debug, Serialize)]
+struct SourceRow {
+    name: String,
+    /// Seconds its training took (0 when it came from the cache).
+    train_s: f64,
+    cached: bool,
+}
+
+/// One recipe's figures.
+#[derive(Clone, Debug, Serialize)]
+struct RecipeRow {
+    recipe: String,
+    tone: Tone,
+    seams: Seams,
+    report: CompositeReport,
+    /// Seconds the ground truth took to capture.
+    truth_s: f64,
+}
+
+/// The means over the recipes.
+#[derive(Clone, Debug, Default, Serialize)]
+struct Means {
+    psnr_db: f64,
+    ceiling_psnr_db: f64,
+    border_psnr_db: f64,
+    interior_psnr_db: f64,
+    leak_percent: f64,
+    skin_delta_e: f64,
+    non_skin_delta_e: f64,
+}
+
+/// The whole bench.
+#[derive(Clone, Debug, Serialize)]
+struct CompositesBench {
+    bench: &'static str,
+    size: [u32; 2],
+    cameras: usize,
+    frames: usize,
+    iterations: usize,
+    sources: Vec<SourceRow>,
+    recipes: Vec<RecipeRow>,
+    mean: Means,
+}
+
+/// The ground truth a recipe is measured against: colour-corrected
+/// composites against the base's skin tone, smoothed ones against smooth seams.
+fn target_of(recipe: &Recipe) -> (Tone, Seams) {
+    let tone = if recipe.post.colour == ColourCorrection::Off {
+        Tone::Source
+    } else {
+        Tone::Base
+    };
+    let seams = if recipe.post.smoothing == Smoothing::Off {
+        Seams::Hard
+    } else {
+        Seams::Smooth
+    };
+    (tone, seams)
+}
+
+fn capture_options(args: &CompositesBenchArgs, source: &str) -> CaptureOptions {
+    CaptureOptions {
+        source: source.to_string(),
+        size: [args.size.0, args.size.1],
+        cameras: args.cameras,
+        frames: args.frames,
+        motion: "talk".into(),
+        ring: false,
+    }
+}
+
+fn scratch(tag: &str) -> PathBuf {
+    std::env::temp_dir().join(format!(
+        "visage-bench-composites-{}-{tag}",
+        std::process::id()
+    ))
+}
+
+/// Trains `name` into the cache unless a finished one is there; a source
+/// appears by rename, so a kill leaves nothing half written.
+fn trained_source(
+    args: &CompositesBenchArgs,
+    builtin: &Database,
+    name: &str,
+    dir: &Path,
+) -> Result<SourceRow> {
+    let done = dir.join(name);
+    if done.join("point_cloud.ply").is_file() && done.join("flame_param.npz").is_file() {
+        return Ok(SourceRow {
+            name: name.to_string(),
+            train_s: 0.0,
+            cached: true,
+        });
+    }
+    let start = Instant::now();
+    let data = scratch(name);
+    std::fs::remove_dir_all(&data).ok();
+    capture(builtin, &capture_options(args, name), &data, &|_, _| {})?;
+    let dataset = Dataset::load(&data)?;
+    let mut trainer = Trainer::new(
+        &dataset,
+        crate::model::builtin::build_head(),
+        TrainOptions {
+            iterations: args.iterations,
+            seed: 1,
+            size: None,
+            background: [0.0; 3],
+            renderer: args.renderer,
+            holes: Default::default(),
+        },
+    )?;
+    eprintln!("visage: training {name} ({} iterations)…", args.iterations);
+    while trainer.iteration() < trainer.iterations() {
+        trainer.step()?;
+    }
+    let partial = dir.join(format!("{name}.partial"));
+    std::fs::remove_dir_all(&partial).ok();
+    trainer.export(&partial)?;
+    std::fs::rename(&partial, &done)
+        .map_err(|e| Error::input(format!("cannot move {} into place: {e}", partial.display())))?;
+    std::fs::remove_dir_all(&data).ok();
+    Ok(SourceRow {
+        name: name.to_string(),
+        train_s: start.elapsed().as_secs_f64(),
+        cached: false,
+    })
+}
+
+/// Runs `visage bench composites`.
+pub fn run(args: &CompositesBenchArgs) -> Result<()> {
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(&args.recipes)
+        .map_err(|e| Error::input(format!("cannot read {}: {e}", args.recipes.display())))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    paths.sort();
+    if paths.is_empty() {
+        return Err(Error::input(format!(
+            "{} holds no recipes",
+            args.recipes.display()
+        )));
+    }
+    let recipes: Vec<(String, Recipe)> = paths
+        .iter()
+        .map(|p| {
+            let name = p
+                .file_stem()
+                .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+            Ok((name, Recipe::load(p)?))
+        })
+        .collect::<Result<_>>()?;
+    let (builtin, _) = DatabaseSpec {
+        gaussians_per_avatar: 1,
+        ..DatabaseSpec::default()
+    }
+    .load()?;
+    let mut names: Vec<String> = recipes.iter().flat_map(|(_, r)| r.source_names()).collect();
+    names.sort();
+    names.dedup();
+    let cache = args.cache.join(format!(
+        "{}x{}-c{}-f{}-i{}",
+        args.size.0, args.size.1, args.cameras, args.frames, args.iterations
+    ));
+    std::fs::create_dir_all(&cache)
+        .map_err(|e| Error::input(format!("cannot create {}: {e}", cache.display())))?;
+    let sources = names
+        .iter()
+        .map(|n| trained_source(args, &builtin, n, &cache))
+        .collect::<Result<Vec<_>>>()?;
+    // The cache holds every source trained at this setting; the evaluation
+    // reads it as a folder database.
+    let (trained, _) = DatabaseSpec {
+        db: cache.display().to_string(),
+        ..DatabaseSpec::default()
+    }
+    .load()?;
+    let options = EvalOptions {
+        border_px: args.border_px,
+        picture_views: 0,
+    };
+    let mut rows = Vec::new();
+    for (name, recipe) in &recipes {
+        let (tone, seams) = target_of(recipe);
+        let start = Instant::now();
+        let truth = scratch(&format!("truth-{name}"));
+        std::fs::remove_dir_all(&truth).ok();
+        let sitter = Sitter::composite(&builtin, recipe, tone, seams)?;
+        capture_sitter(
+            &builtin,
+            &capture_options(args, &recipe.base),
+            &sitter,
+            &truth,
+            &|_, _| {},
+        )?;
+        let truth_s = start.elapsed().as_secs_f64();
+        eprintln!("visage: evaluating {name}…");
+        let (report, _) = evaluate_composite(&trained, recipe, &Dataset::load(&truth)?, &options)?;
+        std::fs::remove_dir_all(&truth).ok();
+        rows.push(RecipeRow {
+            recipe: name.clone(),
+            tone,
+            seams,
+            report,
+            truth_s,
+        });
+    }
+    let n = rows.len() as f64;
+    let mean_of =
+        |f: &dyn Fn(&CompositeReport) -> f64| rows.iter().map(|r| f(&r.report)).sum::<f64>() / n;
+    let bench = CompositesBench {
+        bench: "composites",
+        size: [args.size.0, args.size.1],
+        cameras: args.cameras,
+        frames: args.frames,
+        iterations: args.iterations,
+        mean: Means {
+            psnr_db: mean_of(&|r| r.quality.psnr_db),
+            ceiling_psnr_db: mean_of(&|r| r.ceiling.psnr_db),
+            border_psnr_db: mean_of(&|r| r.border.psnr_db),
+            interior_psnr_db: mean_of(&|r| r.interior.psnr_db),
+            leak_percent: mean_of(&|r| 100.0 * r.leak.mean),
+            skin_delta_e: mean_of(&|r| r.skin.delta_e),
+            non_skin_delta_e: mean_of(&|r| r.non_skin.delta_e),
+        },
+        sources,
+        recipes: rows,
+    };
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string(&bench).expect("reports serialise")
+        );
+    } else {
+        print_table(&bench);
+    }
+    Ok(())
+}
+
+fn print_table(b: &CompositesBench) {
+    println!(
+        "composites against their ground truth: {}x{}, {} cameras, {} timesteps, sources trained {} iterations",
+        b.size[0], b.size[1], b.cameras, b.frames, b.iterations
+    );
+    for s in &b.sources {
+        if !s.cached {
+            println!("  trained {} in {:.0} s", s.name, s.train_s);
+        }
+    }
+    println!(
+        "{:<22} {:>7} {:>8} {:>7} {:>9} {:>6} {:>8} {:>8} {:>7}",
+        "recipe", "PSNR", "ceiling", "border", "interior", "leak%", "ΔE skin", "ΔE other", "eval s"
+    );
+    let line =
+        |name: &str, q: &Quality, c: f64, b: f64, i: f64, l: f64, s: f64, o: f64, t: String| {
+            println!(
+                "{name:<22} {:>7.2} {c:>8.2} {b:>7.2} {i:>9.2} {l:>6.2} {s:>8.2} {o:>8.2} {t:>7}",
+                q.psnr_db
+            )
+        };
+    for r in &b.recipes {
+        let p = &r.report;
+        line(
+            &r.recipe,
+            &p.quality,
+            p.ceiling.psnr_db,
+            p.border.psnr_db,
+            p.interior.psnr_db,
+            100.0 * p.leak.mean,
+            p.skin.delta_e,
+            p.non_skin.delta_e,
+            format!("{:.1}", p.eval_ms / 1e3),
+        );
+    }
+    let m = &b.mean;
+    line(
+        "mean",
+        &Quality {
+            psnr_db: m.psnr_db,
+            ..Quality::default()
+        },
+        m.ceiling_psnr_db,
+        m.border_psnr_db,
+        m.interior_psnr_db,
+        m.leak_percent,
+        m.skin_delta_e,
+        m.non_skin_delta_e,
+        String::new(),
+    );
+}
