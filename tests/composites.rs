@@ -119,6 +119,10 @@ fn an_unedited_recipe_is_its_source_in_capture_and_evaluation() {
     );
     assert!(psnr > 20.0, "{psnr}");
     assert_eq!(report["border"]["pixels"], 0, "one source: no border band");
+    assert!(
+        report["border"]["psnr_db"].is_null(),
+        "and no figure for it"
+    );
     assert!(report["leak"]["mean"].as_f64().unwrap() < 1e-9);
     assert_eq!(report["views"], 6);
 }
@@ -308,5 +312,73 @@ fn bad_input_is_one_line_and_exit_2() {
             out.to_str().unwrap(),
         ],
         "--recipe",
+    );
+}
+
+/// `bench composites` end to end at a toy size: sources captured, trained
+/// and cached, every recipe's ground truth captured and evaluated; a second
+/// run takes the sources from the cache.
+#[test]
+fn bench_composites_trains_once_and_reports_every_recipe() {
+    let recipes = temp("bench-recipes");
+    std::fs::create_dir_all(&recipes).unwrap();
+    std::fs::write(
+        recipes.join("nose.toml"),
+        "base = \"ada\"\n[groups.nose]\ngaussians = \"bram\"\n[post]\nsmoothing = \"thesis\"\ncolour = \"thesis\"\n",
+    )
+    .unwrap();
+    std::fs::write(recipes.join("plain.toml"), "base = \"bram\"\n").unwrap();
+    let cache = temp("bench-cache");
+    std::fs::remove_dir_all(&cache).ok();
+    let run = || -> serde_json::Value {
+        let o = visage(&[
+            "bench",
+            "composites",
+            "--recipes",
+            recipes.to_str().unwrap(),
+            "--size",
+            "24x24",
+            "--cameras",
+            "3",
+            "--frames",
+            "2",
+            "--iterations",
+            "20",
+            "--renderer",
+            "cpu",
+            "--cache",
+            cache.to_str().unwrap(),
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let first = run();
+    let rows = first["recipes"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    assert_eq!(rows[0]["recipe"], "nose");
+    assert_eq!(
+        (rows[0]["tone"].as_str(), rows[0]["seams"].as_str()),
+        (Some("base"), Some("smooth"))
+    );
+    assert_eq!(
+        (rows[1]["tone"].as_str(), rows[1]["seams"].as_str()),
+        (Some("source"), Some("hard"))
+    );
+    assert!(first["mean"]["psnr_db"].as_f64().unwrap() > 5.0);
+    assert!(first["sources"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|s| s["cached"] == false));
+    let second = run();
+    assert!(second["sources"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|s| s["cached"] == true));
+    assert_eq!(
+        first["recipes"][0]["report"]["quality"],
+        second["recipes"][0]["report"]["quality"]
     );
 }

@@ -306,8 +306,17 @@ fn print_table(b: &CompositesBench) {
         }
     }
     println!(
-        "{:<22} {:>7} {:>8} {:>7} {:>9} {:>6} {:>8} {:>8} {:>7}",
-        "recipe", "PSNR", "ceiling", "border", "interior", "leak%", "ΔE skin", "ΔE other", "eval s"
+        "{:<22} {:>7} {:>8} {:>7} {:>9} {:>6} {:>8} {:>8} {:>7} {:>7}",
+        "recipe",
+        "PSNR",
+        "ceiling",
+        "border",
+        "interior",
+        "leak%",
+        "ΔE skin",
+        "ΔE other",
+        "truth s",
+        "eval s"
     );
     let line =
         |name: &str, q: &Quality, c: f64, b: f64, i: f64, l: f64, s: f64, o: f64, t: String| {
@@ -327,7 +336,7 @@ fn print_table(b: &CompositesBench) {
             100.0 * p.leak.mean,
             p.skin.delta_e,
             p.non_skin.delta_e,
-            format!("{:.1}", p.eval_ms / 1e3),
+            format!("{:>7.1} {:>7.1}", r.truth_s, p.eval_ms / 1e3),
         );
     }
     let m = &b.mean;

@@ -59,6 +59,9 @@ pub fn run(args: &EvalArgs) -> Result<()> {
 }
 
 fn row(name: &str, q: &Quality) -> String {
+    if q.pixels == 0 {
+        return format!("  {name:<16}       -     (no pixels)");
+    }
     format!(
         "  {name:<16} {:>7.2} dB  SSIM {:.4}  ΔE {:>5.2}  ({} px)",
         q.psnr_db, q.ssim, q.delta_e, q.pixels

@@ -44,7 +44,8 @@ pub struct EvalOptions {
     pub picture_views: usize,
 }
 
-/// Image quality over a set of pixels.
+/// Image quality over a set of pixels (every figure NaN — `null` in JSON —
+/// over no pixels, e.g. the border band of a single-source composite).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct Quality {
     /// PSNR in dB over the pixels (100 at most).
@@ -82,7 +83,15 @@ impl Sums {
     }
 
     fn quality(&self) -> Quality {
-        let n = self.pixels.max(1) as f64;
+        if self.pixels == 0 {
+            return Quality {
+                psnr_db: f64::NAN,
+                ssim: f64::NAN,
+                delta_e: f64::NAN,
+                pixels: 0,
+            };
+        }
+        let n = self.pixels as f64;
         let mse = self.squared / (3.0 * n);
         Quality {
             psnr_db: if mse > 0.0 {
@@ -774,6 +783,9 @@ mod tests {
         let q = s.quality();
         assert!((q.psnr_db - 20.0).abs() < 1e-9);
         assert!((q.ssim - 0.8).abs() < 1e-12 && (q.delta_e - 3.0).abs() < 1e-12);
-        assert_eq!(Sums::default().quality().psnr_db, 100.0);
+        assert!(
+            Sums::default().quality().psnr_db.is_nan(),
+            "no pixels: no figure"
+        );
     }
 }
