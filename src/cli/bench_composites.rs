@@ -18,7 +18,7 @@ use crate::error::{Error, Result};
 use crate::pipeline::DatabaseSpec;
 use crate::render::Backend;
 use crate::train::capture::{capture, capture_sitter, CaptureOptions};
-use crate::train::composite_eval::{evaluate_composite, CompositeReport, EvalOptions, Quality};
+use crate::train::composite_eval::{evaluate_composite, CompositeReport, EvalOptions};
 use crate::train::dataset::Dataset;
 use crate::train::sitter::{Seams, Sitter, Tone};
 use crate::train::trainer::{TrainOptions, Trainer};
@@ -263,9 +263,16 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
             truth_s,
         });
     }
-    let n = rows.len() as f64;
-    let mean_of =
-        |f: &dyn Fn(&CompositeReport) -> f64| rows.iter().map(|r| f(&r.report)).sum::<f64>() / n;
+    // Means over the recipes that have the figure (a single-source composite
+    // has no border band).
+    let mean_of = |f: &dyn Fn(&CompositeReport) -> f64| {
+        let values: Vec<f64> = rows
+            .iter()
+            .map(|r| f(&r.report))
+            .filter(|v| v.is_finite())
+            .collect();
+        values.iter().sum::<f64>() / values.len().max(1) as f64
+    };
     let bench = CompositesBench {
         bench: "composites",
         size: [args.size.0, args.size.1],
@@ -318,40 +325,49 @@ fn print_table(b: &CompositesBench) {
         "truth s",
         "eval s"
     );
-    let line =
-        |name: &str, q: &Quality, c: f64, b: f64, i: f64, l: f64, s: f64, o: f64, t: String| {
-            println!(
-                "{name:<22} {:>7.2} {c:>8.2} {b:>7.2} {i:>9.2} {l:>6.2} {s:>8.2} {o:>8.2} {t:>7}",
-                q.psnr_db
-            )
-        };
+    let row = |name: &str, figures: [f64; 7], times: String| {
+        let widths = [7, 8, 7, 9, 6, 8, 8];
+        let cells: Vec<String> = figures
+            .iter()
+            .zip(widths)
+            .map(|(x, w)| {
+                if x.is_finite() {
+                    format!("{x:>w$.2}")
+                } else {
+                    format!("{:>w$}", "-")
+                }
+            })
+            .collect();
+        println!("{name:<22} {} {times}", cells.join(" "));
+    };
     for r in &b.recipes {
         let p = &r.report;
-        line(
+        row(
             &r.recipe,
-            &p.quality,
-            p.ceiling.psnr_db,
-            p.border.psnr_db,
-            p.interior.psnr_db,
-            100.0 * p.leak.mean,
-            p.skin.delta_e,
-            p.non_skin.delta_e,
+            [
+                p.quality.psnr_db,
+                p.ceiling.psnr_db,
+                p.border.psnr_db,
+                p.interior.psnr_db,
+                100.0 * p.leak.mean,
+                p.skin.delta_e,
+                p.non_skin.delta_e,
+            ],
             format!("{:>7.1} {:>7.1}", r.truth_s, p.eval_ms / 1e3),
         );
     }
     let m = &b.mean;
-    line(
+    row(
         "mean",
-        &Quality {
-            psnr_db: m.psnr_db,
-            ..Quality::default()
-        },
-        m.ceiling_psnr_db,
-        m.border_psnr_db,
-        m.interior_psnr_db,
-        m.leak_percent,
-        m.skin_delta_e,
-        m.non_skin_delta_e,
+        [
+            m.psnr_db,
+            m.ceiling_psnr_db,
+            m.border_psnr_db,
+            m.interior_psnr_db,
+            m.leak_percent,
+            m.skin_delta_e,
+            m.non_skin_delta_e,
+        ],
         String::new(),
     );
 }
