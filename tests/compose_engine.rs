@@ -264,6 +264,9 @@ fn selection_follows_the_assignment_and_updates_only_what_changed() {
     let n = names(e);
     let mut r = Recipe::unedited(&n[0]);
     r.groups.insert("eyes".into(), edit(&n[2], &[]));
+    // By parent triangle, so the region of each selected Gaussian is its
+    // binding's (membership by place has its own test).
+    r.post.membership = visage::compose::recipe::Membership::Parent;
     let resolved = resolve(e, &r);
     let mut c = e.compose(&resolved);
     let model = &e.database().model;
@@ -581,4 +584,99 @@ fn the_full_composite_has_no_nan_and_is_reproducible() {
         state_hash(e.database(), &resolved),
         state_hash(e.database(), &other)
     );
+}
+
+/// Moves Gaussian `i` of `set` so its centre sits at `world` on the mesh
+/// `vertices` (keeping its parent triangle): a trained child that drifted.
+fn drift_to(
+    set: &mut visage::avatar::gaussians::GaussianSet,
+    i: usize,
+    vertices: &[Vec3],
+    triangles: &[[u32; 3]],
+    world: Vec3,
+) {
+    let frames = visage::avatar::binding::triangle_frames(vertices, triangles);
+    let f = frames[set.binding[i] as usize];
+    set.position[i] = f.rotation.transpose() * (world - f.center) / f.scale;
+}
+
+#[test]
+fn membership_by_place_counts_a_drifted_gaussian_where_it_sits_and_keeps_borders() {
+    use visage::compose::membership::place_triangles;
+    use visage::compose::recipe::Membership;
+    let mut db = small_db();
+    let model = db.model.clone();
+    let neutral = db.sources[0].neutral(&model);
+    let centroid = |t: usize| {
+        let [a, b, c] = model.triangles[t].map(|v| neutral[v as usize]);
+        (a + b + c) / 3.0
+    };
+    let regions = &model.triangle_regions;
+    let set = &mut db.sources[0].gaussians;
+    let on_nose: Vec<usize> = (0..set.len())
+        .filter(|&i| regions[set.binding[i] as usize] == Region::Nose)
+        .collect();
+    // A cheek triangle well away from the nose.
+    let nose_tip = centroid(set.binding[on_nose[0]] as usize);
+    let cheek = (0..model.triangles.len())
+        .filter(|&t| regions[t] == Region::Skin)
+        .find(|&t| (centroid(t) - nose_tip).length() > 0.03 && centroid(t).z > 0.0)
+        .unwrap();
+    let drifted = on_nose[0];
+    drift_to(set, drifted, &neutral, &model.triangles, centroid(cheek));
+    // Exactly on an edge the nose shares with the face: stays with its parent.
+    let (border, shared) = (0..model.triangles.len())
+        .filter(|&t| regions[t] == Region::Nose)
+        .find_map(|t| {
+            let tri = model.triangles[t];
+            (0..model.triangles.len())
+                .filter(|&u| regions[u] == Region::Skin)
+                .find_map(|u| {
+                    let common: Vec<u32> = tri
+                        .iter()
+                        .copied()
+                        .filter(|v| model.triangles[u].contains(v))
+                        .collect();
+                    (common.len() == 2).then_some((t, common))
+                })
+        })
+        .unwrap();
+    let on_border = on_nose[1];
+    set.binding[on_border] = border as u32;
+    let midpoint = 0.5 * (neutral[shared[0] as usize] + neutral[shared[1] as usize]);
+    drift_to(set, on_border, &neutral, &model.triangles, midpoint);
+
+    let placed = place_triangles(&model, set, &neutral);
+    assert_eq!(
+        regions[placed[drifted] as usize],
+        Region::Skin,
+        "the drifted one counts where it sits"
+    );
+    assert_eq!(
+        placed[on_border], border as u32,
+        "a Gaussian on the border keeps its parent"
+    );
+    let moved = (0..set.len())
+        .filter(|&i| placed[i] != set.binding[i])
+        .count();
+    assert!(
+        moved < set.len() / 100,
+        "built-in Gaussians sit on their triangles: {moved} moved"
+    );
+
+    // Composed: face from source 0 on base 1. By parent the drifted Gaussian
+    // is left out (its nose comes from the base); by place it is taken.
+    let marker = set.position[drifted];
+    let e = Engine::new(db).unwrap();
+    let n = names(&e);
+    let mut r = Recipe::unedited(&n[1]);
+    r.groups.insert("face".into(), edit(&n[0], &[]));
+    let has_marker = |membership: Membership| {
+        let mut r = r.clone();
+        r.post.membership = membership;
+        let c = e.compose(&resolve(&e, &r));
+        c.gaussians.position.contains(&marker)
+    };
+    assert!(has_marker(Membership::Place));
+    assert!(!has_marker(Membership::Parent));
 }

@@ -13,7 +13,7 @@ use serde::Serialize;
 
 use super::render::parse_size;
 use crate::avatar::database::Database;
-use crate::compose::recipe::{ColourCorrection, Recipe, Smoothing};
+use crate::compose::recipe::{ColourCorrection, PostProcess, Recipe, Smoothing};
 use crate::error::{Error, Result};
 use crate::pipeline::DatabaseSpec;
 use crate::render::Backend;
@@ -51,9 +51,26 @@ pub struct CompositesBenchArgs {
     /// Border band width in pixels.
     #[arg(long, default_value_t = 3)]
     border_px: u32,
+    /// Whose post-processing the composites get: as each recipe says, the
+    /// thesis's (membership by parent triangle, thesis smoothing and colour),
+    /// or ours (the best measured: by place, thesis smoothing, semantic colour).
+    #[arg(long, value_enum, default_value = "recipe")]
+    pipeline: Pipeline,
     /// Print one JSON document.
     #[arg(long)]
     json: bool,
+}
+
+/// Whose post-processing the bench's composites get.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "snake_case")]
+enum Pipeline {
+    /// As each recipe says.
+    Recipe,
+    /// The thesis's: [`PostProcess::THESIS`].
+    Thesis,
+    /// Ours: [`PostProcess::BEST`].
+    Ours,
 }
 
 /// One trained source.
@@ -96,6 +113,7 @@ struct CompositesBench {
     cameras: usize,
     frames: usize,
     iterations: usize,
+    pipeline: Pipeline,
     sources: Vec<SourceRow>,
     recipes: Vec<RecipeRow>,
     mean: Means,
@@ -205,7 +223,13 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
             let name = p
                 .file_stem()
                 .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
-            Ok((name, Recipe::load(p)?))
+            let mut recipe = Recipe::load(p)?;
+            match args.pipeline {
+                Pipeline::Recipe => {}
+                Pipeline::Thesis => recipe.post = PostProcess::THESIS,
+                Pipeline::Ours => recipe.post = PostProcess::BEST,
+            }
+            Ok((name, recipe))
         })
         .collect::<Result<_>>()?;
     let (builtin, _) = DatabaseSpec {
@@ -279,6 +303,7 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
         cameras: args.cameras,
         frames: args.frames,
         iterations: args.iterations,
+        pipeline: args.pipeline,
         mean: Means {
             psnr_db: mean_of(&|r| r.quality.psnr_db),
             ceiling_psnr_db: mean_of(&|r| r.ceiling.psnr_db),
@@ -304,8 +329,8 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
 
 fn print_table(b: &CompositesBench) {
     println!(
-        "composites against their ground truth: {}x{}, {} cameras, {} timesteps, sources trained {} iterations",
-        b.size[0], b.size[1], b.cameras, b.frames, b.iterations
+        "composites against their ground truth: {}x{}, {} cameras, {} timesteps, sources trained {} iterations, {:?} post-processing",
+        b.size[0], b.size[1], b.cameras, b.frames, b.iterations, b.pipeline
     );
     for s in &b.sources {
         if !s.cached {

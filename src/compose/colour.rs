@@ -176,8 +176,76 @@ pub fn skin_stats(set: &GaussianSet, indices: &[u32]) -> Option<SkinStats> {
 pub fn skin_transfer_gain(dc: [f32; 3], from: &SkinStats, to: &SkinStats) -> Vec3 {
     let rgb = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
     let lab = srgb_to_lab(rgb);
-    let k = skin_likeness(lab, from);
-    if k <= 0.0 || !lab.is_finite() {
+    if !lab.is_finite() {
+        return Vec3::ONE;
+    }
+    transfer_gain(rgb, lab, skin_likeness(lab, from), from, to)
+}
+
+/// Regions that hold no skin at all: the semantic correction leaves them as
+/// captured whatever their colour.
+pub fn holds_no_skin(region: Region) -> bool {
+    matches!(
+        region,
+        Region::LeftEyeball
+            | Region::RightEyeball
+            | Region::TeethUpper
+            | Region::TeethLower
+            | Region::LipsInside
+            | Region::LeftEyeSocket
+            | Region::RightEyeSocket
+            | Region::Hair
+    )
+}
+
+/// Distance in CIELAB with lightness counted half: skin detail (freckles,
+/// shading) differs from skin mostly in lightness, lips, brows and beards in
+/// hue and chroma as well.
+fn skin_distance(lab: Vec3, mean: Vec3) -> f32 {
+    let d = lab - mean;
+    (0.25 * d.x * d.x + d.y * d.y + d.z * d.z).sqrt()
+}
+
+/// How surely a colour is skin for the semantic correction: 1 within 8 of
+/// the source's skin mean (lightness counted half), 0 beyond 14.
+pub fn strict_skin_likeness(lab: Vec3, stats: &SkinStats) -> f32 {
+    smoothstep(14.0, 8.0, skin_distance(lab, stats.mean))
+}
+
+/// The semantic correction's gain for a Gaussian of `region` with DC colour
+/// `dc`: the skin transfer from `from` to `to` where it is skin, nothing
+/// where it is not (see [`holds_no_skin`], [`strict_skin_likeness`]).
+pub fn semantic_skin_gain(dc: [f32; 3], region: Region, from: &SkinStats, to: &SkinStats) -> Vec3 {
+    if holds_no_skin(region) {
+        return Vec3::ONE;
+    }
+    let rgb = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
+    let lab = srgb_to_lab(rgb);
+    if !lab.is_finite() {
+        return Vec3::ONE;
+    }
+    let k = if mostly_skin(region) {
+        skin_likeness(lab, from)
+    } else {
+        strict_skin_likeness(lab, from)
+    };
+    transfer_gain(rgb, lab, k, from, to)
+}
+
+/// Regions that are skin but for small details (face, nose, ears, neck): the
+/// likeness of the skin mode decides there; elsewhere (lips, eye regions,
+/// the hairline, the collar) the strict one.
+fn mostly_skin(region: Region) -> bool {
+    matches!(
+        region,
+        Region::Skin | Region::Nose | Region::LeftEar | Region::RightEar | Region::Neck
+    )
+}
+
+/// The gain moving `rgb` (at `lab`) a share `k` of the way along the
+/// Reinhard mean-and-spread transfer from `from` to `to`.
+fn transfer_gain(rgb: Vec3, lab: Vec3, k: f32, from: &SkinStats, to: &SkinStats) -> Vec3 {
+    if k <= 0.0 {
         return Vec3::ONE;
     }
     let ratio =
@@ -266,5 +334,88 @@ mod tests {
         );
         let hair = [rgb_to_dc(0.05), rgb_to_dc(0.04), rgb_to_dc(0.03)];
         assert_eq!(skin_transfer_gain(hair, &from, &to), Vec3::ONE);
+    }
+
+    fn stats(rgb: Vec3) -> SkinStats {
+        SkinStats {
+            mean: srgb_to_lab(rgb),
+            spread: Vec3::splat(3.0),
+        }
+    }
+
+    fn dc(rgb: Vec3) -> [f32; 3] {
+        [rgb_to_dc(rgb.x), rgb_to_dc(rgb.y), rgb_to_dc(rgb.z)]
+    }
+
+    fn corrected(rgb: Vec3, gain: Vec3) -> Vec3 {
+        let mut sh = dc(rgb).to_vec();
+        apply_gain(&mut sh, gain);
+        Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]))
+    }
+
+    #[test]
+    fn semantic_correction_moves_skin_and_keeps_what_is_not_skin() {
+        // Light skin onto dark skin and back: both ways the skin arrives.
+        let light = Vec3::new(0.9, 0.75, 0.65);
+        let dark = Vec3::new(0.45, 0.3, 0.2);
+        for (from, to) in [(light, dark), (dark, light)] {
+            let gain = semantic_skin_gain(dc(from), Region::Skin, &stats(from), &stats(to));
+            let got = srgb_to_lab(corrected(from, gain));
+            let want = srgb_to_lab(to);
+            assert!((got - want).length() < 2.0, "{from} -> {got}, want {want}");
+        }
+        // Regions that hold no skin keep their colour even when it is skin-like.
+        for region in [
+            Region::Hair,
+            Region::LeftEyeball,
+            Region::TeethUpper,
+            Region::LipsInside,
+        ] {
+            let gain = semantic_skin_gain(dc(light), region, &stats(light), &stats(dark));
+            assert_eq!(gain, Vec3::ONE, "{region:?}");
+        }
+        // Pink lips and a dark brow in mixed regions stay as they are, while the
+        // lenient skin mode half-corrects the lips.
+        let lips = Vec3::new(0.82, 0.55, 0.5);
+        let from = stats(light);
+        let to = stats(dark);
+        assert_eq!(
+            semantic_skin_gain(dc(lips), Region::Lips, &from, &to),
+            Vec3::ONE
+        );
+        assert_ne!(skin_transfer_gain(dc(lips), &from, &to), Vec3::ONE);
+        let brow = Vec3::new(0.2, 0.14, 0.1);
+        let gain = semantic_skin_gain(dc(brow), Region::LeftEyeRegion, &from, &to);
+        assert_eq!(gain, Vec3::ONE);
+    }
+
+    #[test]
+    fn semantic_correction_is_bounded_for_black_white_and_broken_colours() {
+        let black = stats(Vec3::splat(0.0));
+        let white = stats(Vec3::splat(1.0));
+        let skin = stats(Vec3::new(0.8, 0.6, 0.5));
+        for (from, to) in [
+            (&black, &white),
+            (&white, &black),
+            (&skin, &black),
+            (&black, &skin),
+        ] {
+            for rgb in [
+                Vec3::ZERO,
+                Vec3::ONE,
+                Vec3::new(0.8, 0.6, 0.5),
+                Vec3::splat(1e-6),
+            ] {
+                for region in [Region::Skin, Region::Lips, Region::Nose] {
+                    let g = semantic_skin_gain(dc(rgb), region, from, to);
+                    assert!(g.is_finite(), "{rgb} {region:?}: {g}");
+                    assert!(g.min_element() >= GAIN_RANGE.0 && g.max_element() <= GAIN_RANGE.1);
+                }
+            }
+        }
+        let g = semantic_skin_gain([f32::NAN, 0.0, 0.0], Region::Skin, &skin, &black);
+        assert_eq!(g, Vec3::ONE);
+        let g = semantic_skin_gain([f32::INFINITY; 3], Region::Skin, &skin, &black);
+        assert!(g.is_finite());
     }
 }

@@ -9,10 +9,10 @@ use rayon::prelude::*;
 
 use super::blend::{Blender, SparseRhs};
 use super::colour::{
-    apply_gain, skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats,
-    SKIN_REFERENCE_REGIONS,
+    apply_gain, semantic_skin_gain, skin_stats, skin_transfer_gain, thesis_gain,
+    weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
 };
-use super::recipe::{AnimationMode, ColourCorrection, ResolvedRecipe, Smoothing};
+use super::recipe::{AnimationMode, ColourCorrection, Membership, ResolvedRecipe, Smoothing};
 use super::selection::SelectionTables;
 use super::smoothing::{own_share, split_opacity, BorderTables};
 use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
@@ -33,13 +33,17 @@ pub struct Engine {
     /// `[source][region]` → Mᵀd contribution of that region's edges with weight 1.
     region_rhs: Vec<Vec<SparseRhs>>,
     /// `[source][region]` → thesis-weighted mean colour.
-    mean_colour: Vec<Vec<Option<Vec3>>>,
+    mean_colour: [Vec<Vec<Option<Vec3>>>; 2],
     /// Skin statistics per source.
     skin: Vec<Option<SkinStats>>,
     /// Per-Gaussian skin-transfer gains by (source, colour reference), computed on
     /// first use: the CIELAB transfer costs ~100 ns a Gaussian, applying a gain ~5.
-    skin_gains: Mutex<HashMap<(usize, usize), SharedGains>>,
+    skin_gains: Mutex<HashMap<GainKey, SharedGains>>,
 }
+
+/// What a set of skin-transfer gains depends on: the source, the colour
+/// reference and, for the semantic transfer, the membership its regions follow.
+type GainKey = (usize, usize, Option<Membership>);
 
 /// Per-Gaussian colour gains shared between composites.
 type SharedGains = Arc<Vec<Vec3>>;
@@ -101,13 +105,13 @@ impl Engine {
     /// Precomputes the tables of a database and factors its blend system.
     pub fn new(db: Database) -> Result<Self> {
         let blender = Blender::new(&db.model)?;
-        let tables = SelectionTables::new(&db);
         let borders = BorderTables::new(&db.model);
         let neutrals: Vec<Vec<Vec3>> = db
             .sources
             .par_iter()
             .map(|s| s.neutral(&db.model))
             .collect();
+        let tables = SelectionTables::new(&db, &neutrals);
         let region_rhs = neutrals
             .par_iter()
             .map(|n| {
@@ -117,21 +121,25 @@ impl Engine {
                     .collect()
             })
             .collect();
-        let mean_colour = (0..db.sources.len())
-            .into_par_iter()
-            .map(|f| {
-                Region::ALL
-                    .iter()
-                    .map(|&r| weighted_mean_colour(&db.sources[f].gaussians, tables.region(f, r)))
-                    .collect()
-            })
-            .collect();
+        let mean_colour = [Membership::Parent, Membership::Place].map(|m| {
+            (0..db.sources.len())
+                .into_par_iter()
+                .map(|f| {
+                    Region::ALL
+                        .iter()
+                        .map(|&r| {
+                            weighted_mean_colour(&db.sources[f].gaussians, tables.region(m, f, r))
+                        })
+                        .collect()
+                })
+                .collect()
+        });
         let skin = (0..db.sources.len())
             .into_par_iter()
             .map(|f| {
                 let indices: Vec<u32> = SKIN_REFERENCE_REGIONS
                     .iter()
-                    .flat_map(|&r| tables.region(f, r).iter().copied())
+                    .flat_map(|&r| tables.region(Membership::Parent, f, r).iter().copied())
                     .collect();
                 skin_stats(&db.sources[f].gaussians, &indices)
             })
@@ -330,21 +338,38 @@ impl Engine {
         recipe.gaussians[region.group().index()]
     }
 
-    /// Skin-transfer gains of every Gaussian of `source` towards `reference`.
-    fn skin_gains(&self, source: usize, reference: usize) -> Option<SharedGains> {
+    /// Skin-transfer gains of every Gaussian of `source` towards `reference`:
+    /// by colour likeness alone (`semantic` = None) or by the region each
+    /// Gaussian counts for under a membership as well (`Semantic`).
+    fn skin_gains(
+        &self,
+        source: usize,
+        reference: usize,
+        semantic: Option<Membership>,
+    ) -> Option<SharedGains> {
         let (from, to) = (self.skin[source]?, self.skin[reference]?);
         let mut cache = self.skin_gains.lock().unwrap_or_else(|e| e.into_inner());
-        let gains = cache.entry((source, reference)).or_insert_with(|| {
-            let set = &self.db.sources[source].gaussians;
-            let gains = (0..set.len())
-                .into_par_iter()
-                .map(|i| {
-                    let sh = set.sh_of(i);
-                    skin_transfer_gain([sh[0], sh[1], sh[2]], &from, &to)
-                })
-                .collect();
-            Arc::new(gains)
-        });
+        let gains = cache
+            .entry((source, reference, semantic))
+            .or_insert_with(|| {
+                let set = &self.db.sources[source].gaussians;
+                let regions = &self.db.model.triangle_regions;
+                let gains = (0..set.len())
+                    .into_par_iter()
+                    .map(|i| {
+                        let sh = set.sh_of(i);
+                        let dc = [sh[0], sh[1], sh[2]];
+                        match semantic {
+                            Some(m) => {
+                                let t = self.tables.counted_triangles(m, source)[i];
+                                semantic_skin_gain(dc, regions[t as usize], &from, &to)
+                            }
+                            None => skin_transfer_gain(dc, &from, &to),
+                        }
+                    })
+                    .collect();
+                Arc::new(gains)
+            });
         Some(gains.clone())
     }
 
@@ -356,17 +381,22 @@ impl Engine {
         match recipe.post.colour {
             ColourCorrection::Off => Correction::None,
             ColourCorrection::Thesis => {
-                let reference = self.mean_colour[recipe.base][region.index()];
-                let source = self.mean_colour[f][region.index()];
+                let means = &self.mean_colour[recipe.post.membership as usize];
+                let reference = means[recipe.base][region.index()];
+                let source = means[f][region.index()];
                 match (reference, source) {
                     (Some(r), Some(s)) => Correction::Gain(thesis_gain(r, s)),
                     _ => Correction::None,
                 }
             }
-            ColourCorrection::Skin => match self.skin_gains(f, recipe.base) {
-                Some(g) => Correction::PerGaussian(g),
-                None => Correction::None,
-            },
+            ColourCorrection::Skin | ColourCorrection::Semantic => {
+                let semantic = (recipe.post.colour == ColourCorrection::Semantic)
+                    .then_some(recipe.post.membership);
+                match self.skin_gains(f, recipe.base, semantic) {
+                    Some(g) => Correction::PerGaussian(g),
+                    None => Correction::None,
+                }
+            }
         }
     }
 
@@ -381,6 +411,7 @@ impl Engine {
             .max()
             .unwrap_or(0);
         let smoothing = recipe.post.smoothing;
+        let membership = recipe.post.membership;
         // Cross-fade: own Gaussians near a border keep only part of their opacity.
         let mut own_exponent = vec![1.0f32; self.db.model.triangle_count()];
         let differs =
@@ -397,7 +428,11 @@ impl Engine {
         }
         let own_count: usize = Region::ALL
             .iter()
-            .map(|&r| self.tables.region(Self::source_of(recipe, r), r).len())
+            .map(|&r| {
+                self.tables
+                    .region(membership, Self::source_of(recipe, r), r)
+                    .len()
+            })
             .sum();
         let set = &mut composite.gaussians;
         set.clear(degree);
@@ -411,9 +446,9 @@ impl Engine {
             let correction = self.correction(recipe, region, f);
             let start = set.len();
             let mut gain_sum = Vec3::ZERO;
-            let source = &self.db.sources[f].gaussians;
-            for &i in self.tables.region(f, region) {
-                let exponent = own_exponent[source.binding[i as usize] as usize];
+            let placed = self.tables.counted_triangles(membership, f);
+            for &i in self.tables.region(membership, f, region) {
+                let exponent = own_exponent[placed[i as usize] as usize];
                 gain_sum +=
                     self.push_corrected(set, f, i, &correction, OpacityEdit::Split(exponent));
             }
@@ -443,7 +478,7 @@ impl Engine {
                         Smoothing::Crossfade => OpacityEdit::Split(1.0 - own_share(ring)),
                         _ => continue,
                     };
-                    for &i in self.tables.triangle(f, t) {
+                    for &i in self.tables.triangle(membership, f, t) {
                         self.push_corrected(set, f, i, &correction, edit);
                     }
                 }

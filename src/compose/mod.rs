@@ -5,6 +5,7 @@ pub mod blend;
 pub mod colour;
 pub mod composition;
 pub mod engine;
+pub mod membership;
 pub mod random;
 pub mod recipe;
 pub mod rules;

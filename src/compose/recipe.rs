@@ -61,6 +61,24 @@ pub enum ColourCorrection {
     Thesis,
     /// Mean and spread transfer in CIELAB on skin-coloured Gaussians only.
     Skin,
+    /// The same transfer on skin only by what it is: never in regions that
+    /// hold no skin (eyeballs, teeth, the mouth's inside, eye sockets, hair),
+    /// and elsewhere only where a Gaussian's colour is close to its source's
+    /// own skin (lips, brows, lashes and beards keep theirs).
+    Semantic,
+}
+
+/// Which Gaussians of a source count for a region (docs/method.md §5.1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Membership {
+    /// Thesis ch. 5: a Gaussian belongs to the region of its parent triangle,
+    /// wherever training moved it.
+    Parent,
+    /// A Gaussian belongs to the region of the surface it sits on: its parent's
+    /// unless another region's triangle is clearly nearer to its centre.
+    #[default]
+    Place,
 }
 
 /// How the composite is animated.
@@ -87,13 +105,53 @@ pub struct GroupEdit {
 }
 
 /// Post-processing toggles.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PostProcess {
     /// Border smoothing.
     pub smoothing: Smoothing,
     /// Colour correction.
     pub colour: ColourCorrection,
+    /// Which Gaussians count for a region.
+    #[serde(skip_serializing_if = "is_default_membership")]
+    pub membership: Membership,
+}
+
+impl PostProcess {
+    /// The thesis's post-processing (§4.2.2) with its membership by parent
+    /// triangle: what `visage bench composites --pipeline thesis` measures.
+    pub const THESIS: PostProcess = PostProcess {
+        smoothing: Smoothing::Thesis,
+        colour: ColourCorrection::Thesis,
+        membership: Membership::Parent,
+    };
+    /// The post-processing that measured best against ground truth
+    /// (docs/method.md §13, README): `--pipeline ours` and the study's edited
+    /// category.
+    pub const BEST: PostProcess = PostProcess {
+        smoothing: Smoothing::Thesis,
+        colour: ColourCorrection::Semantic,
+        membership: Membership::Place,
+    };
+}
+
+fn is_default_membership(m: &Membership) -> bool {
+    *m == Membership::default()
+}
+
+/// Prints like a derived `Debug`, leaving `membership` out while it is the
+/// default: state hashes (which hash the recipe's `Debug` text) of recorded
+/// sessions stay what they were before the field existed.
+impl std::fmt::Debug for PostProcess {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut d = f.debug_struct("PostProcess");
+        d.field("smoothing", &self.smoothing)
+            .field("colour", &self.colour);
+        if self.membership != Membership::default() {
+            d.field("membership", &self.membership);
+        }
+        d.finish()
+    }
 }
 
 /// Manual adjustments added to the motion's frame (axis-angle radians and

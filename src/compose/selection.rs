@@ -1,7 +1,13 @@
 //! Lookup tables for selecting Gaussians (thesis ch. 5, docs/method.md §5): per source
-//! and region, the indices of the Gaussians bound to that region's triangles, and
-//! per source and triangle (for border smoothing). Built once per database.
+//! and region, the indices of the Gaussians counted for that region — by parent
+//! triangle (the thesis) or by place (§5.1) — and per source and triangle (for
+//! border smoothing). Built once per database.
 
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::membership::place_triangles;
+use super::recipe::Membership;
 use crate::avatar::database::Database;
 use crate::model::regions::Region;
 
@@ -40,60 +46,77 @@ impl Csr {
     }
 }
 
-/// Per-source lookup tables.
+/// Per-source lookup tables, for each way of counting a Gaussian for a region.
 #[derive(Clone, Debug)]
 pub struct SelectionTables {
-    /// `[source]` → rows by region of Gaussian indices.
-    by_region: Vec<Csr>,
-    /// `[source]` → rows by triangle of Gaussian indices.
-    by_triangle: Vec<Csr>,
+    /// `[membership][source]` → rows by region of Gaussian indices.
+    by_region: [Vec<Csr>; 2],
+    /// `[membership][source]` → rows by triangle of Gaussian indices.
+    by_triangle: [Vec<Csr>; 2],
+    /// `[membership][source][gaussian]` → the triangle it counts for.
+    counted: [Vec<Vec<u32>>; 2],
 }
 
 impl SelectionTables {
-    /// Indexes every source of the database.
-    pub fn new(db: &Database) -> Self {
+    /// Indexes every source of the database; `neutrals[s]` is source `s`'s
+    /// neutral mesh (where its Gaussians' places are found).
+    pub fn new(db: &Database, neutrals: &[Vec<Vec3>]) -> Self {
         let regions = &db.model.triangle_regions;
         let triangles = db.model.triangle_count();
-        let by_region = db
+        let parents: Vec<Vec<u32>> = db
             .sources
             .iter()
-            .map(|s| {
-                let pairs = s
-                    .gaussians
-                    .binding
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &b)| (regions[b as usize].index(), i as u32));
-                Csr::from_pairs(Region::COUNT, pairs)
-            })
+            .map(|s| s.gaussians.binding.clone())
             .collect();
-        let by_triangle = db
+        let places: Vec<Vec<u32>> = db
             .sources
-            .iter()
-            .map(|s| {
-                let pairs = s
-                    .gaussians
-                    .binding
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &b)| (b as usize, i as u32));
-                Csr::from_pairs(triangles, pairs)
-            })
+            .par_iter()
+            .zip(neutrals)
+            .map(|(s, neutral)| place_triangles(&db.model, &s.gaussians, neutral))
             .collect();
+        let tables = |of: &[Vec<u32>]| {
+            let by_region = (0..db.sources.len())
+                .map(|s| {
+                    let pairs = of[s]
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &t)| (regions[t as usize].index(), i as u32));
+                    Csr::from_pairs(Region::COUNT, pairs)
+                })
+                .collect();
+            let by_triangle = (0..db.sources.len())
+                .map(|s| {
+                    let pairs = of[s]
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &t)| (t as usize, i as u32));
+                    Csr::from_pairs(triangles, pairs)
+                })
+                .collect();
+            (by_region, by_triangle)
+        };
+        let (parent_region, parent_triangle) = tables(&parents);
+        let (place_region, place_triangle) = tables(&places);
         Self {
-            by_region,
-            by_triangle,
+            by_region: [parent_region, place_region],
+            by_triangle: [parent_triangle, place_triangle],
+            counted: [parents, places],
         }
     }
 
-    /// Gaussians of `source` bound to triangles of `region`.
-    pub fn region(&self, source: usize, region: Region) -> &[u32] {
-        self.by_region[source].row(region.index())
+    /// Gaussians of `source` counted for `region`.
+    pub fn region(&self, membership: Membership, source: usize, region: Region) -> &[u32] {
+        self.by_region[membership as usize][source].row(region.index())
     }
 
-    /// Gaussians of `source` bound to `triangle`.
-    pub fn triangle(&self, source: usize, triangle: u32) -> &[u32] {
-        self.by_triangle[source].row(triangle as usize)
+    /// The triangle each Gaussian of `source` counts for.
+    pub fn counted_triangles(&self, membership: Membership, source: usize) -> &[u32] {
+        &self.counted[membership as usize][source]
+    }
+
+    /// Gaussians of `source` counted for `triangle` (bound to it, or placed on it).
+    pub fn triangle(&self, membership: Membership, source: usize, triangle: u32) -> &[u32] {
+        self.by_triangle[membership as usize][source].row(triangle as usize)
     }
 }
 

@@ -12,7 +12,7 @@ use std::fmt;
 use std::iter::Peekable;
 use std::str::SplitWhitespace;
 
-use crate::compose::recipe::{AnimationMode, ColourCorrection, Smoothing};
+use crate::compose::recipe::{AnimationMode, ColourCorrection, Membership, Smoothing};
 use crate::model::regions::Group;
 use crate::scene::camera::CameraOverrides;
 
@@ -476,9 +476,17 @@ impl Named for ColourCorrection {
         (ColourCorrection::Off, "off"),
         (ColourCorrection::Thesis, "thesis"),
         (ColourCorrection::Skin, "skin"),
+        (ColourCorrection::Semantic, "semantic"),
     ];
     const LABEL: &'static str = "colour";
-    const WORDS: &'static [&'static str] = &["off", "thesis", "skin"];
+    const WORDS: &'static [&'static str] = &["off", "thesis", "skin", "semantic"];
+}
+
+impl Named for Membership {
+    const NAMES: &'static [(Self, &'static str)] =
+        &[(Membership::Parent, "parent"), (Membership::Place, "place")];
+    const LABEL: &'static str = "membership";
+    const WORDS: &'static [&'static str] = &["parent", "place"];
 }
 
 impl Named for AnimationMode {
@@ -698,7 +706,10 @@ commands! {
         => "smoothing", "[off|thesis|crossfade]", "set or cycle border smoothing", PostProcessing, edit;
     /// Set (or with `None`, cycle) colour correction.
     Colour(choice: Option<ColourCorrection> as Choice<ColourCorrection>)
-        => "colour" | "color", "[off|thesis|skin]", "set or cycle colour correction", PostProcessing, edit;
+        => "colour" | "color", "[off|thesis|skin|semantic]", "set or cycle colour correction", PostProcessing, edit;
+    /// Set (or with `None`, toggle) which Gaussians count for a region.
+    Membership(choice: Option<Membership> as Choice<Membership>)
+        => "membership", "[parent|place]", "count Gaussians for a region by parent triangle or by place", PostProcessing, edit;
     /// Drive the composite with a motion ("rest" for none).
     Motion(motion: String as MotionName) => "motion", "NAME|rest", "drive the composite with a motion", Animation, edit;
     /// Switch to the next motion.
@@ -852,6 +863,9 @@ mod tests {
             "smoothing crossfade",
             "colour skin",
             "colour",
+            "colour semantic",
+            "membership parent",
+            "membership",
             "motion talk",
             "next-motion",
             "play",

@@ -182,7 +182,8 @@ mod tests {
         assert_eq!(offered("select-source "), ["ada", "bram", "bruno"]);
         assert_eq!(offered("motion "), ["blink", "rest", "talk"]);
         assert_eq!(offered("smoothing c"), ["crossfade"]);
-        assert_eq!(offered("colour "), ["off", "skin", "thesis"]);
+        assert_eq!(offered("colour "), ["off", "semantic", "skin", "thesis"]);
+        assert_eq!(offered("membership p"), ["parent", "place"]);
         assert_eq!(offered("mode e"), ["exact"]);
         assert_eq!(offered("pose n"), ["neck"]);
         assert_eq!(offered("help set-s"), ["set-shape"]);

@@ -3,7 +3,9 @@
 
 use std::collections::BTreeMap;
 
-use crate::compose::recipe::{AnimationMode, ColourCorrection, GroupEdit, Recipe, Smoothing};
+use crate::compose::recipe::{
+    AnimationMode, ColourCorrection, GroupEdit, Membership, Recipe, Smoothing,
+};
 use crate::model::regions::Group;
 use crate::pipeline::workbench::DebugView;
 use crate::scene::camera::Orbit;
@@ -372,7 +374,7 @@ impl EditorState {
         Ok(Applied::default())
     }
 
-    /// Border smoothing and colour correction.
+    /// Border smoothing, colour correction and region membership.
     fn update_post(&mut self, command: &Command) -> Result<Applied, String> {
         let post = &mut self.recipe.post;
         match command {
@@ -387,7 +389,14 @@ impl EditorState {
                 post.colour = c.unwrap_or(match post.colour {
                     ColourCorrection::Off => ColourCorrection::Thesis,
                     ColourCorrection::Thesis => ColourCorrection::Skin,
-                    ColourCorrection::Skin => ColourCorrection::Off,
+                    ColourCorrection::Skin => ColourCorrection::Semantic,
+                    ColourCorrection::Semantic => ColourCorrection::Off,
+                })
+            }
+            Command::Membership(m) => {
+                post.membership = m.unwrap_or(match post.membership {
+                    Membership::Parent => Membership::Place,
+                    Membership::Place => Membership::Parent,
                 })
             }
             other => return Err(misrouted(other)),

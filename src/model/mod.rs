@@ -5,5 +5,6 @@ pub mod builtin;
 pub mod geometry;
 pub mod head;
 pub mod motion;
+pub mod nearest;
 pub mod regions;
 pub mod topology;

@@ -269,7 +269,9 @@ impl Painter {
 
     /// Draws the composer's posed composite with every group but `group`
     /// dimmed: the region highlight over the Gaussians (a Gaussian belongs
-    /// to the group of its parent triangle's region, as selection has it).
+    /// to the group it was selected for: by place or by parent triangle, as
+    /// the recipe's membership has it; border copies to the group they
+    /// smooth into).
     pub fn render_highlighted(
         &mut self,
         composer: &Composer,
@@ -306,22 +308,24 @@ const DIMMED: f32 = 0.3;
 /// The composite's Gaussians with those outside `group` darkened towards
 /// black and their view-dependent colour damped, so the group stands out.
 fn highlighted(composer: &Composer, group: Group) -> GaussianSet {
-    let regions = &composer.engine().database().model.triangle_regions;
-    let mut set = composer.composite().gaussians.clone();
+    let composite = composer.composite();
+    let mut set = composite.gaussians.clone();
     let stride = set.sh_stride();
-    for i in 0..set.len() {
-        let inside = regions
-            .get(set.binding[i] as usize)
-            .is_some_and(|r| r.group() == group);
-        if inside {
-            continue;
-        }
-        let sh = &mut set.sh[i * stride..(i + 1) * stride];
-        for dc in &mut sh[..3] {
-            *dc = rgb_to_dc(dc_to_rgb(*dc) * DIMMED);
-        }
-        for rest in &mut sh[3..] {
-            *rest *= DIMMED;
+    // By the block a Gaussian was selected for, so the highlight shows the
+    // region membership the composite uses (by place or by parent).
+    for block in composite
+        .blocks
+        .iter()
+        .filter(|b| b.region.group() != group)
+    {
+        for i in block.start..block.end.min(set.len()) {
+            let sh = &mut set.sh[i * stride..(i + 1) * stride];
+            for dc in &mut sh[..3] {
+                *dc = rgb_to_dc(dc_to_rgb(*dc) * DIMMED);
+            }
+            for rest in &mut sh[3..] {
+                *rest *= DIMMED;
+            }
         }
     }
     set

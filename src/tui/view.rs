@@ -445,10 +445,11 @@ fn composite_sections(vm: &ViewModel) -> Vec<Section> {
         section(
             "post",
             vec![format!(
-                " base {} smoothing {} colour {}",
+                " base {} smoothing {} colour {} regions by {}",
                 r.base,
                 lower(&r.post.smoothing),
                 lower(&r.post.colour),
+                lower(&r.post.membership),
             )],
         ),
         section(

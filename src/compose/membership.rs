@@ -1,0 +1,52 @@
+//! Region membership by place (docs/method.md §5.1): the region a Gaussian of
+//! a trained source counts for is the region of the surface it sits on, not
+//! only the region of its parent triangle. Training moves Gaussians: densified
+//! children keep their parent's triangle wherever they drift. Swapping regions
+//! by parent triangle then carries another person's Gaussians into a region
+//! (thesis §7.2, Figure 6.8) — part of the composite's leak.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::avatar::binding::triangle_frames;
+use crate::avatar::gaussians::GaussianSet;
+use crate::model::head::HeadModel;
+use crate::model::nearest::TriangleGrid;
+
+/// How much nearer (metres of template space) another region's surface must
+/// be to a Gaussian's centre than its parent triangle for it to count there:
+/// Gaussians on or near their own triangle keep its region, so a Gaussian on
+/// a border does not flicker between two regions.
+pub const PLACE_MARGIN: f32 = 1e-3;
+
+/// The triangle each Gaussian of `set` counts for by place, on the source's
+/// `neutral` mesh: the triangle nearest its centre when that is another
+/// region's and more than [`PLACE_MARGIN`] nearer than its parent triangle,
+/// otherwise its parent. Gaussians with a non-finite centre (or a binding
+/// past the mesh) keep their parent.
+pub fn place_triangles(model: &HeadModel, set: &GaussianSet, neutral: &[Vec3]) -> Vec<u32> {
+    let frames = triangle_frames(neutral, &model.triangles);
+    let regions = &model.triangle_regions;
+    let grid = TriangleGrid::new(neutral, &model.triangles);
+    (0..set.len())
+        .into_par_iter()
+        .map(|i| {
+            let parent = set.binding[i];
+            let (Some(frame), Some(&own)) =
+                (frames.get(parent as usize), regions.get(parent as usize))
+            else {
+                return parent;
+            };
+            let centre = frame.scale * (frame.rotation * set.position[i]) + frame.center;
+            match grid.nearest(centre) {
+                Some((t, d))
+                    if regions[t as usize] != own
+                        && grid.distance(parent, centre) > d + PLACE_MARGIN =>
+                {
+                    t
+                }
+                _ => parent,
+            }
+        })
+        .collect()
+}

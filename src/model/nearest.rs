@@ -1,0 +1,334 @@
+//! The triangle of a mesh nearest to a point: a uniform grid over the
+//! triangles' bounding boxes searched ring by ring (docs/method.md §5.1).
+//! Used to give each Gaussian the region of the surface it actually sits on.
+
+use glam::{IVec3, Vec3};
+
+/// Cells per axis at most: bounds the grid's memory for huge or odd meshes.
+const MAX_CELLS_PER_AXIS: i32 = 96;
+
+/// A spatial index of one mesh's triangles for nearest-triangle queries.
+#[derive(Clone, Debug)]
+pub struct TriangleGrid {
+    /// The triangles' corners.
+    corners: Vec<[Vec3; 3]>,
+    /// Lower corner of the grid.
+    origin: Vec3,
+    /// Edge length of a cell.
+    cell: f32,
+    /// Cells per axis.
+    dims: IVec3,
+    /// `start[c]..start[c+1]` indexes `items` for cell `c`.
+    start: Vec<u32>,
+    /// Triangle indices by cell.
+    items: Vec<u32>,
+}
+
+impl TriangleGrid {
+    /// Indexes the triangles of `vertices`; triangles with a non-finite corner
+    /// are left out (they are never nearest).
+    pub fn new(vertices: &[Vec3], triangles: &[[u32; 3]]) -> Self {
+        let corners: Vec<[Vec3; 3]> = triangles
+            .iter()
+            .map(|t| t.map(|v| vertices.get(v as usize).copied().unwrap_or(Vec3::NAN)))
+            .collect();
+        let finite = |c: &[Vec3; 3]| c.iter().all(|v| v.is_finite());
+        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        for c in corners.iter().filter(|c| finite(c)) {
+            for v in c {
+                lo = lo.min(*v);
+                hi = hi.max(*v);
+            }
+        }
+        if lo.x > hi.x {
+            return Self::empty(corners);
+        }
+        let extent = (hi - lo).max_element().max(f32::MIN_POSITIVE);
+        let count = corners.len().max(1) as f32;
+        // About two triangles per occupied cell on a surface: cells scale
+        // with the square root of the triangle count.
+        let per_axis = (2.0 * count.sqrt()).clamp(1.0, MAX_CELLS_PER_AXIS as f32);
+        let cell = extent / per_axis;
+        let dims = (((hi - lo) / cell).floor().as_ivec3() + IVec3::ONE)
+            .clamp(IVec3::ONE, IVec3::splat(MAX_CELLS_PER_AXIS));
+        let mut grid = Self {
+            corners,
+            origin: lo,
+            cell,
+            dims,
+            start: Vec::new(),
+            items: Vec::new(),
+        };
+        let spans: Vec<Option<(IVec3, IVec3)>> = grid
+            .corners
+            .iter()
+            .map(|c| {
+                finite(c).then(|| {
+                    let (a, b) = (c[0].min(c[1]).min(c[2]), c[0].max(c[1]).max(c[2]));
+                    (grid.cell_of(a), grid.cell_of(b))
+                })
+            })
+            .collect();
+        let cells = (dims.x * dims.y * dims.z) as usize;
+        let mut count = vec![0u32; cells + 1];
+        for (a, b) in spans.iter().flatten() {
+            grid.for_cells(*a, *b, |c| count[c + 1] += 1);
+        }
+        for c in 0..cells {
+            count[c + 1] += count[c];
+        }
+        let mut fill = count.clone();
+        let mut items = vec![0u32; count[cells] as usize];
+        for (t, span) in spans.iter().enumerate() {
+            if let Some((a, b)) = span {
+                grid.for_cells(*a, *b, |c| {
+                    items[fill[c] as usize] = t as u32;
+                    fill[c] += 1;
+                });
+            }
+        }
+        grid.start = count;
+        grid.items = items;
+        grid
+    }
+
+    fn empty(corners: Vec<[Vec3; 3]>) -> Self {
+        Self {
+            corners,
+            origin: Vec3::ZERO,
+            cell: 1.0,
+            dims: IVec3::ZERO,
+            start: vec![0],
+            items: Vec::new(),
+        }
+    }
+
+    /// The cell holding `p`, clamped into the grid.
+    fn cell_of(&self, p: Vec3) -> IVec3 {
+        let c = ((p - self.origin) / self.cell).floor();
+        // Clamp in float first: huge or infinite offsets must not wrap.
+        let max = (self.dims - IVec3::ONE).as_vec3();
+        c.clamp(Vec3::ZERO, max.max(Vec3::ZERO)).as_ivec3()
+    }
+
+    fn index(&self, c: IVec3) -> usize {
+        ((c.z * self.dims.y + c.y) * self.dims.x + c.x) as usize
+    }
+
+    fn for_cells(&self, a: IVec3, b: IVec3, mut f: impl FnMut(usize)) {
+        for z in a.z..=b.z {
+            for y in a.y..=b.y {
+                for x in a.x..=b.x {
+                    f(self.index(IVec3::new(x, y, z)));
+                }
+            }
+        }
+    }
+
+    /// The nearest triangle to `p` and its distance; `None` for a non-finite
+    /// point or a mesh without finite triangles.
+    pub fn nearest(&self, p: Vec3) -> Option<(u32, f32)> {
+        if !p.is_finite() || self.dims.min_element() <= 0 {
+            return None;
+        }
+        let home = self.cell_of(p);
+        let mut best: Option<(u32, f32)> = None;
+        let rings = self.dims.max_element();
+        for ring in 0..rings {
+            self.for_ring(home, ring, |cell| {
+                let (s, e) = (self.start[cell] as usize, self.start[cell + 1] as usize);
+                for &t in &self.items[s..e] {
+                    let d = self.distance(t, p);
+                    // Ties go to the lower index, whichever cell finds them first.
+                    if best.is_none_or(|(bt, bd)| d < bd || (d == bd && t < bt)) {
+                        best = Some((t, d));
+                    }
+                }
+            });
+            // Cells of the next rings lie at least `ring` cells away from `p`.
+            if best.is_some_and(|(_, d)| d <= ring as f32 * self.cell) {
+                break;
+            }
+        }
+        best
+    }
+
+    /// Distance from `p` to triangle `t`.
+    pub fn distance(&self, t: u32, p: Vec3) -> f32 {
+        let [a, b, c] = self.corners[t as usize];
+        robust_length(closest_point_on_triangle(p, a, b, c) - p)
+    }
+
+    /// Calls `f` on every cell at Chebyshev distance `ring` from `home`.
+    fn for_ring(&self, home: IVec3, ring: i32, mut f: impl FnMut(usize)) {
+        let lo = (home - IVec3::splat(ring)).max(IVec3::ZERO);
+        let hi = (home + IVec3::splat(ring)).min(self.dims - IVec3::ONE);
+        for z in lo.z..=hi.z {
+            for y in lo.y..=hi.y {
+                for x in lo.x..=hi.x {
+                    let c = IVec3::new(x, y, z);
+                    if (c - home).abs().max_element() == ring {
+                        f(self.index(c));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// |v| without overflow for huge components.
+fn robust_length(v: Vec3) -> f32 {
+    let m = v.abs().max_element();
+    if m == 0.0 || !m.is_finite() {
+        return m;
+    }
+    m * (v / m).length()
+}
+
+/// The point of triangle (a, b, c) closest to `p` (by Voronoi regions of its
+/// corners and edges; degenerate triangles give a point on their segments).
+pub fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = va + vb + vc;
+    if denom.abs() <= f32::MIN_POSITIVE {
+        // Degenerate (collinear) triangle that fell through: the nearest corner.
+        return [a, b, c]
+            .into_iter()
+            .min_by(|x, y| {
+                (*x - p)
+                    .length_squared()
+                    .total_cmp(&(*y - p).length_squared())
+            })
+            .unwrap_or(a);
+    }
+    let (v, w) = (vb / denom, vc / denom);
+    let q = a + ab * v + ac * w;
+    if q.is_finite() {
+        q
+    } else {
+        a
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn brute(vertices: &[Vec3], triangles: &[[u32; 3]], p: Vec3) -> f32 {
+        triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| vertices[v as usize]);
+                (closest_point_on_triangle(p, a, b, c) - p).length()
+            })
+            .fold(f32::INFINITY, f32::min)
+    }
+
+    #[test]
+    fn closest_point_covers_face_edges_and_corners() {
+        let (a, b, c) = (Vec3::ZERO, Vec3::X, Vec3::Y);
+        let q = |p| closest_point_on_triangle(p, a, b, c);
+        assert!((q(Vec3::new(0.2, 0.2, 1.0)) - Vec3::new(0.2, 0.2, 0.0)).length() < 1e-6);
+        assert_eq!(q(Vec3::new(-1.0, -1.0, 0.0)), a);
+        assert_eq!(q(Vec3::new(2.0, -0.5, 0.0)), b);
+        assert_eq!(q(Vec3::new(0.5, -1.0, 3.0)), Vec3::new(0.5, 0.0, 0.0));
+        assert!((q(Vec3::new(1.0, 1.0, 0.0)) - Vec3::new(0.5, 0.5, 0.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn degenerate_triangles_give_points_on_their_segments() {
+        // Collinear corners and a triangle collapsed to a point.
+        let p = Vec3::new(0.5, 1.0, 0.0);
+        let q = closest_point_on_triangle(p, Vec3::ZERO, Vec3::X, Vec3::X * 2.0);
+        assert!((q - Vec3::new(0.5, 0.0, 0.0)).length() < 1e-6, "{q}");
+        let q = closest_point_on_triangle(p, Vec3::ONE, Vec3::ONE, Vec3::ONE);
+        assert_eq!(q, Vec3::ONE);
+    }
+
+    #[test]
+    fn grid_agrees_with_brute_force_on_a_curved_sheet_and_far_points() {
+        // A wavy 30×30 sheet plus a separate small part far away.
+        let n = 30;
+        let mut vertices: Vec<Vec3> = (0..n * n)
+            .map(|i| {
+                let (x, y) = ((i % n) as f32 / n as f32, (i / n) as f32 / n as f32);
+                Vec3::new(x, y, 0.1 * (6.0 * x).sin() * (4.0 * y).cos())
+            })
+            .collect();
+        let mut triangles = Vec::new();
+        for y in 0..n - 1 {
+            for x in 0..n - 1 {
+                let i = (y * n + x) as u32;
+                triangles.push([i, i + 1, i + n as u32]);
+                triangles.push([i + 1, i + n as u32 + 1, i + n as u32]);
+            }
+        }
+        let k = vertices.len() as u32;
+        vertices.extend([
+            Vec3::new(5.0, 5.0, 5.0),
+            Vec3::new(5.1, 5.0, 5.0),
+            Vec3::new(5.0, 5.1, 5.0),
+        ]);
+        triangles.push([k, k + 1, k + 2]);
+        let grid = TriangleGrid::new(&vertices, &triangles);
+        let mut state = 12345u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        for _ in 0..500 {
+            let p = Vec3::new(next() * 7.0 - 1.0, next() * 7.0 - 1.0, next() * 7.0 - 1.0);
+            let (t, d) = grid.nearest(p).unwrap();
+            let want = brute(&vertices, &triangles, p);
+            assert!(
+                (d - want).abs() <= 1e-5 * want.max(1.0),
+                "{p}: {d} vs {want}"
+            );
+            assert!((grid.distance(t, p) - d).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn bad_points_and_bad_meshes_answer_none_or_skip() {
+        let vertices = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::NAN];
+        let grid = TriangleGrid::new(&vertices, &[[0, 1, 2], [0, 1, 3]]);
+        assert_eq!(grid.nearest(Vec3::NAN), None);
+        assert_eq!(grid.nearest(Vec3::new(f32::INFINITY, 0.0, 0.0)), None);
+        // The triangle with a NaN corner is never the answer.
+        assert_eq!(grid.nearest(Vec3::new(0.2, 0.2, 1.0)).map(|x| x.0), Some(0));
+        // Huge coordinates stay finite and correct.
+        let (t, d) = grid.nearest(Vec3::new(1e30, 0.0, 0.0)).unwrap();
+        assert_eq!(t, 0);
+        assert!(d.is_finite() && d > 9e29);
+        let empty = TriangleGrid::new(&[], &[]);
+        assert_eq!(empty.nearest(Vec3::ZERO), None);
+        let all_bad = TriangleGrid::new(&[Vec3::NAN; 3], &[[0, 1, 2]]);
+        assert_eq!(all_bad.nearest(Vec3::ZERO), None);
+    }
+}
