@@ -603,29 +603,8 @@ pub fn evaluate_variants(
                 )
             })
             .collect();
-        let mut dbg = vec![0u8; labels.head.len()];
-        let dbg_groups: Vec<Vec<f64>> = if std::env::var("VISAGE_DEBUG_LEAK").is_ok() {
-            crate::model::regions::Group::ALL
-                .iter()
-                .map(|&g| {
-                    let mut m = one_hot(full_model, full, None);
-                    let c0 = crate::render::sh::C0;
-                    for block in &full.blocks {
-                        let white = block.source == 2 && block.region.group() == g;
-                        let value = if white { 0.5 / c0 } else { -0.5 / c0 };
-                        for i in block.start..block.end {
-                            m.sh[i * SH_STRIDE..i * SH_STRIDE + 3].fill(value);
-                        }
-                    }
-                    render(&m, &pose.frames, camera)
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
         for p in (0..labels.head.len()).filter(|&p| labels.head[p] && !labels.band[p]) {
             let total = everything[3 * p];
-            dbg[p] = 40;
             if total < 0.5 {
                 continue;
             }
@@ -634,35 +613,9 @@ pub fn evaluate_variants(
                 .find(|(s, _)| *s as u32 == labels.source[p])
                 .map_or(0.0, |(_, img)| img[3 * p]);
             let leak = (1.0 - assigned / total).clamp(0.0, 1.0);
-            dbg[p] = 60 + (leak * 195.0) as u8;
-            if leak > 0.3 && std::env::var("VISAGE_DEBUG_LEAK").is_ok() && p % 97 == 0 {
-                let parts: Vec<String> = shares
-                    .iter()
-                    .map(|(s, img)| format!("{s}:{:.2}", img[3 * p] / total))
-                    .collect();
-                let g: Vec<String> = dbg_groups
-                    .iter()
-                    .map(|img| format!("{:.2}", img[3 * p] / total))
-                    .collect();
-                eprintln!(
-                    "leak px {p} assigned {} total {total:.2}: {} femi by group {}",
-                    labels.source[p],
-                    parts.join(" "),
-                    g.join(" ")
-                );
-            }
             leak_sum += leak;
             leak_over += usize::from(leak > 0.05);
             leak_pixels += 1;
-        }
-        if let Ok(dir) = std::env::var("VISAGE_DEBUG_LEAK") {
-            let path = format!(
-                "{dir}/leak-{split}-t{}-c{}.pgm",
-                view.timestep, view.camera_index
-            );
-            let mut bytes = format!("P5 {w} {h} 255\n").into_bytes();
-            bytes.extend(&dbg);
-            let _ = std::fs::write(path, bytes);
         }
         // The ceiling: each used source on its own ground truth.
         for (k, ((s, trainable, sitter), surface)) in own.iter().zip(&surfaces).enumerate() {
