@@ -680,3 +680,45 @@ fn membership_by_place_counts_a_drifted_gaussian_where_it_sits_and_keeps_borders
     assert!(has_marker(Membership::Place));
     assert!(!has_marker(Membership::Parent));
 }
+
+#[test]
+fn a_source_with_an_empty_region_composes_by_place_with_semantic_colour() {
+    use visage::avatar::gaussians::GaussianSet;
+    use visage::compose::recipe::Membership;
+    let mut db = small_db();
+    let regions = db.model.triangle_regions.clone();
+    // Source 0 loses every Gaussian of its nose and its hair.
+    let old = &db.sources[0].gaussians;
+    let mut kept = GaussianSet::with_degree(old.sh_degree);
+    for i in 0..old.len() {
+        if !matches!(
+            regions[old.binding[i] as usize],
+            Region::Nose | Region::Hair
+        ) {
+            kept.push_from(old, i, old.opacity_logit[i]);
+        }
+    }
+    db.sources[0].gaussians = kept;
+    let e = Engine::new(db).unwrap();
+    let n = names(&e);
+    let mut r = Recipe::unedited(&n[1]);
+    all_groups(&mut r, &n[0], &[(&n[0], 1.0)]);
+    r.post.smoothing = Smoothing::Crossfade;
+    r.post.colour = ColourCorrection::Semantic;
+    for membership in [Membership::Place, Membership::Parent] {
+        r.post.membership = membership;
+        let c = e.compose(&resolve(&e, &r));
+        assert!(!c.gaussians.is_empty());
+        assert!(
+            c.gaussians.sh.iter().all(|x| x.is_finite()),
+            "{membership:?}"
+        );
+        assert!(
+            c.blocks
+                .iter()
+                .filter(|b| b.region == Region::Nose && b.extra_from.is_none())
+                .all(|b| b.start == b.end),
+            "an empty region stays empty ({membership:?})"
+        );
+    }
+}

@@ -200,6 +200,7 @@ fn report(composer: &Composer, timings: &BuildTimings, frame: Option<usize>) -> 
         "regions": regions,
         "smoothing": format!("{:?}", r.post.smoothing).to_lowercase(),
         "colour": format!("{:?}", r.post.colour).to_lowercase(),
+        "membership": format!("{:?}", r.post.membership).to_lowercase(),
         "gaussians": c.gaussians.len(),
         "extra_gaussians": extra_total,
         "extras": extras,
@@ -256,10 +257,11 @@ fn print_text(r: &serde_json::Value) {
         );
     }
     println!(
-        "smoothing {} adds {} Gaussians; colour {}; blend residual {:.2e}",
+        "smoothing {} adds {} Gaussians; colour {}; regions by {}; blend residual {:.2e}",
         r["smoothing"].as_str().unwrap_or(""),
         r["extra_gaussians"],
         r["colour"].as_str().unwrap_or(""),
+        r["membership"].as_str().unwrap_or(""),
         r["solve_residual"].as_f64().unwrap_or(0.0)
     );
     let t = &r["timings_ms"];

@@ -38,13 +38,14 @@ pub fn place_triangles(model: &HeadModel, set: &GaussianSet, neutral: &[Vec3]) -
                 return parent;
             };
             let centre = frame.scale * (frame.rotation * set.position[i]) + frame.center;
-            match grid.nearest(centre) {
-                Some((t, d))
-                    if regions[t as usize] != own
-                        && grid.distance(parent, centre) > d + PLACE_MARGIN =>
-                {
-                    t
-                }
+            // Within the margin of its parent nothing can be a margin nearer:
+            // most Gaussians of a trained source stop here.
+            let to_parent = grid.distance(parent, centre);
+            if to_parent.is_nan() || to_parent <= PLACE_MARGIN {
+                return parent;
+            }
+            match grid.nearest_within(centre, to_parent - PLACE_MARGIN) {
+                Some((t, d)) if regions[t as usize] != own && to_parent > d + PLACE_MARGIN => t,
                 _ => parent,
             }
         })

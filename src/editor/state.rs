@@ -387,10 +387,11 @@ impl EditorState {
             }
             Command::Colour(c) => {
                 post.colour = c.unwrap_or(match post.colour {
-                    ColourCorrection::Off => ColourCorrection::Thesis,
-                    ColourCorrection::Thesis => ColourCorrection::Skin,
-                    ColourCorrection::Skin => ColourCorrection::Semantic,
-                    ColourCorrection::Semantic => ColourCorrection::Off,
+                    // The best measured first (README, ground truth).
+                    ColourCorrection::Off => ColourCorrection::Semantic,
+                    ColourCorrection::Semantic => ColourCorrection::Skin,
+                    ColourCorrection::Skin => ColourCorrection::Thesis,
+                    ColourCorrection::Thesis => ColourCorrection::Off,
                 })
             }
             Command::Membership(m) => {

@@ -128,13 +128,21 @@ impl TriangleGrid {
     /// The nearest triangle to `p` and its distance; `None` for a non-finite
     /// point or a mesh without finite triangles.
     pub fn nearest(&self, p: Vec3) -> Option<(u32, f32)> {
-        if !p.is_finite() || self.dims.min_element() <= 0 {
+        self.nearest_within(p, f32::INFINITY)
+    }
+
+    /// The nearest triangle to `p` if one lies within `radius` (and perhaps
+    /// one a little farther: only rings that may hold a nearer one are
+    /// searched, so the cost follows the radius, not the mesh).
+    pub fn nearest_within(&self, p: Vec3, radius: f32) -> Option<(u32, f32)> {
+        if !p.is_finite() || self.dims.min_element() <= 0 || radius.is_nan() || radius < 0.0 {
             return None;
         }
         let home = self.cell_of(p);
         let mut best: Option<(u32, f32)> = None;
-        let rings = self.dims.max_element();
-        for ring in 0..rings {
+        // Clamped in float: an infinite or huge radius must not wrap.
+        let rings = ((radius / self.cell).ceil() + 1.0).min(self.dims.max_element() as f32) as i32;
+        for ring in 0..rings.max(1) {
             self.for_ring(home, ring, |cell| {
                 let (s, e) = (self.start[cell] as usize, self.start[cell + 1] as usize);
                 for &t in &self.items[s..e] {
@@ -312,6 +320,28 @@ mod tests {
             );
             assert!((grid.distance(t, p) - d).abs() < 1e-6);
         }
+    }
+
+    #[test]
+    fn a_bounded_search_finds_what_lies_within_its_radius() {
+        let vertices = [
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            Vec3::new(0.0, 0.0, 5.0),
+            Vec3::new(1.0, 0.0, 5.0),
+            Vec3::new(0.0, 1.0, 5.0),
+        ];
+        let grid = TriangleGrid::new(&vertices, &[[0, 1, 2], [3, 4, 5]]);
+        let p = Vec3::new(0.2, 0.2, 0.5);
+        assert_eq!(grid.nearest_within(p, 1.0), Some((0, 0.5)));
+        assert_eq!(grid.nearest_within(p, 0.1).filter(|(_, d)| *d <= 0.1), None);
+        assert_eq!(grid.nearest_within(p, f32::NAN), None);
+        assert_eq!(
+            grid.nearest_within(Vec3::new(0.2, 0.2, 4.9), f32::INFINITY)
+                .map(|x| x.0),
+            Some(1)
+        );
     }
 
     #[test]
