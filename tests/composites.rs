@@ -330,10 +330,12 @@ fn bench_composites_trains_once_and_reports_every_recipe() {
     std::fs::write(recipes.join("plain.toml"), "base = \"bram\"\n").unwrap();
     let cache = temp("bench-cache");
     std::fs::remove_dir_all(&cache).ok();
-    let run = || -> serde_json::Value {
+    let run_with = |pipeline: &str| -> serde_json::Value {
         let o = visage(&[
             "bench",
             "composites",
+            "--pipeline",
+            pipeline,
             "--recipes",
             recipes.to_str().unwrap(),
             "--size",
@@ -353,6 +355,7 @@ fn bench_composites_trains_once_and_reports_every_recipe() {
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         serde_json::from_slice(&o.stdout).unwrap()
     };
+    let run = || run_with("recipe");
     let first = run();
     let rows = first["recipes"].as_array().unwrap();
     assert_eq!(rows.len(), 2);
@@ -380,5 +383,30 @@ fn bench_composites_trains_once_and_reports_every_recipe() {
     assert_eq!(
         first["recipes"][0]["report"]["quality"],
         second["recipes"][0]["report"]["quality"]
+    );
+    // Our pipeline post-processes every recipe, so the plain one is measured
+    // against the base's tone with smooth seams too.
+    let ours = run_with("ours");
+    assert_eq!(ours["pipeline"], "ours");
+    let rows = ours["recipes"].as_array().unwrap();
+    assert_eq!(
+        (rows[1]["tone"].as_str(), rows[1]["seams"].as_str()),
+        (Some("base"), Some("smooth"))
+    );
+    let thesis = run_with("thesis");
+    assert_eq!(thesis["pipeline"], "thesis");
+    // The nose recipe is written with the thesis's post-processing; only the
+    // membership differs, and the built-in avatars' Gaussians sit on their
+    // triangles.
+    let psnr = |v: &serde_json::Value| {
+        v["recipes"][0]["report"]["quality"]["psnr_db"]
+            .as_f64()
+            .unwrap()
+    };
+    assert!(
+        (psnr(&thesis) - psnr(&first)).abs() < 0.1,
+        "{} vs {}",
+        psnr(&thesis),
+        psnr(&first)
     );
 }
