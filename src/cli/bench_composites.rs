@@ -20,6 +20,7 @@ use crate::render::Backend;
 use crate::train::capture::{capture, capture_sitter, CaptureOptions};
 use crate::train::composite_eval::{evaluate_composite, CompositeReport, EvalOptions};
 use crate::train::dataset::Dataset;
+use crate::train::holes::HoleFilling;
 use crate::train::sitter::{Seams, Sitter, Tone};
 use crate::train::trainer::{TrainOptions, Trainer};
 
@@ -183,7 +184,11 @@ fn trained_source(
             size: None,
             background: [0.0; 3],
             renderer: args.renderer,
-            holes: Default::default(),
+            // As `visage train` trains by default: with the interior layer
+            // behind the surface, so a region is opaque on its own and does
+            // not lean on the Gaussians behind it (which a composite may take
+            // from another source).
+            holes: HoleFilling::RECOMMENDED,
         },
     )?;
     eprintln!("visage: training {name} ({} iterations)…", args.iterations);
@@ -241,7 +246,7 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
     names.sort();
     names.dedup();
     let cache = args.cache.join(format!(
-        "{}x{}-c{}-f{}-i{}",
+        "{}x{}-c{}-f{}-i{}-interior",
         args.size.0, args.size.1, args.cameras, args.frames, args.iterations
     ));
     std::fs::create_dir_all(&cache)
