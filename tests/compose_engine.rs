@@ -483,24 +483,31 @@ fn degenerate_and_sliver_triangles_in_a_source_leave_no_nan() {
     let e = Engine::new(db).unwrap();
     let n = names(&e);
     let mut r = Recipe::unedited(&n[0]);
-    r.post.smoothing = Smoothing::Thesis;
     r.post.colour = ColourCorrection::Thesis;
     r.groups.insert("nose".into(), edit(&n[2], &[(&n[2], 1.0)]));
     r.groups
         .insert("face".into(), edit(&n[2], &[(&n[2], 0.5), (&n[0], 0.5)]));
+    r.groups.insert("hair".into(), edit(&n[1], &[]));
     r.animation.motion = "talk".into();
-    let resolved = resolve(&e, &r);
-    let c = e.compose(&resolved);
-    assert!(c.residual <= 1e-10);
-    for mode in [AnimationMode::Fast, AnimationMode::Exact] {
-        let mut posed = PosedMesh::default();
-        let (ex, pose) = e.frame_parameters(&resolved, 40);
-        e.pose_with(&c, &ex, &pose, mode, &mut posed);
-        let scene = e.scene(&c, &posed);
-        assert!(scene.position.iter().all(|p| p.is_finite()), "{mode:?}");
-        assert!(scene.rotation.iter().all(|q| q.is_finite()));
-        assert!(scene.scale.iter().all(|s| s.is_finite()));
-        assert!(scene.opacity.iter().all(|o| o.is_finite()));
+    for smoothing in [Smoothing::Thesis, Smoothing::Blend] {
+        r.post.smoothing = smoothing;
+        let resolved = resolve(&e, &r);
+        let c = e.compose(&resolved);
+        assert!(c.residual <= 1e-10);
+        assert!(
+            c.gaussians.sh.iter().all(|x| x.is_finite()),
+            "{smoothing:?}"
+        );
+        for mode in [AnimationMode::Fast, AnimationMode::Exact] {
+            let mut posed = PosedMesh::default();
+            let (ex, pose) = e.frame_parameters(&resolved, 40);
+            e.pose_with(&c, &ex, &pose, mode, &mut posed);
+            let scene = e.scene(&c, &posed);
+            assert!(scene.position.iter().all(|p| p.is_finite()), "{mode:?}");
+            assert!(scene.rotation.iter().all(|q| q.is_finite()));
+            assert!(scene.scale.iter().all(|s| s.is_finite()));
+            assert!(scene.opacity.iter().all(|o| o.is_finite()));
+        }
     }
 }
 
@@ -703,10 +710,14 @@ fn a_source_with_an_empty_region_composes_by_place_with_semantic_colour() {
     let n = names(&e);
     let mut r = Recipe::unedited(&n[1]);
     all_groups(&mut r, &n[0], &[(&n[0], 1.0)]);
-    r.post.smoothing = Smoothing::Crossfade;
     r.post.colour = ColourCorrection::Semantic;
-    for membership in [Membership::Place, Membership::Parent] {
+    for (membership, smoothing) in [
+        (Membership::Place, Smoothing::Crossfade),
+        (Membership::Parent, Smoothing::Crossfade),
+        (Membership::Place, Smoothing::Blend),
+    ] {
         r.post.membership = membership;
+        r.post.smoothing = smoothing;
         let c = e.compose(&resolve(&e, &r));
         assert!(!c.gaussians.is_empty());
         assert!(
@@ -721,4 +732,81 @@ fn a_source_with_an_empty_region_composes_by_place_with_semantic_colour() {
             "an empty region stays empty ({membership:?})"
         );
     }
+}
+
+/// Every Gaussian of `set` in one flat colour (no view-dependent terms).
+fn paint(set: &mut visage::avatar::gaussians::GaussianSet, rgb: f32) {
+    let stride = set.sh_stride();
+    for i in 0..set.len() {
+        let sh = &mut set.sh[i * stride..(i + 1) * stride];
+        sh.fill(0.0);
+        sh[..3].fill(rgb_to_dc(rgb));
+    }
+}
+
+/// Colour seams (`smoothing = "blend"`, method §7.8) between a white base and
+/// a black nose: nothing but colour changes; half and half at the border,
+/// the own colour a seam's half-width away; never outside the two colours.
+#[test]
+fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
+    use visage::compose::seams::{SeamField, SEAM_WIDTH};
+    let mut db = small_db();
+    paint(&mut db.sources[0].gaussians, 1.0);
+    paint(&mut db.sources[1].gaussians, 0.0);
+    let e = Engine::new(db).unwrap();
+    let n = names(&e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups.insert("nose".into(), edit(&n[1], &[]));
+    let off = e.compose(&resolve(&e, &r));
+    r.post.smoothing = Smoothing::Blend;
+    let blended = e.compose(&resolve(&e, &r));
+    let (a, b) = (&off.gaussians, &blended.gaussians);
+    // No extras, and every Gaussian keeps its place, shape and opacity.
+    assert_eq!(off.blocks, blended.blocks);
+    assert_eq!(a.binding, b.binding);
+    assert_eq!(a.position, b.position);
+    assert_eq!(a.rotation, b.rotation);
+    assert_eq!(a.log_scale, b.log_scale);
+    assert_eq!(a.opacity_logit, b.opacity_logit);
+    // Colours: the nose's black moves towards white, the face's white towards
+    // black, by at most half.
+    let model = &e.database().model;
+    let looks: Vec<u32> = model
+        .triangle_regions
+        .iter()
+        .map(|&r| u32::from(r == Region::Nose))
+        .collect();
+    let field = SeamField::new(model, &looks);
+    let to_nose = field.distances(1).unwrap();
+    let to_face = field.distances(0).unwrap();
+    let (mut moved, mut halfway) = (0, 0);
+    for block in &blended.blocks {
+        let own_white = block.source == 0;
+        for i in block.start..block.end {
+            let rgb = dc_to_rgb(b.sh_of(i)[0]);
+            assert!((-1e-5..=1.0 + 1e-5).contains(&rgb), "{rgb}");
+            let shift = if own_white { 1.0 - rgb } else { rgb };
+            assert!(shift <= 0.5 + 1e-4, "more than half: {shift}");
+            let tri = model.triangles[b.binding[i] as usize];
+            let other = if own_white { to_nose } else { to_face };
+            let near = tri
+                .iter()
+                .map(|&v| other[v as usize])
+                .fold(f32::MAX, f32::min);
+            if shift > 1e-6 {
+                moved += 1;
+                // Only where the other source is near (the triangle a Gaussian
+                // counts for may be a neighbour of its parent, hence the slack).
+                assert!(near < SEAM_WIDTH, "moved {shift} at {near} m");
+            }
+            if shift > 0.45 {
+                halfway += 1;
+            }
+            if near >= SEAM_WIDTH {
+                assert_eq!(shift, 0.0, "far from the border");
+            }
+        }
+    }
+    assert!(moved > 50, "{moved} Gaussians moved");
+    assert!(halfway > 5, "{halfway} Gaussians at the border");
 }

@@ -273,7 +273,12 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
         rows.push(json!({"action": "shape", "sources": n, "ms_median": median, "ms_p90": p90, "max_residual": residual}));
 
         // Assignment: a new random source for the Gaussians of every group.
-        for post in [PostProcess::default(), post_on] {
+        let posts = [
+            (PostProcess::default(), "off"),
+            (post_on, "crossfade+skin"),
+            (PostProcess::BEST, "best"),
+        ];
+        for (post, label) in posts {
             let mut ms = Vec::new();
             let mut count = 0;
             composite = engine.compose(&ResolvedRecipe {
@@ -296,7 +301,7 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
             let (median, p90) = summarize(ms);
             rows.push(json!({
                 "action": "assign", "sources": n, "ms_median": median, "ms_p90": p90,
-                "post": if post == PostProcess::default() { "off" } else { "crossfade+skin" },
+                "post": label,
                 "gaussians": count, "error": 0.0,
             }));
         }

@@ -35,10 +35,8 @@ pub fn weighted_mean_colour(set: &GaussianSet, indices: &[u32]) -> Option<Vec3> 
     let stride = set.sh_stride();
     for &i in indices {
         let i = i as usize;
-        let s = set.log_scale[i].exp();
-        let size = s.x * s.y * s.z / s.min_element().max(1e-30);
-        let w = sigmoid(set.opacity_logit[i]) * size;
-        if !w.is_finite() || w <= 0.0 {
+        let w = colour_weight(set, i);
+        if w <= 0.0 {
             continue;
         }
         let dc = &set.sh[i * stride..i * stride + 3];
@@ -46,6 +44,30 @@ pub fn weighted_mean_colour(set: &GaussianSet, indices: &[u32]) -> Option<Vec3> 
         total += w;
     }
     (total > 0.0 && sum.is_finite()).then(|| sum / total)
+}
+
+/// How much Gaussian `i` counts in a mean colour (thesis weights: opacity
+/// times its largest cross-section, α·Πs / min s); 0 where that is not finite.
+pub fn colour_weight(set: &GaussianSet, i: usize) -> f32 {
+    let s = set.log_scale[i].exp();
+    let w = sigmoid(set.opacity_logit[i]) * s.x * s.y * s.z / s.min_element().max(1e-30);
+    if w.is_finite() && w > 0.0 {
+        w
+    } else {
+        0.0
+    }
+}
+
+/// Moves a Gaussian's displayed colour a share `w` of the way towards
+/// `target` in every direction: rgb' = (1 − w)·rgb + w·target, i.e.
+/// f_dc' = (1 − w)·f_dc + w·(target − 0.5)/C0 and f_rest' = (1 − w)·f_rest.
+pub fn blend_towards(sh: &mut [f32], target: Vec3, w: f32) {
+    for ch in 0..3 {
+        sh[ch] = (1.0 - w) * sh[ch] + w * (target[ch] - 0.5) / SH_C0;
+    }
+    for k in sh.iter_mut().skip(3) {
+        *k *= 1.0 - w;
+    }
 }
 
 /// The thesis gain c̄_ref / c̄_f, guarded and clamped.

@@ -2,22 +2,24 @@
 //! from recipes (and rebuilt only where a recipe changed), and posed frames.
 
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use super::blend::{Blender, SparseRhs};
 use super::colour::{
-    apply_gain, semantic_skin_gain, skin_stats, skin_transfer_gain, thesis_gain,
-    weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
+    apply_gain, blend_towards, colour_weight, semantic_skin_gain, skin_stats, skin_transfer_gain,
+    thesis_gain, weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
 };
+use super::membership::placements;
 use super::recipe::{AnimationMode, ColourCorrection, Membership, ResolvedRecipe, Smoothing};
-use super::selection::SelectionTables;
+use super::seams::{SeamField, SeamNeighbours, SEAM_WIDTH};
+use super::selection::{Csr, SelectionTables};
 use super::smoothing::{own_share, split_opacity, BorderTables};
 use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
 use crate::avatar::database::Database;
-use crate::avatar::gaussians::{logit, sigmoid, GaussianSet};
+use crate::avatar::gaussians::{dc_to_rgb, logit, sigmoid, GaussianSet};
 use crate::error::Result;
 use crate::model::head::{Joint, Pose};
 use crate::model::regions::Region;
@@ -39,6 +41,13 @@ pub struct Engine {
     /// Per-Gaussian skin-transfer gains by (source, colour reference), computed on
     /// first use: the CIELAB transfer costs ~100 ns a Gaussian, applying a gain ~5.
     skin_gains: Mutex<HashMap<GainKey, SharedGains>>,
+    /// Vertex → the triangles around it.
+    vertex_triangles: Csr,
+    /// `[source][membership]` → where each Gaussian sits on the triangle it
+    /// counts for (barycentric), computed on first use by colour seams.
+    placements: Vec<[OnceLock<Vec<[f32; 3]>>; 2]>,
+    /// The template's seam neighbourhoods, computed on first use.
+    seam_neighbours: OnceLock<SeamNeighbours>,
 }
 
 /// What a set of skin-transfer gains depends on: the source, the colour
@@ -144,6 +153,15 @@ impl Engine {
                 skin_stats(&db.sources[f].gaussians, &indices)
             })
             .collect();
+        let vertex_triangles = Csr::from_pairs(
+            db.model.vertex_count(),
+            db.model
+                .triangles
+                .iter()
+                .enumerate()
+                .flat_map(|(t, tri)| tri.map(|v| (v as usize, t as u32))),
+        );
+        let placements = db.sources.iter().map(|_| Default::default()).collect();
         Ok(Self {
             db,
             tables,
@@ -154,6 +172,9 @@ impl Engine {
             mean_colour,
             skin,
             skin_gains: Mutex::new(HashMap::new()),
+            vertex_triangles,
+            placements,
+            seam_neighbours: OnceLock::new(),
         })
     }
 
@@ -334,6 +355,20 @@ impl Engine {
         scene
     }
 
+    /// Where each Gaussian of source `f` sits on the triangle it counts for
+    /// under `membership` (barycentric on the source's neutral mesh).
+    fn placements_of(&self, membership: Membership, f: usize) -> &[[f32; 3]] {
+        self.placements[f][membership as usize].get_or_init(|| {
+            let counted = self.tables.counted_triangles(membership, f);
+            placements(
+                &self.db.model,
+                &self.db.sources[f].gaussians,
+                &self.neutrals[f],
+                counted,
+            )
+        })
+    }
+
     fn source_of(recipe: &ResolvedRecipe, region: Region) -> usize {
         recipe.gaussians[region.group().index()]
     }
@@ -441,6 +476,7 @@ impl Engine {
         blocks.clear();
         let gains = &mut composite.colour_gains;
         *gains = [Vec3::ONE; Region::COUNT];
+        let mut seams = (smoothing == Smoothing::Blend).then(|| SeamColours::new(self, recipe));
         for region in Region::ALL {
             let f = Self::source_of(recipe, region);
             let correction = self.correction(recipe, region, f);
@@ -451,6 +487,10 @@ impl Engine {
                 let exponent = own_exponent[placed[i as usize] as usize];
                 gain_sum +=
                     self.push_corrected(set, f, i, &correction, OpacityEdit::Split(exponent));
+                if let Some(seams) = seams.as_mut() {
+                    let last = set.len() - 1;
+                    seams.blend(self, f, i, set.sh_of_mut(last));
+                }
             }
             let n = set.len() - start;
             if n > 0 {
@@ -464,7 +504,7 @@ impl Engine {
                 end: set.len(),
             });
         }
-        if smoothing != Smoothing::Off {
+        if matches!(smoothing, Smoothing::Thesis | Smoothing::Crossfade) {
             for (&(r, p), band) in self.borders.pairs() {
                 if !differs(r, p) {
                     continue;
@@ -476,6 +516,7 @@ impl Engine {
                     let edit = match smoothing {
                         Smoothing::Thesis if ring == 1 => OpacityEdit::Scale(0.5),
                         Smoothing::Crossfade => OpacityEdit::Split(1.0 - own_share(ring)),
+                        // Colour seams add no Gaussians.
                         _ => continue,
                     };
                     for &i in self.tables.triangle(membership, f, t) {
@@ -512,11 +553,7 @@ impl Engine {
             OpacityEdit::Split(e) => logit(split_opacity(sigmoid(src.opacity_logit[i]), e)),
             OpacityEdit::Scale(s) => logit(sigmoid(src.opacity_logit[i]) * s),
         };
-        let gain = match correction {
-            Correction::None => Vec3::ONE,
-            Correction::Gain(g) => *g,
-            Correction::PerGaussian(g) => g[i],
-        };
+        let gain = correction.gain(i);
         set.push_from(src, i, opacity_logit);
         if gain != Vec3::ONE {
             let last = set.len() - 1;
@@ -526,11 +563,139 @@ impl Engine {
     }
 }
 
+/// Colour seams of one composite (`smoothing = "blend"`, docs/method.md
+/// §7.8): every own Gaussian within half a seam width of another source's
+/// triangles moves its colour towards that source's local colour there.
+struct SeamColours<'a> {
+    recipe: &'a ResolvedRecipe,
+    field: SeamField,
+    /// Per triangle: whether a corner is within half a seam width of
+    /// another source than the one it wears.
+    near: Vec<bool>,
+    /// Per source shown (as `field.sources()`), per vertex: that source's
+    /// local colour, corrected as the composite corrects it, filled on demand.
+    vertex_colour: Vec<Vec<Option<Option<Vec3>>>>,
+    /// Colour corrections by (source, region), made on demand.
+    corrections: HashMap<(usize, Region), Correction>,
+}
+
+impl<'a> SeamColours<'a> {
+    fn new(engine: &Engine, recipe: &'a ResolvedRecipe) -> Self {
+        let model = &engine.db.model;
+        let looks: Vec<u32> = model
+            .triangle_regions
+            .iter()
+            .map(|&r| Engine::source_of(recipe, r) as u32)
+            .collect();
+        let neighbours = engine
+            .seam_neighbours
+            .get_or_init(|| SeamNeighbours::new(&model.template));
+        let field = SeamField::with_neighbours(model, neighbours, &looks);
+        // A triangle none of whose corners is near another source is
+        // untouched: the interpolated distance cannot be nearer than the
+        // nearest corner.
+        let near = model
+            .triangles
+            .iter()
+            .zip(&looks)
+            .map(|(tri, &own)| {
+                field.sources().iter().filter(|&&s| s != own).any(|&s| {
+                    let d = field.distances(s).unwrap_or_default();
+                    tri.iter().any(|&v| d[v as usize] < SEAM_WIDTH / 2.0)
+                })
+            })
+            .collect();
+        let vertex_colour = vec![vec![None; model.vertex_count()]; field.sources().len()];
+        Self {
+            recipe,
+            field,
+            near,
+            vertex_colour,
+            corrections: HashMap::new(),
+        }
+    }
+
+    /// Blends the SH of source `f`'s Gaussian `i` (already corrected) towards
+    /// the nearest other source's local colour by the seam weight.
+    fn blend(&mut self, engine: &Engine, f: usize, i: u32, sh: &mut [f32]) {
+        let membership = self.recipe.post.membership;
+        let t = engine.tables.counted_triangles(membership, f)[i as usize];
+        if !self.near[t as usize] {
+            return;
+        }
+        let tri = engine.db.model.triangles[t as usize];
+        let bary = engine.placements_of(membership, f)[i as usize];
+        let Some(seam) = self.field.blend_at(tri, bary, f as u32) else {
+            return;
+        };
+        let mut sum = Vec3::ZERO;
+        let mut total = 0.0;
+        for (k, &v) in tri.iter().enumerate() {
+            if let Some(c) = self.colour_at(engine, seam.other as usize, v) {
+                sum += bary[k] * c;
+                total += bary[k];
+            }
+        }
+        if total > 0.0 {
+            blend_towards(sh, sum / total, seam.weight);
+        }
+    }
+
+    /// Source `s`'s local colour at vertex `v`: the mean colour of its
+    /// Gaussians counted for the triangles around `v`, each weighted by its
+    /// opacity and size (method §7.5) and by its barycentric share of `v`.
+    fn colour_at(&mut self, engine: &Engine, s: usize, v: u32) -> Option<Vec3> {
+        let k = self.field.sources().binary_search(&(s as u32)).ok()?;
+        if let Some(known) = self.vertex_colour[k][v as usize] {
+            return known;
+        }
+        let membership = self.recipe.post.membership;
+        let set = &engine.db.sources[s].gaussians;
+        let bary = engine.placements_of(membership, s);
+        let model = &engine.db.model;
+        let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
+        for &t in engine.vertex_triangles.row(v as usize) {
+            let corner = model.triangles[t as usize].iter().position(|&u| u == v);
+            let Some(corner) = corner else { continue };
+            let region = model.triangle_regions[t as usize];
+            let correction = self
+                .corrections
+                .entry((s, region))
+                .or_insert_with(|| engine.correction(self.recipe, region, s));
+            for &j in engine.tables.triangle(membership, s, t) {
+                let j = j as usize;
+                let w = colour_weight(set, j) * bary[j][corner];
+                if w <= 0.0 {
+                    continue;
+                }
+                let dc = &set.sh_of(j)[..3];
+                let rgb = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
+                sum += w * rgb * correction.gain(j);
+                total += w;
+            }
+        }
+        let colour = (total > 0.0 && sum.is_finite()).then(|| sum / total);
+        self.vertex_colour[k][v as usize] = Some(colour);
+        colour
+    }
+}
+
 /// A colour correction for a block of Gaussians.
 enum Correction {
     None,
     Gain(Vec3),
     PerGaussian(SharedGains),
+}
+
+impl Correction {
+    /// The gain of Gaussian `i` of the block's source.
+    fn gain(&self, i: usize) -> Vec3 {
+        match self {
+            Correction::None => Vec3::ONE,
+            Correction::Gain(g) => *g,
+            Correction::PerGaussian(g) => g[i],
+        }
+    }
 }
 
 /// How a copied Gaussian's opacity changes.

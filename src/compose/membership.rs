@@ -8,10 +8,10 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::avatar::binding::triangle_frames;
+use crate::avatar::binding::{triangle_frames, TriangleFrame};
 use crate::avatar::gaussians::GaussianSet;
 use crate::model::head::HeadModel;
-use crate::model::nearest::TriangleGrid;
+use crate::model::nearest::{barycentric, TriangleGrid};
 
 /// How much nearer (metres of template space) another region's surface must
 /// be to a Gaussian's centre than its parent triangle for it to count there:
@@ -32,12 +32,12 @@ pub fn place_triangles(model: &HeadModel, set: &GaussianSet, neutral: &[Vec3]) -
         .into_par_iter()
         .map(|i| {
             let parent = set.binding[i];
-            let (Some(frame), Some(&own)) =
-                (frames.get(parent as usize), regions.get(parent as usize))
-            else {
+            let (Some(centre), Some(&own)) = (
+                neutral_centre(&frames, set, i),
+                regions.get(parent as usize),
+            ) else {
                 return parent;
             };
-            let centre = frame.scale * (frame.rotation * set.position[i]) + frame.center;
             // Within the margin of its parent nothing can be a margin nearer:
             // most Gaussians of a trained source stop here.
             let to_parent = grid.distance(parent, centre);
@@ -50,4 +50,41 @@ pub fn place_triangles(model: &HeadModel, set: &GaussianSet, neutral: &[Vec3]) -
             }
         })
         .collect()
+}
+
+/// Where each Gaussian of `set` sits on the triangle it counts for
+/// (`counted`, one per Gaussian): barycentric coordinates of its centre's
+/// projection onto that triangle of the source's `neutral` mesh, clamped into
+/// it. Gaussians with a non-finite centre sit at the centroid.
+pub fn placements(
+    model: &HeadModel,
+    set: &GaussianSet,
+    neutral: &[Vec3],
+    counted: &[u32],
+) -> Vec<[f32; 3]> {
+    let frames = triangle_frames(neutral, &model.triangles);
+    (0..set.len())
+        .into_par_iter()
+        .map(|i| {
+            let centroid = [1.0 / 3.0; 3];
+            let (Some(centre), Some(tri)) = (
+                neutral_centre(&frames, set, i),
+                model.triangles.get(counted[i] as usize),
+            ) else {
+                return centroid;
+            };
+            if !centre.is_finite() {
+                return centroid;
+            }
+            let [a, b, c] = tri.map(|v| neutral[v as usize]);
+            barycentric(centre, a, b, c)
+        })
+        .collect()
+}
+
+/// Gaussian `i`'s centre on the mesh whose triangle `frames` are given
+/// (`None` for a binding past the mesh).
+fn neutral_centre(frames: &[TriangleFrame], set: &GaussianSet, i: usize) -> Option<Vec3> {
+    let frame = frames.get(set.binding[i] as usize)?;
+    Some(frame.scale * (frame.rotation * set.position[i]) + frame.center)
 }

@@ -9,6 +9,7 @@ pub mod membership;
 pub mod random;
 pub mod recipe;
 pub mod rules;
+pub mod seams;
 pub mod selection;
 pub mod smoothing;
 

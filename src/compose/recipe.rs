@@ -48,6 +48,9 @@ pub enum Smoothing {
     Thesis,
     /// A cross-fade over a band of triangles that keeps coverage exact (see `smoothing`).
     Crossfade,
+    /// Colours cross-blend over a centimetre of template surface (see
+    /// `seams`): opacity and geometry untouched, no extra Gaussians.
+    Blend,
 }
 
 /// Colour correction of regions whose Gaussians come from another source than the base.
@@ -129,7 +132,7 @@ impl PostProcess {
     /// (docs/method.md §13, README): `--pipeline ours` and the study's edited
     /// category.
     pub const BEST: PostProcess = PostProcess {
-        smoothing: Smoothing::Thesis,
+        smoothing: Smoothing::Blend,
         colour: ColourCorrection::Semantic,
         membership: Membership::Place,
     };

@@ -466,9 +466,10 @@ impl Named for Smoothing {
         (Smoothing::Off, "off"),
         (Smoothing::Thesis, "thesis"),
         (Smoothing::Crossfade, "crossfade"),
+        (Smoothing::Blend, "blend"),
     ];
     const LABEL: &'static str = "smoothing";
-    const WORDS: &'static [&'static str] = &["off", "thesis", "crossfade"];
+    const WORDS: &'static [&'static str] = &["off", "thesis", "crossfade", "blend"];
 }
 
 impl Named for ColourCorrection {
@@ -703,7 +704,7 @@ commands! {
         => "shape-add", "DELTA", "add to the selected source's weight in the selected group", Shape, edit;
     /// Set (or with `None`, cycle) border smoothing.
     Smoothing(choice: Option<Smoothing> as Choice<Smoothing>)
-        => "smoothing", "[off|thesis|crossfade]", "set or cycle border smoothing", PostProcessing, edit;
+        => "smoothing", "[off|thesis|crossfade|blend]", "set or cycle border smoothing", PostProcessing, edit;
     /// Set (or with `None`, cycle) colour correction.
     Colour(choice: Option<ColourCorrection> as Choice<ColourCorrection>)
         => "colour" | "color", "[off|thesis|skin|semantic]", "set or cycle colour correction", PostProcessing, edit;

@@ -380,7 +380,9 @@ impl EditorState {
         match command {
             Command::Smoothing(s) => {
                 post.smoothing = s.unwrap_or(match post.smoothing {
-                    Smoothing::Off => Smoothing::Thesis,
+                    // The best measured first (README, ground truth).
+                    Smoothing::Off => Smoothing::Blend,
+                    Smoothing::Blend => Smoothing::Thesis,
                     Smoothing::Thesis => Smoothing::Crossfade,
                     Smoothing::Crossfade => Smoothing::Off,
                 })

@@ -244,6 +244,36 @@ pub fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
     }
 }
 
+/// Barycentric coordinates of `p` (a point on or near the triangle's plane)
+/// in triangle (a, b, c), clamped into the triangle and summing to one.
+/// Degenerate triangles answer their centroid.
+pub fn barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> [f32; 3] {
+    // In units of the longest edge from `a`, so huge coordinates do not
+    // overflow the products below.
+    let unit = (b - a).length().max((c - a).length());
+    if unit.is_nan() || unit <= 0.0 || !unit.is_finite() {
+        return [1.0 / 3.0; 3];
+    }
+    let (ab, ac, ap) = ((b - a) / unit, (c - a) / unit, (p - a) / unit);
+    let (d00, d01, d11) = (ab.dot(ab), ab.dot(ac), ac.dot(ac));
+    let (d20, d21) = (ap.dot(ab), ap.dot(ac));
+    let denom = d00 * d11 - d01 * d01;
+    // Relative test: a sliver whose determinant is rounding noise has no
+    // meaningful coordinates.
+    if denom.is_nan() || denom <= 1e-12 * d00 * d11 || !denom.is_finite() {
+        return [1.0 / 3.0; 3];
+    }
+    let v = (d11 * d20 - d01 * d21) / denom;
+    let w = (d00 * d21 - d01 * d20) / denom;
+    let bary = [1.0 - v - w, v, w].map(|x| if x.is_finite() { x.max(0.0) } else { 0.0 });
+    let sum: f32 = bary.iter().sum();
+    if sum > 0.0 {
+        bary.map(|x| x / sum)
+    } else {
+        [1.0 / 3.0; 3]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -360,5 +390,37 @@ mod tests {
         assert_eq!(empty.nearest(Vec3::ZERO), None);
         let all_bad = TriangleGrid::new(&[Vec3::NAN; 3], &[[0, 1, 2]]);
         assert_eq!(all_bad.nearest(Vec3::ZERO), None);
+    }
+
+    #[test]
+    fn barycentric_coordinates_recover_points_and_survive_degenerate_triangles() {
+        let (a, b, c) = (Vec3::ZERO, Vec3::X, Vec3::Y);
+        let p = a * 0.2 + b * 0.3 + c * 0.5;
+        let bary = barycentric(p, a, b, c);
+        for (got, want) in bary.iter().zip([0.2, 0.3, 0.5]) {
+            assert!((got - want).abs() < 1e-6, "{bary:?}");
+        }
+        // Off the plane: the projection's coordinates.
+        let lifted = barycentric(p + Vec3::Z * 3.0, a, b, c);
+        assert!((lifted[2] - 0.5).abs() < 1e-6);
+        // Outside: clamped to the triangle, still summing to one.
+        let outside = barycentric(Vec3::new(2.0, -1.0, 0.0), a, b, c);
+        assert!(outside.iter().all(|x| *x >= 0.0));
+        assert!((outside.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        // Degenerate: a point, a line, a sliver, NaN.
+        for (a, b, c) in [
+            (Vec3::ONE, Vec3::ONE, Vec3::ONE),
+            (Vec3::ZERO, Vec3::X, Vec3::X * 2.0),
+            (Vec3::ZERO, Vec3::X, Vec3::new(0.5, 1e-9, 0.0)),
+            (Vec3::ZERO, Vec3::X, Vec3::NAN),
+        ] {
+            let bary = barycentric(Vec3::new(0.3, 0.1, 0.0), a, b, c);
+            assert!(bary.iter().all(|x| x.is_finite() && *x >= 0.0), "{bary:?}");
+            assert!((bary.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        }
+        // Huge coordinates.
+        let s = 1e15;
+        let bary = barycentric(p * s, a * s, b * s, c * s);
+        assert!((bary[1] - 0.3).abs() < 1e-3, "{bary:?}");
     }
 }

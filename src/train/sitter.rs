@@ -13,6 +13,7 @@ use crate::avatar::database::{Database, SourceAvatar};
 use crate::avatar::synthetic::surface_radiance_toned;
 use crate::compose::engine::Engine;
 use crate::compose::recipe::{Recipe, ResolvedRecipe};
+use crate::compose::seams::{SeamBlend, SeamField};
 use crate::error::Result;
 use crate::io::avatar::neutral_offset;
 use crate::model::head::HeadModel;
@@ -53,21 +54,9 @@ pub enum Seams {
     /// Each triangle wears its group's source: a hard edge.
     #[default]
     Hard,
-    /// The two sources cross-blend over [`SEAM_WIDTH`] of template surface.
+    /// The two sources cross-blend over
+    /// [`SEAM_WIDTH`](crate::compose::seams::SEAM_WIDTH) of template surface.
     Smooth,
-}
-
-/// Width of a smooth seam across a border, in template metres (half on each side).
-pub const SEAM_WIDTH: f32 = 0.01;
-
-/// Per-vertex distances to each source's triangles, for smooth seams.
-#[derive(Clone, Debug)]
-struct SeamField {
-    /// The sources that show, in order.
-    sources: Vec<u32>,
-    /// Per source (as `sources`), per vertex: template distance to the
-    /// nearest vertex of a triangle wearing it, capped at half the seam width.
-    distance: Vec<Vec<f32>>,
 }
 
 /// A capture's subject.
@@ -83,6 +72,8 @@ pub struct Sitter {
     looks: Vec<u32>,
     /// Per triangle: the source whose skin it wears.
     skins: Vec<u32>,
+    /// Whose skin the surface wears: each region's source's or the base's.
+    tone: Tone,
     seams: Option<SeamField>,
     /// What the dataset's JSON records about a composite (nothing for a source).
     pub note: Option<Value>,
@@ -103,6 +94,7 @@ impl Sitter {
             static_offset: avatar.static_offset.clone(),
             looks: vec![look as u32; triangles],
             skins: vec![look as u32; triangles],
+            tone: Tone::Source,
             seams: None,
             note: None,
         }
@@ -131,13 +123,14 @@ impl Sitter {
             Tone::Source => looks.clone(),
             Tone::Base => vec![resolved.base as u32; looks.len()],
         };
-        let seam_field = (seams == Seams::Smooth).then(|| seam_field(model, &looks));
+        let seam_field = (seams == Seams::Smooth).then(|| SeamField::new(model, &looks));
         Ok(Sitter {
             name: db.sources[resolved.base].name.clone(),
             shape: vec![0.0; model.shape_basis.len()],
             static_offset: neutral_offset(&model.template, &neutral),
             looks,
             skins,
+            tone,
             seams: seam_field,
             note: Some(json!({
                 "recipe": recipe.to_toml(),
@@ -181,26 +174,15 @@ impl Sitter {
         let Some(field) = &self.seams else {
             return own_colour;
         };
-        let half = SEAM_WIDTH / 2.0;
-        let nearest = field
-            .sources
-            .iter()
-            .zip(&field.distance)
-            .filter(|(s, _)| **s != own)
-            .map(|(s, d)| {
-                let at = (0..3).map(|k| bary[k] * d[tri[k] as usize]).sum::<f32>();
-                (*s, at)
-            })
-            .min_by(|a, b| a.1.total_cmp(&b.1));
-        let Some((other, d)) = nearest.filter(|(_, d)| *d < half) else {
+        let Some(SeamBlend { other, weight: w }) = field.blend_at(tri, bary, own) else {
             return own_colour;
         };
-        // Half of the other side's colour at the border, none at half the width.
-        let w = 0.5 * (1.0 - smoothstep(d / half));
-        let other_skin = if self.skins[t as usize] == own {
-            other
-        } else {
-            skin
+        // The other side in its own skin, or in the base's like every
+        // triangle: under `Tone::Base` the base's own triangles (where the skin
+        // is also the look) must not take the other source's skin.
+        let other_skin = match self.tone {
+            Tone::Source => other,
+            Tone::Base => skin,
         };
         let other_colour = surface_radiance_toned(
             other as usize,
@@ -214,11 +196,6 @@ impl Sitter {
     }
 }
 
-fn smoothstep(x: f32) -> f32 {
-    let x = x.clamp(0.0, 1.0);
-    x * x * (3.0 - 2.0 * x)
-}
-
 /// True when every group takes its Gaussians and its whole shape from the base.
 pub fn is_unedited(recipe: &ResolvedRecipe) -> bool {
     let base_only = |row: &Vec<f64>| {
@@ -227,53 +204,6 @@ pub fn is_unedited(recipe: &ResolvedRecipe) -> bool {
             .all(|(f, &w)| w == if f == recipe.base { 1.0 } else { 0.0 })
     };
     recipe.gaussians.iter().all(|&g| g == recipe.base) && recipe.shape.iter().all(base_only)
-}
-
-/// For each source a triangle wears, every vertex's template distance to the
-/// nearest vertex of its triangles, capped at half the seam width (a grid of
-/// cells that size keeps the search to the neighbouring cells).
-fn seam_field(model: &HeadModel, looks: &[u32]) -> SeamField {
-    let half = SEAM_WIDTH / 2.0;
-    let mut sources: Vec<u32> = looks.to_vec();
-    sources.sort_unstable();
-    sources.dedup();
-    let cell = |p: Vec3| (p / half).floor().as_ivec3();
-    let mut distance = Vec::with_capacity(sources.len());
-    for &s in &sources {
-        let mut grid: std::collections::HashMap<glam::IVec3, Vec<u32>> = Default::default();
-        for (t, tri) in model.triangles.iter().enumerate() {
-            if looks[t] == s {
-                for &v in tri {
-                    grid.entry(cell(model.template[v as usize]))
-                        .or_default()
-                        .push(v);
-                }
-            }
-        }
-        let d: Vec<f32> = model
-            .template
-            .iter()
-            .map(|&p| {
-                let c = cell(p);
-                let mut best = half;
-                for dx in -1..=1 {
-                    for dy in -1..=1 {
-                        for dz in -1..=1 {
-                            let Some(list) = grid.get(&(c + glam::IVec3::new(dx, dy, dz))) else {
-                                continue;
-                            };
-                            for &v in list {
-                                best = best.min(p.distance(model.template[v as usize]));
-                            }
-                        }
-                    }
-                }
-                best
-            })
-            .collect();
-        distance.push(d);
-    }
-    SeamField { sources, distance }
 }
 
 impl Tone {
@@ -308,6 +238,7 @@ impl Seams {
 mod tests {
     use super::*;
     use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
+    use crate::compose::seams::SEAM_WIDTH;
 
     fn db() -> Database {
         builtin_database(
@@ -357,12 +288,12 @@ mod tests {
             assert_eq!(s.look_of(t as u32), if *r == nose { 2 } else { 0 });
         }
         let field = s.seams.as_ref().unwrap();
-        let cleo = field.sources.iter().position(|&x| x == 2).unwrap();
+        let (to_cleo, to_ada) = (field.distances(2).unwrap(), field.distances(0).unwrap());
         let on_border = (0..model.vertex_count())
-            .find(|&v| field.distance[cleo][v] == 0.0 && field.distance[0][v] == 0.0)
+            .find(|&v| to_cleo[v] == 0.0 && to_ada[v] == 0.0)
             .expect("a vertex on the nose's border");
         assert!(
-            field.distance[cleo].iter().any(|&d| d == SEAM_WIDTH / 2.0),
+            to_cleo.iter().any(|&d| d == SEAM_WIDTH / 2.0),
             "far vertices are capped"
         );
         // A triangle of ada's touching the border vertex: half-blended there.
@@ -388,6 +319,15 @@ mod tests {
         let cleo_c = surface_radiance_toned(2, 2, region, texel, Vec3::Z, 1.0);
         for c in 0..3 {
             assert!((shaded[c] - 0.5 * (ada[c] + cleo_c[c])).abs() < 1e-5);
+        }
+        // In the base's tone, the base's side of the seam blends towards
+        // cleo's look in the base's skin, never cleo's own skin.
+        let toned = Sitter::composite(&db, &recipe, Tone::Base, Seams::Smooth).unwrap();
+        let shaded = toned.shade(model, &point);
+        let cleo_in_ada = surface_radiance_toned(2, 0, region, texel, Vec3::Z, 1.0);
+        assert!(cleo_in_ada != cleo_c, "the two skins differ here");
+        for c in 0..3 {
+            assert!((shaded[c] - 0.5 * (ada[c] + cleo_in_ada[c])).abs() < 1e-5);
         }
     }
 }
