@@ -54,7 +54,7 @@ pub struct CompositesBenchArgs {
     border_px: u32,
     /// Whose post-processing the composites get: as each recipe says, the
     /// thesis's (membership by parent triangle, thesis smoothing and colour),
-    /// or ours (the best measured: by place, thesis smoothing, semantic colour).
+    /// or ours (the best measured: by place, colour seams, semantic colour).
     #[arg(long, value_enum, default_value = "recipe")]
     pipeline: Pipeline,
     /// Print one JSON document.
