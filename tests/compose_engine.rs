@@ -810,3 +810,53 @@ fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
     assert!(moved > 50, "{moved} Gaussians moved");
     assert!(halfway > 5, "{halfway} Gaussians at the border");
 }
+
+/// `deform = "affine"` (method §6.7): Gaussians follow their triangles'
+/// whole reshaping. Where no triangle changes shape nothing moves; a shape
+/// weight of 1.0 on a very different face moves Gaussians but not their
+/// count, opacity or colour, leaves no NaN, and a shape edit rebuilds them.
+#[test]
+fn affine_deformation_follows_reshaped_triangles_and_only_them() {
+    use visage::compose::recipe::Deform;
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.post.deform = Deform::Affine;
+    let unedited = e.compose(&resolve(e, &r));
+    r.post.deform = Deform::Similarity;
+    let plain = e.compose(&resolve(e, &r));
+    assert_eq!(unedited.gaussians.position, plain.gaussians.position);
+    assert_eq!(unedited.gaussians.log_scale, plain.gaussians.log_scale);
+
+    // The base's Gaussians on another face entirely.
+    all_groups(&mut r, &n[0], &[(&n[3], 1.0)]);
+    let similar = e.compose(&resolve(e, &r));
+    r.post.deform = Deform::Affine;
+    let affine = e.compose(&resolve(e, &r));
+    let (a, b) = (&similar.gaussians, &affine.gaussians);
+    assert_eq!(a.len(), b.len());
+    assert_eq!(a.binding, b.binding);
+    assert_eq!(a.opacity_logit, b.opacity_logit);
+    assert_eq!(a.sh, b.sh);
+    assert!(b.position.iter().all(|p| p.is_finite()));
+    assert!(b.rotation.iter().all(|q| q.is_finite()));
+    assert!(b.log_scale.iter().all(|s| s.is_finite()));
+    let moved = (0..a.len())
+        .filter(|&i| a.log_scale[i] != b.log_scale[i])
+        .count();
+    assert!(moved > a.len() / 2, "{moved} of {} reshaped", a.len());
+    // Posed, the scene stays finite.
+    let mut posed = PosedMesh::default();
+    e.pose(&affine, 0, &mut posed);
+    assert!(e.scene(&affine, &posed).scale.iter().all(|s| s.is_finite()));
+
+    // A shape edit rebuilds the Gaussians only when they follow the shape.
+    let mut next = resolve(e, &r);
+    next.shape[Group::Nose.index()] = vec![0.5, 0.0, 0.0, 0.5];
+    let mut c = affine.clone();
+    assert!(e.update(&mut c, &next).gaussians);
+    let mut c = similar.clone();
+    let mut next_similar = next.clone();
+    next_similar.post.deform = Deform::Similarity;
+    assert!(!e.update(&mut c, &next_similar).gaussians);
+}

@@ -12,7 +12,7 @@ use super::DbArgs;
 use crate::compose::blend::Blender;
 use crate::compose::engine::{Engine, PosedMesh};
 use crate::compose::recipe::{
-    AnimationMode, ColourCorrection, Membership, PostProcess, ResolvedRecipe, Smoothing,
+    AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe, Smoothing,
 };
 use crate::error::{Error, Result};
 use crate::model::regions::Group;
@@ -213,6 +213,7 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
         smoothing: Smoothing::Crossfade,
         colour: ColourCorrection::Skin,
         membership: Membership::Place,
+        deform: Deform::Similarity,
     };
     for &n in &args.sources {
         // A composite drawing on all n sources: random shape weights and assignment.

@@ -102,6 +102,7 @@ struct Means {
     border_psnr_db: f64,
     interior_psnr_db: f64,
     leak_percent: f64,
+    holes_percent: f64,
     skin_delta_e: f64,
     non_skin_delta_e: f64,
 }
@@ -315,6 +316,7 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
             border_psnr_db: mean_of(&|r| r.border.psnr_db),
             interior_psnr_db: mean_of(&|r| r.interior.psnr_db),
             leak_percent: mean_of(&|r| 100.0 * r.leak.mean),
+            holes_percent: mean_of(&|r| 100.0 * r.holes),
             skin_delta_e: mean_of(&|r| r.skin.delta_e),
             non_skin_delta_e: mean_of(&|r| r.non_skin.delta_e),
         },

@@ -88,6 +88,10 @@ fn print_report(r: &CompositeReport) {
         100.0 * r.leak.over_5_percent,
         r.leak.pixels
     );
+    println!(
+        "  holes            {:.2} % of head px covered less than half",
+        100.0 * r.holes
+    );
     println!("groups (source; PSNR against the ceiling of that source on itself):");
     for g in &r.groups {
         println!(

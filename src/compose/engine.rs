@@ -12,8 +12,11 @@ use super::colour::{
     apply_gain, blend_towards, colour_weight, semantic_skin_gain, skin_stats, skin_transfer_gain,
     thesis_gain, weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
 };
+use super::deform::{apply_local_map, local_map};
 use super::membership::placements;
-use super::recipe::{AnimationMode, ColourCorrection, Membership, ResolvedRecipe, Smoothing};
+use super::recipe::{
+    AnimationMode, ColourCorrection, Deform, Membership, ResolvedRecipe, Smoothing,
+};
 use super::seams::{SeamField, SeamNeighbours, SEAM_WIDTH};
 use super::selection::{Csr, SelectionTables};
 use super::smoothing::{own_share, split_opacity, BorderTables};
@@ -218,6 +221,11 @@ impl Engine {
             gaussians: old.gaussians != recipe.gaussians
                 || old.base != recipe.base
                 || old.post != recipe.post,
+        };
+        // Gaussians that follow their triangles' reshaping depend on the shape.
+        let changes = Changes {
+            gaussians: changes.gaussians || (changes.shape && recipe.post.deform == Deform::Affine),
+            ..changes
         };
         if changes.shape {
             let (neutral, residual) = self.blend_neutral(recipe);
@@ -533,6 +541,43 @@ impl Engine {
                     });
                 }
             }
+        }
+        if recipe.post.deform == Deform::Affine {
+            self.follow_reshaped_triangles(composite);
+        }
+    }
+
+    /// Maps every Gaussian of the composite whose parent triangle the blend
+    /// reshaped by that triangle's local deformation (method §6.7): from its
+    /// source's neutral triangle to the composite's.
+    fn follow_reshaped_triangles(&self, composite: &mut Composite) {
+        let model = &self.db.model;
+        let corners = |mesh: &[Vec3], t: &[u32; 3]| t.map(|v| mesh[v as usize]);
+        let mut maps: HashMap<usize, Vec<Option<glam::DMat3>>> = HashMap::new();
+        for block in &composite.blocks {
+            maps.entry(block.source).or_insert_with(|| {
+                let source = &self.neutrals[block.source];
+                model
+                    .triangles
+                    .par_iter()
+                    .map(|t| local_map(corners(source, t), corners(&composite.neutral, t)))
+                    .collect()
+            });
+        }
+        let set = &mut composite.gaussians;
+        for block in &composite.blocks {
+            let maps = &maps[&block.source];
+            let range = block.start..block.end;
+            set.position[range.clone()]
+                .par_iter_mut()
+                .zip(&mut set.rotation[range.clone()])
+                .zip(&mut set.log_scale[range.clone()])
+                .zip(&set.binding[range])
+                .for_each(|(((p, q), s), &t)| {
+                    if let Some(Some(map)) = maps.get(t as usize) {
+                        apply_local_map(map, p, q, s);
+                    }
+                });
         }
     }
 

@@ -4,6 +4,7 @@
 pub mod blend;
 pub mod colour;
 pub mod composition;
+pub mod deform;
 pub mod engine;
 pub mod membership;
 pub mod random;

@@ -84,6 +84,20 @@ pub enum Membership {
     Place,
 }
 
+/// How a source's Gaussians follow a triangle whose shape the blend changed
+/// (docs/method.md §6.7).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Deform {
+    /// GaussianAvatars and the thesis: the triangle's rotation and one
+    /// scale (its size), the same along every axis, the normal included.
+    #[default]
+    Similarity,
+    /// The triangle's whole in-plane stretch and shear, and along the normal
+    /// the square root of its area's change.
+    Affine,
+}
+
 /// How the composite is animated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -118,6 +132,9 @@ pub struct PostProcess {
     /// Which Gaussians count for a region.
     #[serde(skip_serializing_if = "is_default_membership")]
     pub membership: Membership,
+    /// How Gaussians follow a reshaped triangle.
+    #[serde(skip_serializing_if = "is_default_deform")]
+    pub deform: Deform,
 }
 
 impl PostProcess {
@@ -127,6 +144,7 @@ impl PostProcess {
         smoothing: Smoothing::Thesis,
         colour: ColourCorrection::Thesis,
         membership: Membership::Parent,
+        deform: Deform::Similarity,
     };
     /// The post-processing that measured best against ground truth
     /// (docs/method.md §13, README): `--pipeline ours` and the study's edited
@@ -135,6 +153,7 @@ impl PostProcess {
         smoothing: Smoothing::Blend,
         colour: ColourCorrection::Semantic,
         membership: Membership::Place,
+        deform: Deform::Similarity,
     };
 }
 
@@ -142,8 +161,12 @@ fn is_default_membership(m: &Membership) -> bool {
     *m == Membership::default()
 }
 
-/// Prints like a derived `Debug`, leaving `membership` out while it is the
-/// default: state hashes (which hash the recipe's `Debug` text) of recorded
+fn is_default_deform(d: &Deform) -> bool {
+    *d == Deform::default()
+}
+
+/// Prints like a derived `Debug`, leaving `membership` and `deform` out while
+/// they are the defaults: state hashes (which hash the recipe's `Debug` text) of recorded
 /// sessions stay what they were before the field existed.
 impl std::fmt::Debug for PostProcess {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -152,6 +175,9 @@ impl std::fmt::Debug for PostProcess {
             .field("colour", &self.colour);
         if self.membership != Membership::default() {
             d.field("membership", &self.membership);
+        }
+        if self.deform != Deform::default() {
+            d.field("deform", &self.deform);
         }
         d.finish()
     }

@@ -12,7 +12,7 @@ use std::fmt;
 use std::iter::Peekable;
 use std::str::SplitWhitespace;
 
-use crate::compose::recipe::{AnimationMode, ColourCorrection, Membership, Smoothing};
+use crate::compose::recipe::{AnimationMode, ColourCorrection, Deform, Membership, Smoothing};
 use crate::model::regions::Group;
 use crate::scene::camera::CameraOverrides;
 
@@ -490,6 +490,15 @@ impl Named for Membership {
     const WORDS: &'static [&'static str] = &["parent", "place"];
 }
 
+impl Named for Deform {
+    const NAMES: &'static [(Self, &'static str)] = &[
+        (Deform::Similarity, "similarity"),
+        (Deform::Affine, "affine"),
+    ];
+    const LABEL: &'static str = "deform";
+    const WORDS: &'static [&'static str] = &["similarity", "affine"];
+}
+
 impl Named for AnimationMode {
     const NAMES: &'static [(Self, &'static str)] = &[
         (AnimationMode::Fast, "fast"),
@@ -711,6 +720,9 @@ commands! {
     /// Set (or with `None`, toggle) which Gaussians count for a region.
     Membership(choice: Option<Membership> as Choice<Membership>)
         => "membership", "[parent|place]", "count Gaussians for a region by parent triangle or by place", PostProcessing, edit;
+    /// Set (or with `None`, toggle) how Gaussians follow a reshaped triangle.
+    Deform(choice: Option<Deform> as Choice<Deform>)
+        => "deform", "[similarity|affine]", "Gaussians follow a reshaped triangle's size or its whole stretch", PostProcessing, edit;
     /// Drive the composite with a motion ("rest" for none).
     Motion(motion: String as MotionName) => "motion", "NAME|rest", "drive the composite with a motion", Animation, edit;
     /// Switch to the next motion.
@@ -867,6 +879,8 @@ mod tests {
             "colour semantic",
             "membership parent",
             "membership",
+            "deform affine",
+            "deform",
             "motion talk",
             "next-motion",
             "play",

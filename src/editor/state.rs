@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use crate::compose::recipe::{
-    AnimationMode, ColourCorrection, GroupEdit, Membership, Recipe, Smoothing,
+    AnimationMode, ColourCorrection, Deform, GroupEdit, Membership, Recipe, Smoothing,
 };
 use crate::model::regions::Group;
 use crate::pipeline::workbench::DebugView;
@@ -374,7 +374,8 @@ impl EditorState {
         Ok(Applied::default())
     }
 
-    /// Border smoothing, colour correction and region membership.
+    /// Border smoothing, colour correction, region membership and how
+    /// Gaussians follow reshaped triangles.
     fn update_post(&mut self, command: &Command) -> Result<Applied, String> {
         let post = &mut self.recipe.post;
         match command {
@@ -400,6 +401,12 @@ impl EditorState {
                 post.membership = m.unwrap_or(match post.membership {
                     Membership::Parent => Membership::Place,
                     Membership::Place => Membership::Parent,
+                })
+            }
+            Command::Deform(d) => {
+                post.deform = d.unwrap_or(match post.deform {
+                    Deform::Similarity => Deform::Affine,
+                    Deform::Affine => Deform::Similarity,
                 })
             }
             other => return Err(misrouted(other)),

@@ -2,7 +2,7 @@
 //! anisotropic Gaussian bumps evaluated in head space (metres, y up, +z forward,
 //! +x towards the subject's left).
 
-use glam::Vec3;
+use glam::{DMat3, DVec3, Vec3};
 
 /// Hermite smoothstep from `edge0` to `edge1` (either order), clamped to [0, 1].
 pub fn smoothstep(edge0: f32, edge1: f32, x: f32) -> f32 {
@@ -104,6 +104,53 @@ fn lattice_hash(x: i32, y: i32, z: i32, seed: u32) -> f32 {
     h = h.wrapping_mul(0x297a_2d39);
     h ^= h >> 15;
     (h >> 8) as f32 / (1u32 << 24) as f32
+}
+
+/// Eigenvalues (descending) and orthonormal eigenvectors (as columns, in
+/// the same order) of a symmetric 3×3 matrix, by cyclic Jacobi rotations:
+/// exact to rounding for repeated eigenvalues and flat (rank-deficient)
+/// inputs alike; near-diagonal inputs take one or two sweeps.
+pub fn symmetric_eigen(m: [[f64; 3]; 3]) -> ([f64; 3], DMat3) {
+    let mut a = m;
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _sweep in 0..50 {
+        let off = a[0][1].powi(2) + a[0][2].powi(2) + a[1][2].powi(2);
+        let scale = a[0][0].powi(2) + a[1][1].powi(2) + a[2][2].powi(2);
+        if off <= 1e-30 * scale.max(1e-300) {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q].abs() < 1e-300 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
+            for row in a.iter_mut() {
+                let (akp, akq) = (row[p], row[q]);
+                row[p] = c * akp - s * akq;
+                row[q] = s * akp + c * akq;
+            }
+            let (row_p, row_q) = (a[p], a[q]);
+            for k in 0..3 {
+                a[p][k] = c * row_p[k] - s * row_q[k];
+                a[q][k] = s * row_p[k] + c * row_q[k];
+            }
+            for row in v.iter_mut() {
+                let (vp, vq) = (row[p], row[q]);
+                row[p] = c * vp - s * vq;
+                row[q] = s * vp + c * vq;
+            }
+        }
+    }
+    let mut order = [0, 1, 2];
+    order.sort_by(|&i, &j| a[j][j].total_cmp(&a[i][i]));
+    let column = |k: usize| DVec3::new(v[0][k], v[1][k], v[2][k]).normalize();
+    (
+        order.map(|k| a[k][k]),
+        DMat3::from_cols(column(order[0]), column(order[1]), column(order[2])),
+    )
 }
 
 #[cfg(test)]

@@ -115,8 +115,13 @@ pub struct ViewQuality {
     pub timestep: usize,
     /// The rig camera.
     pub camera: usize,
+    /// The camera's yaw about the head's up axis (0 in front, + to the
+    /// subject's left), degrees.
+    pub yaw_deg: f64,
     /// Over the head.
     pub quality: Quality,
+    /// Share of head pixels the composite covers less than half (0-1).
+    pub holes: f64,
 }
 
 /// One group's figures.
@@ -195,6 +200,9 @@ pub struct CompositeReport {
     pub non_skin: Quality,
     /// Leak at interior pixels.
     pub leak: Leak,
+    /// Share of head pixels, over all views, that the composite covers less
+    /// than half (holes, 0-1).
+    pub holes: f64,
     /// The ceiling: every group as good as its source on itself, combined.
     pub ceiling: Quality,
     /// Each source's own figures.
@@ -282,6 +290,8 @@ fn steps(recipe: &Recipe) -> Vec<(&'static str, Recipe)> {
         smoothing: Smoothing::Off,
         colour: ColourCorrection::Off,
         membership: recipe.post.membership,
+        // How Gaussians follow the blended shape belongs to the +shape step.
+        deform: recipe.post.deform,
     };
     let mut shape = recipe.clone();
     shape.post = swap.post;
@@ -550,6 +560,7 @@ pub fn evaluate_variants(
     let mut source_sums = vec![Sums::default(); own.len()];
     let mut step_sums = vec![[Sums::default(); 5]; variants.len()];
     let (mut leak_sum, mut leak_over, mut leak_pixels) = (0.0, 0usize, 0usize);
+    let (mut hole_pixels, mut head_pixels) = (0usize, 0usize);
     let mut pictures = Vec::new();
 
     for (split, view) in &views {
@@ -603,6 +614,11 @@ pub fn evaluate_variants(
                 )
             })
             .collect();
+        // Holes: head pixels the composite's opacity leaves more than half open.
+        let head: Vec<usize> = (0..labels.head.len()).filter(|&p| labels.head[p]).collect();
+        let view_holes = head.iter().filter(|&&p| everything[3 * p] < 0.5).count();
+        hole_pixels += view_holes;
+        head_pixels += head.len();
         for p in (0..labels.head.len()).filter(|&p| labels.head[p] && !labels.band[p]) {
             let total = everything[3 * p];
             if total < 0.5 {
@@ -654,7 +670,9 @@ pub fn evaluate_variants(
             split,
             timestep: view.timestep,
             camera: view.camera_index,
+            yaw_deg: camera.eye[0].atan2(camera.eye[2]).to_degrees(),
             quality: view_sums.quality(),
+            holes: view_holes as f64 / head.len().max(1) as f64,
         });
     }
     let mut ceiling = Sums::default();
@@ -685,6 +703,7 @@ pub fn evaluate_variants(
             over_5_percent: leak_over as f64 / leak_pixels.max(1) as f64,
             pixels: leak_pixels,
         },
+        holes: hole_pixels as f64 / head_pixels.max(1) as f64,
         ceiling: ceiling.quality(),
         sources: own
             .iter()

@@ -11,6 +11,7 @@ use super::project::{project, Geometry, TrainCamera};
 use super::raster::Splat;
 use crate::avatar::binding::TriangleFrame;
 use crate::error::{Error, Result};
+use crate::model::geometry::symmetric_eigen;
 
 /// The obscuring Gaussian's scale: the head box's extents times this (the
 /// thesis's empirical constant).
@@ -136,7 +137,7 @@ pub fn oriented_box(points: &[Vec3]) -> Option<OrientedBox> {
             }
         }
     }
-    let mut axes = symmetric_eigenvectors(covariance);
+    let (_, mut axes) = symmetric_eigen(covariance);
     axes.z_axis = axes.x_axis.cross(axes.y_axis);
     let (mut low, mut high) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
     for p in points {
@@ -149,49 +150,6 @@ pub fn oriented_box(points: &[Vec3]) -> Option<OrientedBox> {
         axes,
         extents: high - low,
     })
-}
-
-/// Orthonormal eigenvectors (columns, by descending eigenvalue) of a
-/// symmetric 3×3 matrix, by cyclic Jacobi rotations: exact to rounding for
-/// repeated eigenvalues and flat (rank-deficient) inputs alike.
-fn symmetric_eigenvectors(m: [[f64; 3]; 3]) -> DMat3 {
-    let mut a = m;
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    for _sweep in 0..50 {
-        let off = a[0][1].powi(2) + a[0][2].powi(2) + a[1][2].powi(2);
-        let scale = a[0][0].powi(2) + a[1][1].powi(2) + a[2][2].powi(2);
-        if off <= 1e-30 * scale.max(1e-300) {
-            break;
-        }
-        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
-            if a[p][q].abs() < 1e-300 {
-                continue;
-            }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let t = if theta == 0.0 { 1.0 } else { t };
-            let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
-            for row in a.iter_mut() {
-                let (akp, akq) = (row[p], row[q]);
-                row[p] = c * akp - s * akq;
-                row[q] = s * akp + c * akq;
-            }
-            let (row_p, row_q) = (a[p], a[q]);
-            for k in 0..3 {
-                a[p][k] = c * row_p[k] - s * row_q[k];
-                a[q][k] = s * row_p[k] + c * row_q[k];
-            }
-            for row in v.iter_mut() {
-                let (vp, vq) = (row[p], row[q]);
-                row[p] = c * vp - s * vq;
-                row[q] = s * vp + c * vq;
-            }
-        }
-    }
-    let mut order = [0, 1, 2];
-    order.sort_by(|&i, &j| a[j][j].total_cmp(&a[i][i]));
-    let column = |k: usize| DVec3::new(v[0][k], v[1][k], v[2][k]).normalize();
-    DMat3::from_cols(column(order[0]), column(order[1]), column(order[2]))
 }
 
 /// The obscuring Gaussian of a posed head's box as drawn by `camera` at

@@ -445,11 +445,12 @@ fn composite_sections(vm: &ViewModel) -> Vec<Section> {
         section(
             "post",
             vec![format!(
-                " base {} smoothing {} colour {} regions by {}",
+                " base {} smoothing {} colour {} regions by {} deform {}",
                 r.base,
                 lower(&r.post.smoothing),
                 lower(&r.post.colour),
                 lower(&r.post.membership),
+                lower(&r.post.deform),
             )],
         ),
         section(
