@@ -188,6 +188,21 @@ fn an_edited_composite_reports_regions_band_leak_ceiling_and_steps() {
         groups.contains(&"nose") && groups.contains(&"mouth"),
         "{groups:?}"
     );
+    // Open- and closed-mouth views split the head's pixels between them;
+    // holes are a share; every view knows its yaw and its jaw.
+    let px = |q: &serde_json::Value| q["pixels"].as_u64().unwrap();
+    assert_eq!(
+        px(&report["open_mouth"]) + px(&report["closed_mouth"]),
+        px(&report["quality"])
+    );
+    let holes = report["holes"].as_f64().unwrap();
+    assert!((0.0..0.5).contains(&holes), "{holes}");
+    for view in report["per_view"].as_array().unwrap() {
+        let yaw = view["yaw_deg"].as_f64().unwrap();
+        assert!(yaw.abs() < 90.0, "a frontal rig: {yaw}");
+        assert!(view["jaw_deg"].as_f64().unwrap() >= 0.0);
+    }
+    assert!(text.contains("open mouth") && text.contains("holes"), "{text}");
     // The exported built-in avatars are the people themselves (6000 Gaussians
     // each, seen at 40x40: far from a trained avatar's fidelity, but alike).
     assert!(

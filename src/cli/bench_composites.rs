@@ -103,6 +103,8 @@ struct Means {
     interior_psnr_db: f64,
     leak_percent: f64,
     holes_percent: f64,
+    open_mouth_psnr_db: f64,
+    closed_mouth_psnr_db: f64,
     skin_delta_e: f64,
     non_skin_delta_e: f64,
 }
@@ -317,6 +319,8 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
             interior_psnr_db: mean_of(&|r| r.interior.psnr_db),
             leak_percent: mean_of(&|r| 100.0 * r.leak.mean),
             holes_percent: mean_of(&|r| 100.0 * r.holes),
+            open_mouth_psnr_db: mean_of(&|r| r.open_mouth.psnr_db),
+            closed_mouth_psnr_db: mean_of(&|r| r.closed_mouth.psnr_db),
             skin_delta_e: mean_of(&|r| r.skin.delta_e),
             non_skin_delta_e: mean_of(&|r| r.non_skin.delta_e),
         },
@@ -401,5 +405,11 @@ fn print_table(b: &CompositesBench) {
             m.non_skin_delta_e,
         ],
         String::new(),
+    );
+    println!(
+        "open-mouth views {:.2} dB, closed-mouth views {:.2} dB (means; {holes:.2} % of head pixels are holes)",
+        m.open_mouth_psnr_db,
+        m.closed_mouth_psnr_db,
+        holes = m.holes_percent
     );
 }

@@ -92,6 +92,8 @@ fn print_report(r: &CompositeReport) {
         "  holes            {:.2} % of head px covered less than half",
         100.0 * r.holes
     );
+    println!("{}", row("open mouth", &r.open_mouth));
+    println!("{}", row("closed mouth", &r.closed_mouth));
     println!("groups (source; PSNR against the ceiling of that source on itself):");
     for g in &r.groups {
         println!(

@@ -51,6 +51,9 @@ pub struct Engine {
     placements: Vec<[OnceLock<Vec<[f32; 3]>>; 2]>,
     /// The template's seam neighbourhoods, computed on first use.
     seam_neighbours: OnceLock<SeamNeighbours>,
+    /// `[source]` → each Gaussian's weight in a mean colour (method §7.5),
+    /// computed on first use by colour seams.
+    colour_weights: Vec<OnceLock<Vec<f32>>>,
 }
 
 /// What a set of skin-transfer gains depends on: the source, the colour
@@ -165,6 +168,7 @@ impl Engine {
                 .flat_map(|(t, tri)| tri.map(|v| (v as usize, t as u32))),
         );
         let placements = db.sources.iter().map(|_| Default::default()).collect();
+        let source_count = db.sources.len();
         Ok(Self {
             db,
             tables,
@@ -178,6 +182,7 @@ impl Engine {
             vertex_triangles,
             placements,
             seam_neighbours: OnceLock::new(),
+            colour_weights: (0..source_count).map(|_| OnceLock::new()).collect(),
         })
     }
 
@@ -374,6 +379,17 @@ impl Engine {
                 &self.neutrals[f],
                 counted,
             )
+        })
+    }
+
+    /// Each Gaussian of source `f`'s weight in a mean colour.
+    fn colour_weights_of(&self, f: usize) -> &[f32] {
+        self.colour_weights[f].get_or_init(|| {
+            let set = &self.db.sources[f].gaussians;
+            (0..set.len())
+                .into_par_iter()
+                .map(|i| colour_weight(set, i))
+                .collect()
         })
     }
 
@@ -697,6 +713,7 @@ impl<'a> SeamColours<'a> {
         let membership = self.recipe.post.membership;
         let set = &engine.db.sources[s].gaussians;
         let bary = engine.placements_of(membership, s);
+        let weights = engine.colour_weights_of(s);
         let model = &engine.db.model;
         let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
         for &t in engine.vertex_triangles.row(v as usize) {
@@ -709,7 +726,7 @@ impl<'a> SeamColours<'a> {
                 .or_insert_with(|| engine.correction(self.recipe, region, s));
             for &j in engine.tables.triangle(membership, s, t) {
                 let j = j as usize;
-                let w = colour_weight(set, j) * bary[j][corner];
+                let w = weights[j] * bary[j][corner];
                 if w <= 0.0 {
                     continue;
                 }

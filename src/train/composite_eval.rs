@@ -31,7 +31,7 @@ use crate::compose::recipe::{
 };
 use crate::error::{Error, Result};
 use crate::io::avatar::read_flame_params;
-use crate::model::head::{HeadModel, Pose};
+use crate::model::head::{HeadModel, Joint, Pose};
 use crate::model::regions::{Group, Region};
 use crate::render::image::RgbImage;
 
@@ -106,6 +106,10 @@ impl Sums {
     }
 }
 
+/// A jaw opened at least this far (degrees) counts as an open mouth: the
+/// talk motion's syllables open it up to ~9°, its pauses leave it under 1°.
+pub const OPEN_MOUTH_DEG: f64 = 3.0;
+
 /// One view's figures.
 #[derive(Clone, Debug, Serialize)]
 pub struct ViewQuality {
@@ -122,6 +126,8 @@ pub struct ViewQuality {
     pub quality: Quality,
     /// Share of head pixels the composite covers less than half (0-1).
     pub holes: f64,
+    /// The jaw's opening at this timestep, degrees.
+    pub jaw_deg: f64,
 }
 
 /// One group's figures.
@@ -203,6 +209,10 @@ pub struct CompositeReport {
     /// Share of head pixels, over all views, that the composite covers less
     /// than half (holes, 0-1).
     pub holes: f64,
+    /// Over the views whose jaw is open at least [`OPEN_MOUTH_DEG`].
+    pub open_mouth: Quality,
+    /// Over the other views.
+    pub closed_mouth: Quality,
     /// The ceiling: every group as good as its source on itself, combined.
     pub ceiling: Quality,
     /// Each source's own figures.
@@ -561,6 +571,7 @@ pub fn evaluate_variants(
     let mut step_sums = vec![[Sums::default(); 5]; variants.len()];
     let (mut leak_sum, mut leak_over, mut leak_pixels) = (0.0, 0usize, 0usize);
     let (mut hole_pixels, mut head_pixels) = (0usize, 0usize);
+    let mut mouth_sums = [Sums::default(); 2];
     let mut pictures = Vec::new();
 
     for (split, view) in &views {
@@ -665,6 +676,8 @@ pub fn evaluate_variants(
             }
         }
         overall.merge(&view_sums);
+        let jaw_deg = (t.pose.joints[Joint::Jaw as usize].length() as f64).to_degrees();
+        mouth_sums[usize::from(jaw_deg >= OPEN_MOUTH_DEG)].merge(&view_sums);
         splits.entry(*split).or_default().merge(&view_sums);
         per_view.push(ViewQuality {
             split,
@@ -673,6 +686,7 @@ pub fn evaluate_variants(
             yaw_deg: camera.eye[0].atan2(camera.eye[2]).to_degrees(),
             quality: view_sums.quality(),
             holes: view_holes as f64 / head.len().max(1) as f64,
+            jaw_deg,
         });
     }
     let mut ceiling = Sums::default();
@@ -704,6 +718,8 @@ pub fn evaluate_variants(
             pixels: leak_pixels,
         },
         holes: hole_pixels as f64 / head_pixels.max(1) as f64,
+        open_mouth: mouth_sums[1].quality(),
+        closed_mouth: mouth_sums[0].quality(),
         ceiling: ceiling.quality(),
         sources: own
             .iter()
