@@ -202,7 +202,10 @@ fn an_edited_composite_reports_regions_band_leak_ceiling_and_steps() {
         assert!(yaw.abs() < 90.0, "a frontal rig: {yaw}");
         assert!(view["jaw_deg"].as_f64().unwrap() >= 0.0);
     }
-    assert!(text.contains("open mouth") && text.contains("holes"), "{text}");
+    assert!(
+        text.contains("open mouth") && text.contains("holes"),
+        "{text}"
+    );
     // The exported built-in avatars are the people themselves (6000 Gaussians
     // each, seen at 40x40: far from a trained avatar's fidelity, but alike).
     assert!(

@@ -214,8 +214,6 @@ pub fn holds_no_skin(region: Region) -> bool {
             | Region::TeethUpper
             | Region::TeethLower
             | Region::LipsInside
-            | Region::LeftEyeSocket
-            | Region::RightEyeSocket
             | Region::Hair
     )
 }
@@ -254,9 +252,10 @@ pub fn semantic_skin_gain(dc: [f32; 3], region: Region, from: &SkinStats, to: &S
     transfer_gain(rgb, lab, k, from, to)
 }
 
-/// Regions that are skin but for small details (face, nose, ears, neck): the
-/// likeness of the skin mode decides there; elsewhere (lips, eye regions,
-/// the hairline, the collar) the strict one.
+/// Regions that are skin but for small details (face, nose, ears, neck, the
+/// eye sockets — the lids round the eyeball): the likeness of the skin mode
+/// decides there; elsewhere (lips, eye regions, the hairline, the collar)
+/// the strict one.
 fn mostly_skin(region: Region) -> bool {
     matches!(
         region,
@@ -409,6 +408,18 @@ mod tests {
         let brow = Vec3::new(0.2, 0.14, 0.1);
         let gain = semantic_skin_gain(dc(brow), Region::LeftEyeRegion, &from, &to);
         assert_eq!(gain, Vec3::ONE);
+        // Eye sockets are the lids' skin round the eyeball (FLAME's sockets
+        // are every triangle within two eyeball radii): skin there moves,
+        // the pink inside of a built-in socket does not.
+        for region in [Region::LeftEyeSocket, Region::RightEyeSocket] {
+            let got = corrected(light, semantic_skin_gain(dc(light), region, &from, &to));
+            assert!(
+                (srgb_to_lab(got) - srgb_to_lab(dark)).length() < 2.0,
+                "{got}"
+            );
+            let pink = Vec3::new(0.62, 0.30, 0.30);
+            assert_eq!(semantic_skin_gain(dc(pink), region, &from, &to), Vec3::ONE);
+        }
     }
 
     #[test]

@@ -65,7 +65,7 @@ pub enum ColourCorrection {
     /// Mean and spread transfer in CIELAB on skin-coloured Gaussians only.
     Skin,
     /// The same transfer on skin only by what it is: never in regions that
-    /// hold no skin (eyeballs, teeth, the mouth's inside, eye sockets, hair),
+    /// hold no skin (eyeballs, teeth, the mouth's inside, hair),
     /// and elsewhere only where a Gaussian's colour is close to its source's
     /// own skin (lips, brows, lashes and beards keep theirs).
     Semantic,
