@@ -138,6 +138,29 @@ fn compose_render_and_export_real_avatars() {
     let report = ok_json(args);
     assert!(report["solve_residual"].as_f64().unwrap() <= 1e-10);
     assert_eq!(report["frame"]["finite"], true);
+    // Our pipeline on FLAME's topology (GaussianAvatars' teeth included):
+    // colour seams add nothing, affine deformation leaves nothing non-finite.
+    let ours = temp("recipe-ours.toml");
+    std::fs::write(
+        &ours,
+        std::fs::read_to_string(&recipe).unwrap().replace(
+            "smoothing = \"crossfade\"\ncolour = \"thesis\"",
+            "smoothing = \"blend\"\ncolour = \"semantic\"\ndeform = \"affine\"",
+        ),
+    )
+    .unwrap();
+    let mut args = vec![
+        "compose".into(),
+        "--recipe".into(),
+        ours.display().to_string(),
+        "--json".into(),
+    ];
+    args.extend(db_args(f));
+    let ours = ok_json(args);
+    assert_eq!(ours["smoothing"], "blend");
+    assert_eq!(ours["deform"], "affine");
+    assert_eq!(ours["extra_gaussians"], 0);
+    assert_eq!(ours["frame"]["finite"], true);
     // Render a still and a two-frame sequence.
     let png = temp("still.png");
     let args = vec![
