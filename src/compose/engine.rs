@@ -221,16 +221,14 @@ impl Engine {
     /// the selection; motion, frame and camera cost nothing here.
     pub fn update(&self, composite: &mut Composite, recipe: &ResolvedRecipe) -> Changes {
         let old = &composite.recipe;
+        let shape = old.shape != recipe.shape || old.base != recipe.base;
         let changes = Changes {
-            shape: old.shape != recipe.shape || old.base != recipe.base,
+            shape,
+            // Gaussians that follow their triangles' reshaping depend on the shape.
             gaussians: old.gaussians != recipe.gaussians
                 || old.base != recipe.base
-                || old.post != recipe.post,
-        };
-        // Gaussians that follow their triangles' reshaping depend on the shape.
-        let changes = Changes {
-            gaussians: changes.gaussians || (changes.shape && recipe.post.deform == Deform::Affine),
-            ..changes
+                || old.post != recipe.post
+                || (shape && recipe.post.deform == Deform::Affine),
         };
         if changes.shape {
             let (neutral, residual) = self.blend_neutral(recipe);
