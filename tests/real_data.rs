@@ -594,9 +594,10 @@ fn real_chumpy_flame() -> PathBuf {
     path
 }
 
-/// Writes a folder database with one avatar (a Gaussian on every triangle) for
-/// a model with `triangles` triangles and `vertices` vertices.
-fn one_avatar_db(name: &str, triangles: usize, vertices: usize) -> PathBuf {
+/// Writes a folder database with one avatar (a Gaussian on every triangle
+/// files know) for `model`.
+fn one_avatar_db(name: &str, model: &visage::model::head::HeadModel) -> PathBuf {
+    let (triangles, vertices) = (model.file_triangle_count(), model.file_vertex_count());
     use visage::avatar::gaussians::GaussianSet;
     use visage::io::avatar::{write_avatar, AvatarParams, FrameParams};
     let mut set = GaussianSet::with_degree(0);
@@ -624,6 +625,7 @@ fn one_avatar_db(name: &str, triangles: usize, vertices: usize) -> PathBuf {
             static_offset: &offset,
             frames: &frames,
         },
+        model,
     )
     .unwrap();
     root
@@ -642,7 +644,7 @@ fn flame_models_pickled_by_real_chumpy_load() {
     assert!(head.pose_correctives.is_some());
 
     // The same through the command line, as a user would: a folder database on it.
-    let db = one_avatar_db("chumpy-db", 10144, 5143);
+    let db = one_avatar_db("chumpy-db", &head);
     let v = ok_json(vec![
         "info".into(),
         "--json".into(),
@@ -713,4 +715,134 @@ fn render_and_bench_default_to_the_first_source_of_a_folder_database() {
     let report = ok_json(args);
     assert!(report.to_string().contains("psnr"), "{report}");
     std::fs::remove_file(png).ok();
+}
+
+/// A FLAME-like model whose lips are open at the back, as FLAME's are, gets a
+/// mouth cavity (docs/method.md §2.4): the mouth closes, the cavity opens with
+/// the jaw, files never see it (exports rebind its Gaussians in place and stop
+/// offsets at the file's vertices, which GaussianAvatars' loader reads), and
+/// the rebound Gaussians count for the mouth's inside again once loaded.
+#[test]
+fn open_mouthed_flame_models_get_a_cavity_that_files_never_see() {
+    use visage::io::fixtures::{write_fixtures_with, FixtureMouth};
+    use visage::model::cavity::boundary_loops;
+    use visage::model::regions::Region;
+    let dir = temp("open-mouth");
+    let open = write_fixtures_with(&dir.join("open"), 2, 9_000, 3, FixtureMouth::Open).unwrap();
+    let head = visage::io::flame::load_flame(&open.model, &open.masks).unwrap();
+    let closed = fixtures();
+    let closed_head = visage::io::flame::load_flame(&closed.model, &closed.masks).unwrap();
+    assert!(
+        closed_head.mouth_cavity.is_none(),
+        "a closed mouth gets none"
+    );
+    let cavity = head
+        .mouth_cavity
+        .as_ref()
+        .expect("an open mouth gets a cavity");
+    assert_eq!(head.file_vertex_count(), cavity.first_vertex);
+    assert!(head.vertex_count() > cavity.first_vertex);
+    assert!(head.triangle_regions[cavity.first_triangle..]
+        .iter()
+        .all(|r| *r == Region::LipsInside));
+    // Closed: as many openings left as the pocketed head has (the neck's).
+    let loops =
+        |m: &visage::model::head::HeadModel| boundary_loops(m.vertex_count(), &m.triangles).len();
+    assert_eq!(loops(&head), loops(&closed_head));
+
+    // The jaw opens the cavity: its lower half goes down with the chin, its
+    // upper half stays with the skull.
+    let neutral = head.neutral(&[], None);
+    let mut pose = visage::model::head::Pose::REST;
+    pose.joints[2] = glam::Vec3::new(0.3, 0.0, 0.0);
+    let mut posed = Vec::new();
+    head.pose(&neutral, &[], &pose, &mut posed);
+    let drop_of = |jaw: bool| {
+        let moved: Vec<f32> = (cavity.first_vertex..head.vertex_count())
+            .filter(|&v| (head.skin_weights[v][2] > 0.5) == jaw)
+            .map(|v| posed[v].y - neutral[v].y)
+            .collect();
+        moved.iter().sum::<f32>() / moved.len() as f32
+    };
+    assert!(drop_of(true) < -0.004, "lower half: {}", drop_of(true));
+    assert!(
+        drop_of(false).abs() < 0.001,
+        "upper half: {}",
+        drop_of(false)
+    );
+
+    // The avatars written on it name only the triangles files know.
+    for entry in std::fs::read_dir(&open.avatars).unwrap() {
+        let ply = entry.unwrap().path().join("point_cloud.ply");
+        let set = visage::io::avatar::read_bound_ply(&ply, head.file_triangle_count()).unwrap();
+        assert!(!set.is_empty());
+    }
+    // Loaded back, Gaussians that sat on the cavity count for the mouth's
+    // inside again by place, though their parents are now lips or teeth.
+    let db =
+        visage::io::folder::load_folder(&open.avatars, Some((&open.model, &open.masks))).unwrap();
+    let source = &db.sources[0];
+    let placed = visage::compose::membership::place_triangles(
+        &head,
+        &source.gaussians,
+        &source.neutral(&head),
+    );
+    let moved_in = placed
+        .iter()
+        .zip(&source.gaussians.binding)
+        .filter(|(p, b)| {
+            **p as usize >= cavity.first_triangle && (**b as usize) < cavity.first_triangle
+        })
+        .count();
+    assert!(
+        moved_in > 50,
+        "{moved_in} Gaussians count for the cavity again"
+    );
+
+    // A composite's export: GaussianAvatars' loader reads its offsets, with
+    // the file's vertex count, and the export loads back.
+    let exported_root = dir.join("exported");
+    let avatar = exported_root.join("composite");
+    let names: Vec<String> = db.sources.iter().map(|s| s.name.clone()).collect();
+    let recipe = dir.join("open.toml");
+    std::fs::write(
+        &recipe,
+        format!(
+            "base = \"{a}\"\n[groups.mouth]\ngaussians = \"{b}\"\nshape = {{ {b} = 1.0 }}\n[animation]\nmotion = \"{a}\"\nframe = 10\n",
+            a = names[0],
+            b = names[1]
+        ),
+    )
+    .unwrap();
+    let mut args = vec![
+        "export".into(),
+        "--recipe".into(),
+        recipe.display().to_string(),
+        "--format".into(),
+        "gaussian-avatars".into(),
+        "-o".into(),
+        avatar.display().to_string(),
+    ];
+    args.extend(db_args(&open));
+    let out = run(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary = gaussian_avatars_reads(&avatar.join("flame_param.npz"));
+    assert_eq!(summary["vertices"], head.file_vertex_count());
+    visage::io::avatar::read_bound_ply(&avatar.join("point_cloud.ply"), head.file_triangle_count())
+        .unwrap();
+    let back =
+        visage::io::folder::load_folder(&exported_root, Some((&open.model, &open.masks))).unwrap();
+    assert_eq!(back.sources.len(), 1);
+    // `info` says what was added.
+    let mut args = vec!["info".into(), "--json".into()];
+    args.extend(db_args(&open));
+    let info = ok_json(args);
+    assert_eq!(
+        info["model"]["mouth_cavity"]["triangles"],
+        head.triangle_count() - cavity.first_triangle
+    );
 }

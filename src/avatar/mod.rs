@@ -5,4 +5,5 @@
 pub mod binding;
 pub mod database;
 pub mod gaussians;
+pub mod rebind;
 pub mod synthetic;

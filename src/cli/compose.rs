@@ -127,7 +127,7 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
                 frames: &frames,
             };
             let gaussians = reordered(&c.gaussians, &canonical_order(model, &c.gaussians));
-            write_avatar(&args.output, &gaussians, &params)?;
+            write_avatar(&args.output, &gaussians, &params, model)?;
             eprintln!(
                 "visage: wrote a GaussianAvatars avatar ({} Gaussians, {count} frames) to {}",
                 c.gaussians.len(),

@@ -129,6 +129,10 @@ fn report(db: &Database, args: &InfoArgs, generation_ms: f64) -> serde_json::Val
             "expression_components": model.expression_basis.names(),
             "joints": JOINT_NAMES,
             "pose_correctives": model.pose_correctives.is_some(),
+            "mouth_cavity": model.mouth_cavity.as_ref().map(|c| json!({
+                "vertices": model.vertex_count() - c.first_vertex,
+                "triangles": model.triangle_count() - c.first_triangle,
+            })),
             "regions": regions,
             "groups": groups,
         },
@@ -155,6 +159,12 @@ fn print_text(r: &serde_json::Value) {
         m["expression_components"].as_array().map_or(0, Vec::len),
         JOINT_NAMES.join(", ")
     );
+    if let Some(c) = m["mouth_cavity"].as_object() {
+        println!(
+            "mouth cavity added behind the lips: {} vertices, {} triangles (files never see them)",
+            c["vertices"], c["triangles"]
+        );
+    }
     println!("regions (18 in 7 groups):");
     for g in m["groups"].as_array().into_iter().flatten() {
         let names: Vec<String> = g["regions"]

@@ -203,14 +203,25 @@ struct FixturesArgs {
     /// Seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Cut the built-in head's mouth pocket away, leaving the lips' inner rim
+    /// open as FLAME's is (the loader then adds its own mouth cavity).
+    #[arg(long)]
+    open_mouth: bool,
 }
 
 fn run_fixtures(args: &FixturesArgs) -> Result<()> {
-    let p = crate::io::fixtures::write_fixtures(
+    use crate::io::fixtures::{write_fixtures_with, FixtureMouth};
+    let mouth = if args.open_mouth {
+        FixtureMouth::Open
+    } else {
+        FixtureMouth::Pocket
+    };
+    let p = write_fixtures_with(
         &args.dir,
         args.sources,
         args.gaussians_per_avatar,
         args.seed,
+        mouth,
     )?;
     println!(
         "visage --db {} --flame {} --masks {}",

@@ -19,6 +19,7 @@ use super::pickle::NdArray;
 use super::ply::{encode_inria_ply, read_element, InriaRecord, InriaRows};
 use crate::avatar::database::SourceAvatar;
 use crate::avatar::gaussians::{sh_coefficients, GaussianSet};
+use crate::avatar::rebind::rebind_past;
 use crate::model::head::{HeadModel, Pose, JOINT_COUNT};
 use crate::model::motion::Motion;
 
@@ -229,7 +230,7 @@ pub fn read_flame_params(
         ))
         .into());
     }
-    let v = model.vertex_count();
+    let v = model.file_vertex_count();
     if let Some(d) = arrays.get("dynamic_offset") {
         check_dynamic_offset(d, frames, v).map_err(label)?;
     }
@@ -257,6 +258,10 @@ pub fn read_flame_params(
             o
         }
     };
+    let mut static_offset = static_offset;
+    if let Some(c) = &model.mouth_cavity {
+        c.extend_offsets(&mut static_offset);
+    }
     let e_len = model.expression_basis.len();
     let v3 = |r: &[f32]| Vec3::new(r[0], r[1], r[2]);
     let poses = (0..frames)
@@ -329,6 +334,7 @@ pub struct FrameParams {
 }
 
 /// What an avatar folder stores besides its Gaussians.
+#[derive(Clone, Copy)]
 pub struct AvatarParams<'a> {
     /// Shape coefficients (padded to 300).
     pub shape: &'a [f32],
@@ -390,15 +396,35 @@ pub fn neutral_as_stored(template: &[Vec3], neutral: &[Vec3]) -> Vec<Vec3> {
         .collect()
 }
 
-/// Writes a GaussianAvatars avatar folder.
+/// Writes a GaussianAvatars avatar folder for `model`. What only visage's
+/// model has stays behind: Gaussians bound to an added mouth cavity are rebound
+/// to the nearest triangle the file can name (in place on the avatar's neutral
+/// mesh), and offsets stop at the file's vertices.
 pub fn write_avatar(
     dir: &Path,
     gaussians: &GaussianSet,
     params: &AvatarParams,
+    model: &HeadModel,
 ) -> super::Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| super::FileError::access("create", dir, e))?;
+    let (keep, vertices) = (model.file_triangle_count(), model.file_vertex_count());
+    let rebound;
+    let gaussians = if gaussians.binding.iter().any(|&b| b as usize >= keep) {
+        let neutral = model.neutral(params.shape, Some(params.static_offset));
+        rebound = rebind_past(gaussians, &neutral, &model.triangles, keep);
+        &rebound
+    } else {
+        gaussians
+    };
     write_bound_ply(&dir.join("point_cloud.ply"), gaussians)?;
-    write_flame_params(&dir.join("flame_param.npz"), params)
+    let offset = &params.static_offset[..params.static_offset.len().min(vertices)];
+    write_flame_params(
+        &dir.join("flame_param.npz"),
+        &AvatarParams {
+            static_offset: offset,
+            ..*params
+        },
+    )
 }
 
 /// Writes FLAME parameters as GaussianAvatars stores them: shape (300),

@@ -30,14 +30,10 @@ pub struct FixturePaths {
     pub avatars: PathBuf,
 }
 
-/// The built-in head without its own tooth rows (the FLAME loader adds
-/// GaussianAvatars' teeth instead).
-fn without_teeth(model: &HeadModel) -> HeadModel {
-    let keep_tri: Vec<bool> = model
-        .triangle_regions
-        .iter()
-        .map(|r| !matches!(r, Region::TeethUpper | Region::TeethLower))
-        .collect();
+/// `model` without the triangles whose region `drop` names (and the vertices
+/// only they used), and where each kept vertex went (`u32::MAX`: removed).
+fn without(model: &HeadModel, drop: impl Fn(Region) -> bool) -> (HeadModel, Vec<u32>) {
+    let keep_tri: Vec<bool> = model.triangle_regions.iter().map(|r| !drop(*r)).collect();
     let mut used = vec![false; model.vertex_count()];
     for (t, k) in model.triangles.iter().zip(&keep_tri) {
         if *k {
@@ -66,7 +62,7 @@ fn without_teeth(model: &HeadModel) -> HeadModel {
         }
         out
     };
-    HeadModel {
+    let kept = HeadModel {
         template: pick(&model.template),
         triangles: model
             .triangles
@@ -98,7 +94,18 @@ fn without_teeth(model: &HeadModel) -> HeadModel {
             .map(|(w, _)| *w)
             .collect(),
         pose_correctives: None,
-    }
+        mouth_cavity: None,
+    };
+    (kept, remap)
+}
+
+/// The built-in head without its own tooth rows (the FLAME loader adds
+/// GaussianAvatars' teeth instead).
+fn without_teeth(model: &HeadModel) -> HeadModel {
+    without(model, |r| {
+        matches!(r, Region::TeethUpper | Region::TeethLower)
+    })
+    .0
 }
 
 /// FLAME mask names for the built-in regions.
@@ -247,6 +254,16 @@ fn write_model(path: &Path, model: &HeadModel) -> super::Result<()> {
     super::write_file(path, &to_pickle(&dict))
 }
 
+/// The mouth of the fixture model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FixtureMouth {
+    /// The built-in head's mouth pocket stays: the model is closed at the lips.
+    Pocket,
+    /// The pocket is cut away, leaving the lips' inner rim open as FLAME's is,
+    /// so the loader adds its own cavity.
+    Open,
+}
+
 /// Writes the fixtures into `dir`: `flame/model.pkl`, `flame/masks.pkl` and
 /// `avatars/<name>/` for `sources` synthetic people.
 pub fn write_fixtures(
@@ -255,19 +272,53 @@ pub fn write_fixtures(
     gaussians_per_avatar: usize,
     seed: u64,
 ) -> super::Result<FixturePaths> {
+    write_fixtures_with(
+        dir,
+        sources,
+        gaussians_per_avatar,
+        seed,
+        FixtureMouth::Pocket,
+    )
+}
+
+/// [`write_fixtures`] with a choice of mouth.
+pub fn write_fixtures_with(
+    dir: &Path,
+    sources: usize,
+    gaussians_per_avatar: usize,
+    seed: u64,
+    mouth: FixtureMouth,
+) -> super::Result<FixturePaths> {
     let flame_dir = dir.join("flame");
     let avatars = dir.join("avatars");
     for d in [&flame_dir, &avatars] {
         std::fs::create_dir_all(d).map_err(|e| super::FileError::access("create", d, e))?;
     }
-    let base = without_teeth(&build_head());
+    let closed = without_teeth(&build_head());
+    // The lip rings come from where the pocket meets the lips, so the masks are
+    // found on the closed model and carried over to the open one.
+    let mut masks = masks_of(&closed);
+    let base = match mouth {
+        FixtureMouth::Pocket => closed,
+        FixtureMouth::Open => {
+            let (open, remap) = without(&closed, |r| r == Region::LipsInside);
+            for ids in masks.values_mut() {
+                *ids = ids
+                    .iter()
+                    .map(|&v| remap[v as usize])
+                    .filter(|&v| v != u32::MAX)
+                    .map(i64::from)
+                    .collect();
+            }
+            open
+        }
+    };
     let paths = FixturePaths {
         model: flame_dir.join("model.pkl"),
         masks: flame_dir.join("masks.pkl"),
         avatars: avatars.clone(),
     };
     write_model(&paths.model, &base)?;
-    let masks = masks_of(&base);
     let mask_objs: Vec<(String, Vec<i64>)> = masks.into_iter().collect();
     let dict = PyObj::Dict(
         mask_objs
@@ -318,6 +369,7 @@ pub fn write_fixtures(
                 static_offset: &s.static_offset,
                 frames: &frames,
             },
+            &db.model,
         )?;
     }
     Ok(paths)

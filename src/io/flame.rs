@@ -1,6 +1,7 @@
 //! The user's FLAME model (`flame2023.pkl` or `generic_model.pkl`) and masks
-//! (`FLAME_masks.pkl`) → a [`HeadModel`] with GaussianAvatars' teeth appended and
-//! the 18 regions derived from the masks.
+//! (`FLAME_masks.pkl`) → a [`HeadModel`] with GaussianAvatars' teeth appended,
+//! a mouth cavity after them when the lips' rim is open (`model::cavity`; files
+//! never see it), and the 18 regions derived from the masks.
 //!
 //! **Teeth** (so real GaussianAvatars bindings line up): 120 vertices and 168
 //! triangles after the FLAME mesh (5023 → 5143 vertices, 9976 → 10144 triangles),
@@ -18,7 +19,7 @@
 //!
 //! **Regions** — a triangle is in a mask when at least two of its vertices are
 //! (all three for eyeballs); the first rule that matches wins:
-//! teeth → teeth_upper / teeth_lower; left/right_eyeball; left/right_ear;
+//! teeth → teeth_upper / teeth_lower; cavity → lips_inside; left/right_eyeball; left/right_ear;
 //! lips → lips_inside when its centroid lies behind the outer lip rings by more
 //! than 0.3 d, else lips; nose; left/right_eye_region; boundary; neck;
 //! scalp → hair; face or forehead → skin; an unassigned triangle within two
@@ -31,6 +32,7 @@ use std::path::Path;
 use glam::Vec3;
 
 use super::pickle::{self, NdArray, Value};
+use crate::model::cavity::{build_mouth_cavity, mouth_loop};
 use crate::model::head::{Basis, HeadModel, RegressorRow, JOINT_COUNT};
 use crate::model::regions::Region;
 
@@ -203,15 +205,34 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
         .collect::<Result<_, String>>()?;
     let flame_triangles = triangles.len();
 
+    let lips: HashSet<u32> = mask(&masks, "lips")
+        .map(|m| m.iter().copied().collect())
+        .unwrap_or_default();
+    let mouth = mouth_loop(n, &triangles, |v| lips.contains(&v));
+
     let (ring_up, ring_lo) = lip_rings(&masks, n)?;
     let teeth = build_teeth(&positions, &ring_up, &ring_lo);
     positions.extend(&teeth.positions);
     triangles.extend(teeth.triangles.iter().map(|t| t.map(|i| i + n as u32)));
+    let cavity = mouth.map(|m| build_mouth_cavity(&positions, triangles.len(), &m));
+    if let Some(c) = &cavity {
+        positions.extend(&c.positions);
+        triangles.extend(&c.triangles);
+    }
+    let cavity = cavity.map(|c| c.cavity);
     let total = positions.len();
 
     let components = shapedirs.shape[2];
     let shape_count = components.min(FLAME_SHAPE_COMPONENTS);
-    let field = |k: usize, teeth_value: &dyn Fn(usize) -> Vec3| -> Vec<Vec3> {
+    // Shape components move the cavity with the lips everywhere; expressions
+    // and pose correctives fade towards its back.
+    let with_cavity = |mut f: Vec<Vec3>, follow: bool| {
+        if let Some(c) = &cavity {
+            c.extend_field(&mut f, follow);
+        }
+        f
+    };
+    let field = |k: usize, teeth_value: &dyn Fn(usize) -> Vec3, follow: bool| -> Vec<Vec3> {
         let mut f: Vec<Vec3> = (0..n)
             .map(|v| {
                 let at = |c: usize| shapedirs.data[(v * 3 + c) * components + k] as f32;
@@ -219,7 +240,7 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
             })
             .collect();
         f.extend((0..TEETH_VERTICES).map(teeth_value));
-        f
+        with_cavity(f, follow)
     };
     let mut shape_basis = Basis::new(total);
     for k in 0..shape_count {
@@ -235,13 +256,13 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
             let j = j % 15;
             0.5 * (at(ring_up[j]) + at(ring_lo[j]))
         };
-        shape_basis.push(format!("shape{k:03}"), field(k, &lip_mean));
+        shape_basis.push(format!("shape{k:03}"), field(k, &lip_mean, false));
     }
     let mut expression_basis = Basis::new(total);
     for k in shape_count..components {
         expression_basis.push(
             format!("expression{:03}", k - shape_count),
-            field(k, &|_| Vec3::ZERO),
+            field(k, &|_| Vec3::ZERO, true),
         );
     }
     let pose_correctives = posedirs.map(|p| {
@@ -253,8 +274,8 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
                     Vec3::new(at(0), at(1), at(2))
                 })
                 .collect();
-            f.resize(total, Vec3::ZERO);
-            b.push(format!("pose{k:02}"), f);
+            f.resize(n + TEETH_VERTICES, Vec3::ZERO);
+            b.push(format!("pose{k:02}"), with_cavity(f, true));
         }
         b
     });
@@ -275,6 +296,9 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
         w[if upper { 1 } else { 2 }] = 1.0;
         skin_weights.push(w);
     }
+    if let Some(c) = &cavity {
+        c.extend_weights(&mut skin_weights);
+    }
     let triangle_regions = assign_regions(
         &positions,
         &triangles,
@@ -292,6 +316,7 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
         joint_regressor,
         skin_weights,
         pose_correctives,
+        mouth_cavity: cavity,
     })
 }
 
@@ -456,10 +481,10 @@ fn assign_regions(
     let mut out = Vec::with_capacity(triangles.len());
     for (k, t) in triangles.iter().enumerate() {
         if k >= flame_triangles {
-            out.push(if k - flame_triangles < TEETH_TRIANGLES / 2 {
-                Region::TeethUpper
-            } else {
-                Region::TeethLower
+            out.push(match k - flame_triangles {
+                t if t < TEETH_TRIANGLES / 2 => Region::TeethUpper,
+                t if t < TEETH_TRIANGLES => Region::TeethLower,
+                _ => Region::LipsInside,
             });
             continue;
         }

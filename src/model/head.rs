@@ -8,6 +8,7 @@
 
 use glam::{DVec3, Mat3, Quat, Vec3};
 
+use super::cavity::MouthCavity;
 use super::regions::Region;
 
 /// Number of skeleton joints (FLAME order: global, neck, jaw, left eye, right eye).
@@ -133,6 +134,9 @@ pub struct HeadModel {
     pub skin_weights: Vec<[f32; JOINT_COUNT]>,
     /// Optional pose correctives: [`POSE_FEATURES`] components driven by (R - I).
     pub pose_correctives: Option<Basis>,
+    /// The mouth cavity visage added behind the model's own vertices and
+    /// triangles (FLAME has none), which files never see.
+    pub mouth_cavity: Option<MouthCavity>,
 }
 
 impl HeadModel {
@@ -144,6 +148,22 @@ impl HeadModel {
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
         self.triangles.len()
+    }
+
+    /// Vertices as files (offsets in `flame_param.npz`) have them: all but an
+    /// added mouth cavity's.
+    pub fn file_vertex_count(&self) -> usize {
+        self.mouth_cavity
+            .as_ref()
+            .map_or(self.vertex_count(), |c| c.first_vertex)
+    }
+
+    /// Triangles as files (`binding_0` in `point_cloud.ply`) know them: all but
+    /// an added mouth cavity's.
+    pub fn file_triangle_count(&self) -> usize {
+        self.mouth_cavity
+            .as_ref()
+            .map_or(self.triangle_count(), |c| c.first_triangle)
     }
 
     /// A source's identity mesh: template + shape blendshapes + static offset,

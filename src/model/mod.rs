@@ -2,6 +2,7 @@
 //! built-in procedural head and its motions.
 
 pub mod builtin;
+pub mod cavity;
 pub mod geometry;
 pub mod head;
 pub mod motion;

@@ -771,6 +771,7 @@ impl Trainer {
                 static_offset: offset,
                 frames: &self.flame_frames,
             },
+            &self.head,
         )?;
         self.write_metadata(&dir.join(TRAINING_METADATA))
     }

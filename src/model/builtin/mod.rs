@@ -42,6 +42,7 @@ pub fn build_head() -> HeadModel {
         joint_regressor: rig::joint_regressor(&mesh),
         skin_weights: rig::skin_weights(&mesh, &mouth),
         pose_correctives: None,
+        mouth_cavity: None,
         template: mesh.positions,
         triangles: mesh.triangles,
     }
