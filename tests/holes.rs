@@ -185,6 +185,44 @@ fn bench_holes_compares_six_variants_and_draws_the_grid() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("unknown variant 'bogus'"));
 }
 
+/// `visage bench mouth` trains one capture on the three heads (pocket, open
+/// rim, generated cavity) and scores open- and closed-mouth views; the cavity
+/// head has the pocket's triangle count minus what its rim is missing.
+#[test]
+fn bench_mouth_trains_three_heads_and_splits_open_mouths() {
+    let o = visage(&[
+        "bench",
+        "mouth",
+        "--capture-size",
+        "32x32",
+        "--iterations",
+        "6",
+        "--renderer",
+        "cpu",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let heads = r["heads"].as_array().unwrap();
+    let names: Vec<&str> = heads.iter().map(|h| h["head"].as_str().unwrap()).collect();
+    assert_eq!(names, ["pocket", "open", "cavity"]);
+    let open_views = r["open_views"].as_u64().unwrap();
+    assert!(open_views > 0 && open_views < r["held_out_views"].as_u64().unwrap());
+    for h in heads {
+        for key in [
+            "open_psnr_db",
+            "closed_psnr_db",
+            "open_mouth_psnr_db",
+            "closed_mouth_psnr_db",
+        ] {
+            assert!(h[key].as_f64().unwrap().is_finite(), "{key}: {h}");
+        }
+    }
+    let triangles = |i: usize| heads[i]["triangles"].as_u64().unwrap();
+    assert!(triangles(1) < triangles(0), "the open rim lost the pocket");
+    assert!(triangles(2) > triangles(1), "the cavity closed it again");
+}
+
 /// `sessions/trained-sources.sh` trains three sources (here tiny ones) and
 /// `sessions/trained-sources.vsg` composes them: every command succeeds, and
 /// border smoothing with colour correction change the picture.

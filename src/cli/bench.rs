@@ -40,6 +40,10 @@ enum BenchWhat {
     /// Composites against their ground truth: a fixed set of recipes over
     /// trained (cached) sources, every composite metric per recipe.
     Composites(super::bench_composites::CompositesBenchArgs),
+    /// The mouth cavity: one capture trained on the built-in head with its
+    /// pocket, with the pocket removed (FLAME-like) and with the generated
+    /// cavity; open- and closed-mouth PSNR over views and the mouth's box.
+    Mouth(super::bench_mouth::MouthBenchArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -69,6 +73,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         BenchWhat::Train(a) => super::bench_train::run(a),
         BenchWhat::Holes(a) => super::bench_holes::run(a),
         BenchWhat::Composites(a) => super::bench_composites::run(a),
+        BenchWhat::Mouth(a) => super::bench_mouth::run(a),
     }
 }
 

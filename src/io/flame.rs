@@ -32,8 +32,8 @@ use std::path::Path;
 use glam::Vec3;
 
 use super::pickle::{self, NdArray, Value};
-use crate::model::cavity::{build_mouth_cavity, mouth_loop};
 use crate::model::head::{Basis, HeadModel, RegressorRow, JOINT_COUNT};
+use crate::model::open_mouth::with_mouth_cavity;
 use crate::model::regions::Region;
 
 /// Outer lip ring vertex ids of FLAME's topology (upper, lower; left to right),
@@ -205,34 +205,15 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
         .collect::<Result<_, String>>()?;
     let flame_triangles = triangles.len();
 
-    let lips: HashSet<u32> = mask(&masks, "lips")
-        .map(|m| m.iter().copied().collect())
-        .unwrap_or_default();
-    let mouth = mouth_loop(n, &triangles, |v| lips.contains(&v));
-
     let (ring_up, ring_lo) = lip_rings(&masks, n)?;
     let teeth = build_teeth(&positions, &ring_up, &ring_lo);
     positions.extend(&teeth.positions);
     triangles.extend(teeth.triangles.iter().map(|t| t.map(|i| i + n as u32)));
-    let cavity = mouth.map(|m| build_mouth_cavity(&positions, triangles.len(), &m));
-    if let Some(c) = &cavity {
-        positions.extend(&c.positions);
-        triangles.extend(&c.triangles);
-    }
-    let cavity = cavity.map(|c| c.cavity);
     let total = positions.len();
 
     let components = shapedirs.shape[2];
     let shape_count = components.min(FLAME_SHAPE_COMPONENTS);
-    // Shape components move the cavity with the lips everywhere; expressions
-    // and pose correctives fade towards its back.
-    let with_cavity = |mut f: Vec<Vec3>, follow: bool| {
-        if let Some(c) = &cavity {
-            c.extend_field(&mut f, follow);
-        }
-        f
-    };
-    let field = |k: usize, teeth_value: &dyn Fn(usize) -> Vec3, follow: bool| -> Vec<Vec3> {
+    let field = |k: usize, teeth_value: &dyn Fn(usize) -> Vec3| -> Vec<Vec3> {
         let mut f: Vec<Vec3> = (0..n)
             .map(|v| {
                 let at = |c: usize| shapedirs.data[(v * 3 + c) * components + k] as f32;
@@ -240,7 +221,7 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
             })
             .collect();
         f.extend((0..TEETH_VERTICES).map(teeth_value));
-        with_cavity(f, follow)
+        f
     };
     let mut shape_basis = Basis::new(total);
     for k in 0..shape_count {
@@ -256,13 +237,13 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
             let j = j % 15;
             0.5 * (at(ring_up[j]) + at(ring_lo[j]))
         };
-        shape_basis.push(format!("shape{k:03}"), field(k, &lip_mean, false));
+        shape_basis.push(format!("shape{k:03}"), field(k, &lip_mean));
     }
     let mut expression_basis = Basis::new(total);
     for k in shape_count..components {
         expression_basis.push(
             format!("expression{:03}", k - shape_count),
-            field(k, &|_| Vec3::ZERO, true),
+            field(k, &|_| Vec3::ZERO),
         );
     }
     let pose_correctives = posedirs.map(|p| {
@@ -274,8 +255,8 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
                     Vec3::new(at(0), at(1), at(2))
                 })
                 .collect();
-            f.resize(n + TEETH_VERTICES, Vec3::ZERO);
-            b.push(format!("pose{k:02}"), with_cavity(f, true));
+            f.resize(total, Vec3::ZERO);
+            b.push(format!("pose{k:02}"), f);
         }
         b
     });
@@ -296,9 +277,6 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
         w[if upper { 1 } else { 2 }] = 1.0;
         skin_weights.push(w);
     }
-    if let Some(c) = &cavity {
-        c.extend_weights(&mut skin_weights);
-    }
     let triangle_regions = assign_regions(
         &positions,
         &triangles,
@@ -307,7 +285,10 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
         &ring_up,
         &ring_lo,
     )?;
-    Ok(HeadModel {
+    let lips: HashSet<u32> = mask(&masks, "lips")
+        .map(|m| m.iter().copied().collect())
+        .unwrap_or_default();
+    let head = HeadModel {
         template: positions,
         triangles,
         triangle_regions,
@@ -316,8 +297,12 @@ pub fn load_flame(model_path: &Path, masks_path: &Path) -> super::Result<HeadMod
         joint_regressor,
         skin_weights,
         pose_correctives,
-        mouth_cavity: cavity,
-    })
+        mouth_cavity: None,
+    };
+    // FLAME's lips end at an open rim: hang a cavity from it.
+    Ok(with_mouth_cavity(head, |v| {
+        (v as usize) < n && lips.contains(&v)
+    }))
 }
 
 /// The outer lip rings: from the masks file when it has them, else FLAME's ids.
@@ -481,10 +466,10 @@ fn assign_regions(
     let mut out = Vec::with_capacity(triangles.len());
     for (k, t) in triangles.iter().enumerate() {
         if k >= flame_triangles {
-            out.push(match k - flame_triangles {
-                t if t < TEETH_TRIANGLES / 2 => Region::TeethUpper,
-                t if t < TEETH_TRIANGLES => Region::TeethLower,
-                _ => Region::LipsInside,
+            out.push(if k - flame_triangles < TEETH_TRIANGLES / 2 {
+                Region::TeethUpper
+            } else {
+                Region::TeethLower
             });
             continue;
         }

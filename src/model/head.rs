@@ -80,6 +80,18 @@ impl Basis {
         &self.data[k * self.vertex_count..(k + 1) * self.vertex_count]
     }
 
+    /// This basis over `vertex_count` vertices: each component's field with
+    /// the new vertices' displacements appended by `extend`.
+    pub fn extended(&self, vertex_count: usize, extend: impl Fn(&mut Vec<Vec3>)) -> Basis {
+        let mut out = Basis::new(vertex_count);
+        for k in 0..self.len() {
+            let mut field = self.component(k).to_vec();
+            extend(&mut field);
+            out.push(self.names[k].clone(), field);
+        }
+        out
+    }
+
     /// Adds `Σ_k coeffs[k] · component(k)` to `out`. Coefficients past the basis
     /// length are ignored (a file may carry more than the model uses); zero
     /// coefficients cost nothing.

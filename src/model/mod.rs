@@ -7,5 +7,6 @@ pub mod geometry;
 pub mod head;
 pub mod motion;
 pub mod nearest;
+pub mod open_mouth;
 pub mod regions;
 pub mod topology;
