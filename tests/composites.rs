@@ -212,6 +212,13 @@ fn an_edited_composite_reports_regions_band_leak_ceiling_and_steps() {
         report["ceiling"]["psnr_db"].as_f64().unwrap() > 15.0,
         "{report}"
     );
+    // The ceiling split into skin and the rest covers the ceiling's pixels.
+    assert_eq!(
+        px(&report["ceiling_skin"]) + px(&report["ceiling_non_skin"]),
+        px(&report["ceiling"])
+    );
+    assert!(px(&report["ceiling_skin"]) > 0 && px(&report["ceiling_non_skin"]) > 0);
+    assert!(text.contains("ceiling non-skin"), "{text}");
 }
 
 /// A composite whose face Gaussians are counted as another source's than

@@ -107,6 +107,8 @@ struct Means {
     closed_mouth_psnr_db: f64,
     skin_delta_e: f64,
     non_skin_delta_e: f64,
+    ceiling_skin_delta_e: f64,
+    ceiling_non_skin_delta_e: f64,
 }
 
 /// The whole bench.
@@ -323,6 +325,8 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
             closed_mouth_psnr_db: mean_of(&|r| r.closed_mouth.psnr_db),
             skin_delta_e: mean_of(&|r| r.skin.delta_e),
             non_skin_delta_e: mean_of(&|r| r.non_skin.delta_e),
+            ceiling_skin_delta_e: mean_of(&|r| r.ceiling_skin.delta_e),
+            ceiling_non_skin_delta_e: mean_of(&|r| r.ceiling_non_skin.delta_e),
         },
         sources,
         recipes: rows,
@@ -411,5 +415,9 @@ fn print_table(b: &CompositesBench) {
         m.open_mouth_psnr_db,
         m.closed_mouth_psnr_db,
         holes = m.holes_percent
+    );
+    println!(
+        "the sources on their own truth (the ceiling): ΔE skin {:.2}, ΔE other {:.2}",
+        m.ceiling_skin_delta_e, m.ceiling_non_skin_delta_e
     );
 }

@@ -82,6 +82,8 @@ fn print_report(r: &CompositeReport) {
     println!("{}", row("interior", &r.interior));
     println!("{}", row("skin", &r.skin));
     println!("{}", row("non-skin", &r.non_skin));
+    println!("{}", row("ceiling skin", &r.ceiling_skin));
+    println!("{}", row("ceiling non-skin", &r.ceiling_non_skin));
     println!(
         "  leak             {:.2} % of colour from another source ({:.2} % of {} interior px over 5 %)",
         100.0 * r.leak.mean,

@@ -215,6 +215,10 @@ pub struct CompositeReport {
     pub closed_mouth: Quality,
     /// The ceiling: every group as good as its source on itself, combined.
     pub ceiling: Quality,
+    /// The ceiling over skin pixels: what no colour correction can beat there.
+    pub ceiling_skin: Quality,
+    /// The ceiling over the other pixels.
+    pub ceiling_non_skin: Quality,
     /// Each source's own figures.
     pub sources: Vec<SourceCeiling>,
     /// swap → +shape → +smoothing → +colour.
@@ -567,6 +571,8 @@ pub fn evaluate_variants(
     let mut per_view = Vec::new();
     let mut groups = [Sums::default(); Group::COUNT];
     let mut ceilings = [Sums::default(); Group::COUNT];
+    // [skin, other] pixels of the ceiling.
+    let mut ceiling_parts = [Sums::default(); 2];
     let mut source_sums = vec![Sums::default(); own.len()];
     let mut step_sums = vec![[Sums::default(); 5]; variants.len()];
     let (mut leak_sum, mut leak_over, mut leak_pixels) = (0.0, 0usize, 0usize);
@@ -669,9 +675,11 @@ pub fn evaluate_variants(
                 let (a, b) = (rgb(&image, p), rgb(&truth_goal, p));
                 let (sq, de) = ((a - b).length_squared(), (lab(a) - lab(b)).length());
                 source_sums[k].add(sq, ssim[p], de);
-                let g = model.triangle_regions[tri as usize].group();
+                let region = model.triangle_regions[tri as usize];
+                let g = region.group();
                 if resolved.gaussians[g.index()] == *s {
                     ceilings[g.index()].add(sq, ssim[p], de);
+                    ceiling_parts[usize::from(!is_skin(region))].add(sq, ssim[p], de);
                 }
             }
         }
@@ -721,6 +729,8 @@ pub fn evaluate_variants(
         open_mouth: mouth_sums[1].quality(),
         closed_mouth: mouth_sums[0].quality(),
         ceiling: ceiling.quality(),
+        ceiling_skin: ceiling_parts[0].quality(),
+        ceiling_non_skin: ceiling_parts[1].quality(),
         sources: own
             .iter()
             .zip(&source_sums)
