@@ -247,3 +247,117 @@ fn files_from_other_tools_open_in_the_viewer() {
     }
     std::fs::remove_dir_all(&out).ok();
 }
+
+/// `visage clean` removes the planted floaters of a synthetic scene (one in a
+/// thousand, 20-40 units out) and little else, writes the rest in the output's
+/// format, says what each rule removed and how the home view changed; bad
+/// options and files are one line and exit 2.
+#[test]
+fn clean_removes_planted_floaters_and_reports_the_view() {
+    let input = scene_file("dirty.ply");
+    let output = temp_path("view", "clean.spz");
+    let o = visage(&[
+        "clean",
+        input.to_str().unwrap(),
+        output.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let removed = &r["removed"];
+    let isolated = removed["isolated"].as_u64().unwrap();
+    let kept = removed["kept"].as_u64().unwrap();
+    assert!((20..=60).contains(&isolated), "{r}");
+    assert!(kept >= 19_900, "{r}");
+    assert_eq!(
+        visage::io::splat::read_scene(&output).unwrap().len() as u64,
+        kept
+    );
+    // The floaters lie outside the framed subject: the view hardly changes.
+    assert!(r["psnr_db"].as_f64().unwrap() > 40.0, "{r}");
+    // Isolation off keeps them.
+    let o = visage(&[
+        "clean",
+        input.to_str().unwrap(),
+        output.to_str().unwrap(),
+        "--isolation",
+        "0",
+        "--json",
+    ]);
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["removed"]["isolated"], 0);
+    for (args, needle) in [
+        (
+            vec!["--min-opacity", "2"],
+            "--min-opacity takes an opacity from 0 to 1",
+        ),
+        (vec!["--huge", "0"], "--huge takes a positive share"),
+        (
+            vec!["--isolation=-1"],
+            "--isolation takes a factor of 0 or more",
+        ),
+    ] {
+        let mut all = vec!["clean", input.to_str().unwrap(), output.to_str().unwrap()];
+        all.extend(args);
+        let o = visage(&all);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains(needle) && err.trim().lines().count() == 1,
+            "{err}"
+        );
+    }
+    let o = visage(&["clean", "/nonexistent/scene.ply", output.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+}
+
+/// `toggle-floaters` in a scene view draws what `visage clean` writes (the
+/// same pixels as rendering its output), and toggling again draws the scene
+/// as it is.
+#[test]
+fn hidden_floaters_draw_what_clean_writes() {
+    let scene = scene_file("floaters.ply");
+    let cleaned = temp_path("view", "floaters-clean.ply");
+    let o = visage(&["clean", scene.to_str().unwrap(), cleaned.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // From far out, the floaters are in the picture.
+    let camera = "0 set-camera yaw=30 pitch=-20 radius=60\n";
+    let session = write_session(
+        "floaters.vsg",
+        &scene,
+        &format!(
+            "{camera}0 snapshot shown.png\n0 toggle-floaters\n0 snapshot hidden.png\n0 toggle-floaters\n0 snapshot again.png\n"
+        ),
+    );
+    let out = temp_path("view", "floaters-out");
+    std::fs::create_dir_all(&out).unwrap();
+    let report = replay_json(&session, &out);
+    assert!(
+        report["failures"].as_array().unwrap().is_empty(),
+        "{report}"
+    );
+    let reference = out.join("reference.png");
+    let o = visage(&[
+        "render",
+        "--ply",
+        cleaned.to_str().unwrap(),
+        "--renderer",
+        "cpu",
+        "--size",
+        "96x64",
+        "--yaw",
+        "30",
+        "--pitch",
+        "-20",
+        "--radius",
+        "60",
+        "-o",
+        reference.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (shown, hidden) = (png(&out.join("shown.png")), png(&out.join("hidden.png")));
+    assert!(shown.pixels != hidden.pixels, "the floaters were in view");
+    assert_eq!(hidden.pixels, png(&reference).pixels);
+    assert_eq!(png(&out.join("again.png")).pixels, shown.pixels);
+    std::fs::remove_dir_all(&out).ok();
+}

@@ -29,9 +29,11 @@ pub struct ConvertArgs {
 }
 
 /// Size of the view the conversion error is measured on.
-const VIEW: (u32, u32) = (320, 240);
+pub(super) const VIEW: (u32, u32) = (320, 240);
 
-fn view(scene: &SplatScene, orbit: &Orbit) -> Result<RgbImage> {
+/// `scene` seen from `orbit` at [`VIEW`] on the CPU renderer: the fixed view
+/// that `convert` and `clean` compare before and after.
+pub(super) fn home_view(scene: &SplatScene, orbit: &Orbit) -> Result<RgbImage> {
     let mut renderer = SplatRenderer::open(Backend::Cpu)?;
     renderer.set_world_scene(scene)?;
     renderer.render_world(&orbit.camera(VIEW.0, VIEW.1), &RenderSettings::default())
@@ -45,7 +47,8 @@ pub fn run(args: &ConvertArgs) -> Result<()> {
         .ok_or_else(|| Error::input(format!("{} holds no Gaussians", args.input.display())))?;
     write_scene(&args.output, &input)?;
     let output = read_scene(&args.output)?;
-    let psnr = psnr_report(&view(&output, &orbit)?, &view(&input, &orbit)?).unwrap_or(0.0);
+    let psnr =
+        psnr_report(&home_view(&output, &orbit)?, &home_view(&input, &orbit)?).unwrap_or(0.0);
     let size = |p: &PathBuf| std::fs::metadata(p).map_or(0, |m| m.len());
     let report = json!({
         "input": args.input.display().to_string(),

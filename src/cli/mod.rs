@@ -11,6 +11,7 @@ mod bench_terminal;
 mod bench_train;
 mod camera;
 mod capture;
+mod clean;
 mod compose;
 mod convert;
 mod db;
@@ -59,6 +60,8 @@ enum Command {
     Render(render::RenderArgs),
     /// Convert a 3DGS scene between PLY, compressed PLY, .splat and SPZ, reporting the error.
     Convert(convert::ConvertArgs),
+    /// Remove floaters from a 3DGS scene: broken, transparent, huge and isolated Gaussians.
+    Clean(clean::CleanArgs),
     /// Capture a multi-view dataset (GaussianAvatars layout) of a built-in source.
     Capture(capture::CaptureArgs),
     /// Train a GaussianAvatars avatar from a multi-view dataset.
@@ -99,6 +102,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Export(args)) => compose::run_export(&args),
         Some(Command::Render(args)) => render::run(&args),
         Some(Command::Convert(args)) => convert::run(&args),
+        Some(Command::Clean(args)) => clean::run(&args),
         Some(Command::Bench(args)) => bench::run(&args),
         Some(Command::Random(args)) => random::run(&args),
         Some(Command::Study(args)) => study::run(&args),

@@ -774,6 +774,8 @@ commands! {
     DebugScale(factor: f32 as Positive) => "debug-scale", "FACTOR", "multiply every Gaussian's scale (debug view)", Debug;
     /// Toggle the mesh overlay.
     ToggleMesh => "toggle-mesh", "", "draw the mesh instead of the Gaussians", Debug, avatar;
+    /// Hide (or show again) the Gaussians the floater filter removes.
+    ToggleFloaters => "toggle-floaters", "", "hide or show the floaters `visage clean` removes (scene view)", Debug;
     /// Toggle highlighting the selected group's regions.
     ToggleHighlight => "toggle-highlight", "", "highlight the selected group (Gaussians or mesh)", Debug, avatar;
     /// Write the recipe to a TOML file.
@@ -906,6 +908,7 @@ mod tests {
             "debug-scale 0.5",
             "toggle-mesh",
             "toggle-highlight",
+            "toggle-floaters",
             "save-recipe out.toml",
             "export-ply out.ply",
             "snapshot view.png",

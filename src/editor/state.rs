@@ -580,6 +580,21 @@ impl EditorState {
             Command::DebugScale(f) => debug.scale = (debug.scale * f).clamp(0.01, 10.0),
             Command::ToggleMesh => debug.mesh = !debug.mesh,
             Command::ToggleHighlight => debug.highlight = !debug.highlight,
+            Command::ToggleFloaters => {
+                if catalog.scene.is_none() {
+                    return Err(
+                        "toggle-floaters: only a scene view (visage view FILE) has floaters to hide"
+                            .into(),
+                    );
+                }
+                debug.hide_floaters = !debug.hide_floaters;
+                let said = if debug.hide_floaters {
+                    "floaters hidden (what visage clean removes)"
+                } else {
+                    "floaters shown"
+                };
+                return Ok(Applied::said(said.to_string()));
+            }
             other => return Err(misrouted(other)),
         }
         Ok(Applied::default())
@@ -868,6 +883,20 @@ mod tests {
         assert_eq!(seen, [1, 0, 2, 1]);
         s.apply(&catalog, &Command::ShDegree(Some(0))).unwrap();
         assert_eq!(s.debug.sh_degree, 0);
+        // toggle-floaters hides and shows them again.
+        s.apply(&catalog, &Command::ToggleFloaters).unwrap();
+        assert!(s.debug.hide_floaters);
+        s.apply(&catalog, &Command::ToggleFloaters).unwrap();
+        assert!(!s.debug.hide_floaters);
+    }
+
+    /// An avatar editor has no floaters to hide: the command says so.
+    #[test]
+    fn toggle_floaters_needs_a_scene_view() {
+        let mut s = EditorState::new(Recipe::unedited("ada"));
+        let e = s.apply(&catalog(), &Command::ToggleFloaters).unwrap_err();
+        assert!(e.contains("only a scene view"), "{e}");
+        assert!(!s.debug.hide_floaters);
     }
 
     fn run(state: &mut EditorState, lines: &[&str]) {

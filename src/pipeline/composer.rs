@@ -202,8 +202,12 @@ enum Uploaded {
     Composite(u64),
     /// The same with every group but one dimmed (the region highlight).
     Highlighted(u64, Group),
-    /// A world-space scene (a painter draws one scene for its lifetime).
-    Scene,
+    /// A world-space scene (a painter draws one scene for its lifetime), as
+    /// it is or without its floaters.
+    Scene {
+        /// Whether this is the scene without its floaters.
+        cleaned: bool,
+    },
 }
 
 /// One renderer drawing composers' posed composites (or one scene).
@@ -242,17 +246,20 @@ impl Painter {
         Ok(())
     }
 
-    /// Draws a world-space scene, uploading it on the first call (a painter
-    /// that draws a scene draws only that scene).
+    /// Draws a world-space scene, uploading it when it was not the last one
+    /// drawn (a painter that draws a scene draws only that scene, as it is
+    /// or, `cleaned`, without its floaters).
     pub fn render_scene(
         &mut self,
         scene: &SplatScene,
+        cleaned: bool,
         camera: &Camera,
         settings: &RenderSettings,
     ) -> Result<RgbImage> {
-        if self.uploaded != Some(Uploaded::Scene) {
+        let which = Some(Uploaded::Scene { cleaned });
+        if self.uploaded != which {
             self.renderer.set_world_scene(scene)?;
-            self.uploaded = Some(Uploaded::Scene);
+            self.uploaded = which;
         }
         self.renderer.render_world(camera, settings)
     }

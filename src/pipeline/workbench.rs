@@ -23,6 +23,8 @@ use crate::render::mesh_preview::render_mesh;
 use crate::render::reference::centre_depth;
 use crate::render::settings::RenderSettings;
 use crate::render::Backend;
+use crate::scene::clean::{judge, keep, CleanOptions};
+use crate::scene::splats::SplatScene;
 
 /// Debug view toggles.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,6 +37,8 @@ pub struct DebugView {
     pub highlight: bool,
     /// Highest SH degree drawn (the file's own degree caps it).
     pub sh_degree: u8,
+    /// Leave out what the floater filter removes (`scene::clean`; scene views).
+    pub hide_floaters: bool,
 }
 
 impl Default for DebugView {
@@ -44,6 +48,7 @@ impl Default for DebugView {
             mesh: false,
             highlight: false,
             sh_degree: 3,
+            hide_floaters: false,
         }
     }
 }
@@ -110,6 +115,8 @@ enum Content {
 pub struct Workbench {
     content: Content,
     painter: Painter,
+    /// A scene without its floaters, made the first time they are hidden.
+    cleaned: Option<SplatScene>,
 }
 
 impl Workbench {
@@ -118,6 +125,7 @@ impl Workbench {
         Ok(Self {
             content: Content::Composite(Box::new(Composer::new(engine))),
             painter: Painter::open(backend)?,
+            cleaned: None,
         })
     }
 
@@ -126,6 +134,7 @@ impl Workbench {
         Ok(Self {
             content: Content::Scene(Box::new(scene)),
             painter: Painter::open(backend)?,
+            cleaned: None,
         })
     }
 
@@ -220,16 +229,24 @@ impl Workbench {
             .camera
             .camera(request.width.max(1), request.height.max(1));
         let t = Instant::now();
-        let image = self
-            .painter
-            .render_scene(&viewed.scene, &camera, settings)?;
+        let scene = if request.debug.hide_floaters {
+            self.cleaned.get_or_insert_with(|| {
+                let (verdicts, _) = judge(&viewed.scene, &CleanOptions::default());
+                keep(&viewed.scene, &verdicts)
+            })
+        } else {
+            &viewed.scene
+        };
+        let image =
+            self.painter
+                .render_scene(scene, request.debug.hide_floaters, &camera, settings)?;
         Ok(FrameResult {
             image,
             timings: FrameTimings {
                 render: t.elapsed().as_secs_f64() * 1e3,
                 ..FrameTimings::default()
             },
-            gaussians: viewed.scene.len(),
+            gaussians: scene.len(),
             visible: self.painter.visible(),
             stages: self.painter.stage_timings(),
             extras: 0,
@@ -297,7 +314,8 @@ fn settings_for(request: &FrameRequest) -> RenderSettings {
     settings
 }
 
-/// A scene view's state hash: the file's name and size and the camera.
+/// A scene view's state hash: the file's name and size and the camera (debug
+/// views — SH degree, hidden floaters — are not part of it).
 fn scene_view_hash(viewed: &ViewedScene, camera: &crate::scene::camera::Orbit) -> String {
     let mut h = blake3::Hasher::new();
     h.update(format!("{} {} {camera:?}", viewed.name, viewed.scene.len()).as_bytes());

@@ -3,6 +3,7 @@
 //! method and the renderers, beside the head model and the formats.
 
 pub mod camera;
+pub mod clean;
 pub mod splats;
 pub mod synthetic;
 pub mod upright;

@@ -574,10 +574,15 @@ fn scene_sections(scene: &SceneSummary, vm: &ViewModel) -> Vec<Section> {
         section(
             "appearance",
             vec![format!(
-                " SH {} of {} scale {:.2}",
+                " SH {} of {} scale {:.2} floaters {}",
                 s.debug.sh_degree.min(scene.sh_degree),
                 scene.sh_degree,
-                s.debug.scale
+                s.debug.scale,
+                if s.debug.hide_floaters {
+                    "hidden"
+                } else {
+                    "shown"
+                }
             )],
         ),
         section(
