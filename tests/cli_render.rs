@@ -575,3 +575,58 @@ fn compressed_plys_render_and_convert() {
     );
     std::fs::remove_file(out).ok();
 }
+
+/// `convert --synthetic-scale N OUT` streams the synthetic scene to a PLY with
+/// the very rows `write_splat_ply` writes for it in memory, writes the other
+/// formats from memory, and refuses an input beside it or no output.
+#[test]
+fn convert_writes_the_synthetic_scene_streamed() {
+    let (streamed, in_memory) = (temp("synthetic.ply"), temp("synthetic-ref.ply"));
+    let report = json(&[
+        "convert",
+        "--synthetic-scale",
+        "3000",
+        "--seed",
+        "5",
+        streamed.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(report["streamed"], true);
+    assert_eq!(report["gaussians"], 3000);
+    write_splat_ply(
+        &in_memory,
+        &visage::scene::synthetic::synthetic_scene(3000, 5),
+    )
+    .unwrap();
+    let body = |p: &std::path::Path| {
+        let bytes = std::fs::read(p).unwrap();
+        let end = bytes
+            .windows(11)
+            .position(|w| w == b"end_header\n")
+            .unwrap()
+            + 11;
+        bytes[end..].to_vec()
+    };
+    assert_eq!(body(&streamed), body(&in_memory), "the same rows");
+    assert!(!streamed.with_extension("ply.partial").exists());
+    let spz = temp("synthetic.spz");
+    let report = json(&[
+        "convert",
+        "--synthetic-scale",
+        "500",
+        spz.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(report["streamed"], false);
+    assert_eq!(visage::io::splat::read_scene(&spz).unwrap().len(), 500);
+    for args in [
+        vec!["convert", "--synthetic-scale", "10", "a.ply", "b.ply"],
+        vec!["convert", "a.ply"],
+        vec!["convert", "--synthetic-scale", "10", "out.txt"],
+    ] {
+        let o = visage(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+}

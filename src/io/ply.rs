@@ -516,8 +516,19 @@ pub fn encode_inria_ply<'a>(
     extra: Option<&str>,
     record: impl Fn(usize) -> InriaRecord<'a>,
 ) -> Vec<u8> {
-    let coefficients = sh_coefficients(sh_degree);
-    let rest = 3 * (coefficients - 1);
+    let header = inria_header(comment, count, sh_degree, extra);
+    let row = inria_row_bytes(sh_degree, extra.is_some());
+    let mut out = Vec::with_capacity(header.len() + count * row);
+    out.extend_from_slice(header.as_bytes());
+    for i in 0..count {
+        encode_inria_row(&mut out, sh_degree, &record(i));
+    }
+    out
+}
+
+/// The header of an INRIA-layout PLY of `count` rows.
+fn inria_header(comment: &str, count: usize, sh_degree: u8, extra: Option<&str>) -> String {
+    let rest = 3 * (sh_coefficients(sh_degree) - 1);
     let mut names: Vec<String> = [
         "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
     ]
@@ -537,32 +548,75 @@ pub fn encode_inria_ply<'a>(
     for n in &names {
         header += &format!("property float {n}\n");
     }
-    header += "end_header\n";
-    let mut out = Vec::with_capacity(header.len() + count * names.len() * 4);
-    out.extend_from_slice(header.as_bytes());
+    header + "end_header\n"
+}
+
+/// Bytes of one INRIA-layout row.
+fn inria_row_bytes(sh_degree: u8, extra: bool) -> usize {
+    4 * (17 + 3 * (sh_coefficients(sh_degree) - 1) + usize::from(extra))
+}
+
+/// Appends one row (f_rest channel-major, as INRIA's trainer writes it).
+fn encode_inria_row(out: &mut Vec<u8>, sh_degree: u8, r: &InriaRecord) {
+    let coefficients = sh_coefficients(sh_degree);
     let mut put = |v: f32| out.extend_from_slice(&v.to_le_bytes());
-    for i in 0..count {
-        let r = record(i);
-        let p = r.position;
-        [p.x, p.y, p.z, 0.0, 0.0, 0.0]
-            .into_iter()
-            .for_each(&mut put);
-        (0..3).for_each(|ch| put(r.sh[ch]));
-        for ch in 0..3 {
-            for k in 1..coefficients {
-                put(r.sh[k * 3 + ch]);
-            }
-        }
-        put(r.opacity_logit);
-        let s = r.log_scale;
-        [s.x, s.y, s.z].into_iter().for_each(&mut put);
-        let q = r.rotation;
-        [q.w, q.x, q.y, q.z].into_iter().for_each(&mut put);
-        if let Some(v) = r.extra {
-            put(v);
+    let p = r.position;
+    [p.x, p.y, p.z, 0.0, 0.0, 0.0]
+        .into_iter()
+        .for_each(&mut put);
+    (0..3).for_each(|ch| put(r.sh[ch]));
+    for ch in 0..3 {
+        for k in 1..coefficients {
+            put(r.sh[k * 3 + ch]);
         }
     }
-    out
+    put(r.opacity_logit);
+    let s = r.log_scale;
+    [s.x, s.y, s.z].into_iter().for_each(&mut put);
+    let q = r.rotation;
+    [q.w, q.x, q.y, q.z].into_iter().for_each(&mut put);
+    if let Some(v) = r.extra {
+        put(v);
+    }
+}
+
+/// Writes `count` rows as an INRIA-layout PLY without holding them: each
+/// item is encoded (through `record`) as `rows` yields it, through a buffer,
+/// into `PATH.partial`, renamed to `path` once complete (a killed run leaves
+/// no half file under the name). `rows` must yield at least `count` items.
+pub fn write_inria_ply_stream<T>(
+    path: &Path,
+    comment: &str,
+    count: usize,
+    sh_degree: u8,
+    rows: impl Iterator<Item = T>,
+    record: impl for<'b> Fn(&'b T) -> InriaRecord<'b>,
+) -> super::Result<()> {
+    let partial = path.with_extension(match path.extension() {
+        Some(e) => format!("{}.partial", e.to_string_lossy()),
+        None => "partial".into(),
+    });
+    let access = |e| super::FileError::access("write", &partial, e);
+    let file = std::fs::File::create(&partial).map_err(access)?;
+    let mut writer = std::io::BufWriter::with_capacity(1 << 20, file);
+    writer
+        .write_all(inria_header(comment, count, sh_degree, None).as_bytes())
+        .map_err(access)?;
+    let mut row = Vec::with_capacity(inria_row_bytes(sh_degree, false));
+    let mut written = 0usize;
+    for item in rows.take(count) {
+        row.clear();
+        encode_inria_row(&mut row, sh_degree, &record(&item));
+        writer.write_all(&row).map_err(access)?;
+        written += 1;
+    }
+    assert_eq!(written, count, "the rows ran out before the count");
+    writer
+        .into_inner()
+        .map_err(|e| access(e.into_error()))?
+        .sync_all()
+        .map_err(access)?;
+    std::fs::rename(&partial, path).map_err(|e| super::FileError::access("write", path, e))
 }
 
 /// Writes a scene as a standard 3DGS PLY (binary little endian), readable by any
