@@ -630,3 +630,53 @@ fn convert_writes_the_synthetic_scene_streamed() {
         assert_eq!(err.trim().lines().count(), 1, "{err}");
     }
 }
+
+/// A file that cannot be written is an I/O failure (exit 4), told apart from
+/// bad input (exit 2: a file that cannot be read): one line either way.
+#[test]
+fn write_failures_exit_4_and_read_failures_exit_2() {
+    let unwritable = "/proc/visage-no-such-dir/out";
+    for (args, code, needle) in [
+        (
+            vec![
+                "render",
+                "--size",
+                "16x12",
+                "--renderer",
+                "cpu",
+                "-o",
+                "/proc/visage-no-such-dir/x.png",
+            ],
+            4,
+            "cannot write /proc/visage-no-such-dir/x.png",
+        ),
+        (
+            vec![
+                "convert",
+                "--synthetic-scale",
+                "10",
+                "/proc/visage-no-such-dir/x.ply",
+            ],
+            4,
+            "cannot write",
+        ),
+        (vec!["fixtures", unwritable], 4, "cannot create"),
+        (
+            vec!["clean", "/proc/visage-no-such-dir/in.ply", "/tmp/out.ply"],
+            2,
+            "cannot read /proc/visage-no-such-dir/in.ply",
+        ),
+    ] {
+        let o = visage(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{args:?}: {err}");
+        let last = err.trim().lines().last().unwrap_or("");
+        assert!(last.contains(needle), "{args:?}: {err}");
+        assert_eq!(
+            err.lines()
+                .filter(|l| l.starts_with("visage: cannot"))
+                .count(),
+            1
+        );
+    }
+}

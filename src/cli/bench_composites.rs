@@ -203,8 +203,7 @@ fn trained_source(
     let partial = dir.join(format!("{name}.partial"));
     std::fs::remove_dir_all(&partial).ok();
     trainer.export(&partial)?;
-    std::fs::rename(&partial, &done)
-        .map_err(|e| Error::input(format!("cannot move {} into place: {e}", partial.display())))?;
+    std::fs::rename(&partial, &done).map_err(|e| Error::io("move into place", &partial, e))?;
     std::fs::remove_dir_all(&data).ok();
     Ok(SourceRow {
         name: name.to_string(),
@@ -254,8 +253,7 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
         "{}x{}-c{}-f{}-i{}-interior",
         args.size.0, args.size.1, args.cameras, args.frames, args.iterations
     ));
-    std::fs::create_dir_all(&cache)
-        .map_err(|e| Error::input(format!("cannot create {}: {e}", cache.display())))?;
+    std::fs::create_dir_all(&cache).map_err(|e| Error::io("create", &cache, e))?;
     let sources = names
         .iter()
         .map(|n| trained_source(args, &builtin, n, &cache))

@@ -255,5 +255,4 @@ fn write_rows(rows: &[Vec<RgbImage>], path: &std::path::Path) -> Result<()> {
         }
     }
     out.save_png(path)
-        .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))
 }

@@ -45,8 +45,7 @@ pub fn run(args: &InfoArgs) -> Result<()> {
 }
 
 fn export_objs(db: &Database, dir: &PathBuf) -> Result<()> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| Error::input(format!("cannot create {}: {e}", dir.display())))?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::io("create", dir, e))?;
     for source in &db.sources {
         let file: String = source
             .name

@@ -84,8 +84,7 @@ pub fn run(args: &RandomArgs) -> Result<()> {
         attributes,
     };
     let composites = random_composites(&db, &options)?;
-    std::fs::create_dir_all(&args.out)
-        .map_err(|e| Error::input(format!("cannot create {}: {e}", args.out.display())))?;
+    std::fs::create_dir_all(&args.out).map_err(|e| Error::io("create", &args.out, e))?;
     let mut bench = if args.render {
         Some(Workbench::new(Engine::new(db)?, args.renderer)?)
     } else {
@@ -94,7 +93,7 @@ pub fn run(args: &RandomArgs) -> Result<()> {
     for (i, composite) in composites.iter().enumerate() {
         let path = args.out.join(format!("random-{:03}.toml", i + 1));
         std::fs::write(&path, composite.recipe.to_toml())
-            .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))?;
+            .map_err(|e| Error::io("write", &path, e))?;
         if let Some(bench) = &mut bench {
             let request = FrameRequest {
                 recipe: composite.recipe.clone(),

@@ -108,8 +108,7 @@ fn render_sequence(
     composer.check_frames(start..end)?;
     let first = PathBuf::from(pattern.replace("{frame}", &format!("{start:04}")));
     if let Some(dir) = first.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::input(format!("cannot create {}: {e}", dir.display())))?;
+        std::fs::create_dir_all(dir).map_err(|e| Error::io("create", dir, e))?;
     }
     let mut painter = (!args.reference)
         .then(|| Painter::open(args.renderer))

@@ -216,8 +216,7 @@ fn run_analyse(args: &AnalyseArgs) -> Result<()> {
     };
     let analysis = analyse(&results, &options)?;
     if let Some(path) = &args.results {
-        std::fs::write(path, results.to_toml())
-            .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))?;
+        std::fs::write(path, results.to_toml()).map_err(|e| Error::io("write", path, e))?;
     }
     if args.json {
         println!(

@@ -134,8 +134,7 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
     let dataset = Dataset::load(&args.dataset)?;
     let head = args.head.load(Some(&dataset))?;
     // Fail on an unwritable output before training, not after.
-    std::fs::create_dir_all(&args.output)
-        .map_err(|e| Error::input(format!("cannot create {}: {e}", args.output.display())))?;
+    std::fs::create_dir_all(&args.output).map_err(|e| Error::io("create", &args.output, e))?;
     let background = if args.white_background {
         [1.0; 3]
     } else {

@@ -210,8 +210,7 @@ impl JournalFolder {
 
     /// The journals folder at `dir`, created if needed.
     pub fn at(dir: PathBuf) -> Result<JournalFolder> {
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| Error::input(format!("cannot create {}: {e}", dir.display())))?;
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io("create", &dir, e))?;
         Ok(JournalFolder { dir })
     }
 

@@ -115,8 +115,7 @@ pub fn perform(
     match effect {
         Effect::SaveRecipe(p) => {
             let path = place(p);
-            std::fs::write(&path, recipe.to_toml())
-                .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))?;
+            std::fs::write(&path, recipe.to_toml()).map_err(|e| Error::io("write", &path, e))?;
             Ok(Performed {
                 message: format!("saved recipe {}", path.display()),
                 path,

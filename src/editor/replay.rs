@@ -77,8 +77,7 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
     let mut bench = session.header.subject().open(Backend::Cpu, &|_, _| {})?;
     let mut editor = Editor::for_bench(&bench);
     if let Some(dir) = out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::input(format!("cannot create {}: {e}", dir.display())))?;
+        std::fs::create_dir_all(dir).map_err(|e| Error::io("create", dir, e))?;
     }
     let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let (w, h) = session.header.render;

@@ -73,9 +73,16 @@ impl From<&str> for FileError {
     }
 }
 
+/// A file that cannot be read or is malformed is bad input (exit 2); a file
+/// or folder that cannot be written is an I/O failure (exit 4).
 impl From<FileError> for crate::error::Error {
     fn from(e: FileError) -> Self {
-        crate::error::Error::Input(e.to_string())
+        match &e {
+            FileError::Access { action, .. } if *action != "read" => {
+                crate::error::Error::Io(e.to_string())
+            }
+            _ => crate::error::Error::Input(e.to_string()),
+        }
     }
 }
 

@@ -39,8 +39,8 @@ impl RgbImage {
         }
     }
 
-    /// Writes a PNG.
-    pub fn save_png(&self, path: &Path) -> Result<(), String> {
+    /// Writes a PNG; a failure is an I/O error (exit 4).
+    pub fn save_png(&self, path: &Path) -> crate::error::Result<()> {
         image::save_buffer(
             path,
             &self.pixels,
@@ -48,7 +48,7 @@ impl RgbImage {
             self.height,
             image::ExtendedColorType::Rgb8,
         )
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+        .map_err(|e| crate::error::Error::io("write", path, e))
     }
 
     /// Reads a PNG (any colour type; converted to RGB8).

@@ -439,9 +439,7 @@ fn recipe_files(path: &Path) -> Result<Vec<PathBuf>> {
 }
 
 fn write_folder(out: &Path, study: &Study, recipes: &[(u32, Recipe)]) -> Result<()> {
-    let io = |what: &Path, e: std::io::Error| {
-        Error::input(format!("cannot write {}: {e}", what.display()))
-    };
+    let io = |what: &Path, e: std::io::Error| Error::io("write", what, e);
     let recipes_dir = out.join(RECIPES_DIR);
     std::fs::create_dir_all(&recipes_dir).map_err(|e| io(&recipes_dir, e))?;
     std::fs::create_dir_all(out.join(ANSWERS_DIR)).map_err(|e| io(out, e))?;

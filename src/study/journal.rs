@@ -65,7 +65,8 @@ impl Journal {
     pub fn open(study: &StudyFolder, participant: &str) -> Result<Journal> {
         check_participant(participant)?;
         let path = journal_path(study, participant);
-        let io = |e: std::io::Error| Error::input(format!("{}: {e}", path.display()));
+        // The answers file is ours to write: failing to is an I/O error (exit 4).
+        let io = |e: std::io::Error| Error::Io(format!("{}: {e}", path.display()));
         let header = Header {
             participant: participant.to_string(),
             study: study.fingerprint.clone(),

@@ -63,9 +63,7 @@ fn draw_png(
         area.present().map_err(plot_error)?;
     }
     let image = image::RgbImage::from_raw(size.0, size.1, pixels).expect("buffer matches size");
-    image
-        .save(path)
-        .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))
+    image.save(path).map_err(|e| Error::io("write", path, e))
 }
 
 fn category_colour(analysis: &Analysis, name: &str) -> RGBColor {
@@ -79,8 +77,7 @@ fn category_colour(analysis: &Analysis, name: &str) -> RGBColor {
 
 /// Writes `authenticity.png` and `regions.png` into `dir`; returns their paths.
 pub fn write_plots(analysis: &Analysis, dir: &Path) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| Error::input(format!("cannot create {}: {e}", dir.display())))?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::io("create", dir, e))?;
     let scores = dir.join("authenticity.png");
     draw_png(&scores, (1400, 900), |area| {
         authenticity_chart(area, analysis)

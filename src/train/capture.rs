@@ -325,8 +325,7 @@ pub fn capture_sitter(
     let surface = Surface::new(model, sitter);
     for dir in ["images", "fg_masks", "flame_param"] {
         let d = out.join(dir);
-        std::fs::create_dir_all(&d)
-            .map_err(|e| Error::input(format!("cannot create {}: {e}", d.display())))?;
+        std::fs::create_dir_all(&d).map_err(|e| Error::io("create", &d, e))?;
     }
     let (cameras, held_out) = rig(options.cameras, options.ring, options.size);
     let timesteps: Vec<usize> = (0..options.frames)
@@ -370,7 +369,7 @@ pub fn capture_sitter(
             let (image, mask) = surface.draw(&posed, camera);
             let name = format!("{t:05}_{c:02}.png");
             let image_path = out.join("images").join(&name);
-            image.save_png(&image_path).map_err(Error::input)?;
+            image.save_png(&image_path)?;
             let mask_path = out.join("fg_masks").join(&name);
             image::save_buffer(
                 &mask_path,
@@ -379,7 +378,7 @@ pub fn capture_sitter(
                 camera.size[1],
                 image::ExtendedColorType::L8,
             )
-            .map_err(|e| Error::input(format!("cannot write {}: {e}", mask_path.display())))?;
+            .map_err(|e| Error::io("write", &mask_path, e))?;
             splits[split].push(json!({
                 "file_path": format!("images/{name}"),
                 "fg_mask_path": format!("fg_masks/{name}"),
@@ -424,7 +423,7 @@ pub fn capture_sitter(
         });
         let path = out.join(format!("transforms_{split}.json"));
         std::fs::write(&path, serde_json::to_string_pretty(&doc).expect("json"))
-            .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))?;
+            .map_err(|e| Error::io("write", &path, e))?;
     }
     // GaussianAvatars recognises a dynamic-head dataset by this file.
     write_flame_params(

@@ -791,8 +791,7 @@ impl Trainer {
             "gaussians": self.model.len(),
         });
         let text = serde_json::to_string_pretty(&doc).expect("JSON values serialise");
-        std::fs::write(path, text + "\n")
-            .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))
+        std::fs::write(path, text + "\n").map_err(|e| Error::io("write", path, e))
     }
 
     /// Writes everything a resumed run needs to continue exactly where this
@@ -885,8 +884,7 @@ impl Trainer {
             .collect();
         let partial = path.with_extension("npz.partial");
         crate::io::npy::write_npz(&partial, &named, false)?;
-        std::fs::rename(&partial, path)
-            .map_err(|e| Error::input(format!("cannot write {}: {e}", path.display())))
+        std::fs::rename(&partial, path).map_err(|e| Error::io("write", path, e))
     }
 
     /// A trainer continuing from a checkpoint of a run on the same dataset
