@@ -9,7 +9,8 @@
 //!   colours (w = α·Πs / min s). Means below `DARK_MEAN` are treated as
 //!   `DARK_MEAN` and gains are clamped to `GAIN_RANGE`, so near-black regions
 //!   (pupils, mouth cavity) never explode or produce NaN.
-//! - **skin**: mean and spread transfer (Reinhard) in CIELAB, estimated on the
+//! - **skin**: the ratio of the two sources' mean skin colours, per channel in
+//!   linear RGB (another albedo under the same light), estimated on the
 //!   skin-coloured Gaussians of each source's face and applied to skin-coloured
 //!   Gaussians only, weighted by how skin-like they are. Hair, brows, lips, eyes
 //!   and clothing keep their colours (the thesis's neck turned green trying to
@@ -25,8 +26,6 @@ use crate::model::regions::Region;
 pub const DARK_MEAN: f32 = 0.02;
 /// Allowed per-channel gains.
 pub const GAIN_RANGE: (f32, f32) = (0.25, 4.0);
-/// Allowed spread ratios in the skin transfer.
-pub const SPREAD_RANGE: (f32, f32) = (0.5, 2.0);
 
 /// Weighted mean DC colour of some Gaussians of a set (thesis weights).
 pub fn weighted_mean_colour(set: &GaussianSet, indices: &[u32]) -> Option<Vec3> {
@@ -88,15 +87,42 @@ pub fn apply_gain(sh: &mut [f32], gain: Vec3) {
     }
 }
 
+/// Linear values below this count as this when dividing by them.
+const LINEAR_FLOOR: f32 = 1e-4;
+
+/// sRGB (display, 0..1, clamped) to linear RGB.
+pub fn srgb_to_linear(rgb: Vec3) -> Vec3 {
+    rgb.clamp(Vec3::ZERO, Vec3::ONE)
+        .to_array()
+        .map(|c| {
+            if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            }
+        })
+        .into()
+}
+
+/// Linear RGB to sRGB (negative values clamped to 0; values above 1 stay
+/// above, for the caller to clamp).
+pub fn linear_to_srgb(linear: Vec3) -> Vec3 {
+    linear
+        .to_array()
+        .map(|c| {
+            let c = c.max(0.0);
+            if c <= 0.003_130_8 {
+                12.92 * c
+            } else {
+                1.055 * c.powf(1.0 / 2.4) - 0.055
+            }
+        })
+        .into()
+}
+
 /// sRGB (display, 0..1) to CIELAB (D65).
 pub fn srgb_to_lab(rgb: Vec3) -> Vec3 {
-    let lin = rgb.clamp(Vec3::ZERO, Vec3::ONE).to_array().map(|c| {
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    });
+    let lin = srgb_to_linear(rgb).to_array();
     let x = 0.412_456_4 * lin[0] + 0.357_576_1 * lin[1] + 0.180_437_5 * lin[2];
     let y = 0.212_672_9 * lin[0] + 0.715_152_2 * lin[1] + 0.072_175 * lin[2];
     let z = 0.019_333_9 * lin[0] + 0.119_192 * lin[1] + 0.950_304_1 * lin[2];
@@ -127,17 +153,7 @@ pub fn lab_to_srgb(lab: Vec3) -> Vec3 {
     let r = 3.240_454_2 * x - 1.537_138_5 * y - 0.498_531_4 * z;
     let g = -0.969_266 * x + 1.876_010_8 * y + 0.041_556 * z;
     let b = 0.055_643_4 * x - 0.204_025_9 * y + 1.057_225_2 * z;
-    Vec3::new(r, g, b)
-        .to_array()
-        .map(|c| {
-            let c = c.max(0.0);
-            if c <= 0.003_130_8 {
-                12.92 * c
-            } else {
-                1.055 * c.powf(1.0 / 2.4) - 0.055
-            }
-        })
-        .into()
+    linear_to_srgb(Vec3::new(r, g, b))
 }
 
 /// Skin colour statistics of one source in CIELAB.
@@ -145,12 +161,21 @@ pub fn lab_to_srgb(lab: Vec3) -> Vec3 {
 pub struct SkinStats {
     /// Weighted mean.
     pub mean: Vec3,
-    /// Weighted standard deviation per channel.
-    pub spread: Vec3,
 }
 
-/// How skin-like a colour is, given the source's skin statistics (1 = typical skin).
+/// How skin-like a colour is, given the source's skin statistics (1 = typical
+/// skin): 1 within 12 of the skin mean, 0 beyond 26, with lightness counted
+/// half ([`skin_distance`]) so that lit and shaded skin — a nose's highlight,
+/// the shadow behind an ear — stays skin. The skin statistics and the semantic
+/// correction's skin regions use it.
 pub fn skin_likeness(lab: Vec3, stats: &SkinStats) -> f32 {
+    smoothstep(26.0, 12.0, skin_distance(lab, stats.mean))
+}
+
+/// The skin mode's likeness: as [`skin_likeness`] but with lightness counted
+/// fully. That mode knows no regions, so dark brows and hair must stay out by
+/// colour alone (with lightness halved they came in: non-skin ΔE 3.61 → 5.77).
+pub fn colour_only_skin_likeness(lab: Vec3, stats: &SkinStats) -> f32 {
     smoothstep(26.0, 12.0, (lab - stats.mean).length())
 }
 
@@ -158,7 +183,7 @@ pub fn skin_likeness(lab: Vec3, stats: &SkinStats) -> f32 {
 pub const SKIN_REFERENCE_REGIONS: [Region; 2] = [Region::Skin, Region::Nose];
 
 /// Estimates skin statistics from the Gaussians `indices` of a set: a first mean
-/// over all of them, then mean and spread over the skin-like ones.
+/// over all of them, then the mean over the skin-like ones.
 pub fn skin_stats(set: &GaussianSet, indices: &[u32]) -> Option<SkinStats> {
     let stride = set.sh_stride();
     let labs: Vec<(Vec3, f32)> = indices
@@ -172,21 +197,13 @@ pub fn skin_stats(set: &GaussianSet, indices: &[u32]) -> Option<SkinStats> {
         .filter(|(lab, w)| lab.is_finite() && w.is_finite())
         .collect();
     let weighted = |weight: &dyn Fn(Vec3, f32) -> f32| -> Option<SkinStats> {
-        let (mut sum, mut sq, mut total) = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
+        let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
         for &(lab, a) in &labs {
             let w = weight(lab, a);
             sum += w * lab;
-            sq += w * lab * lab;
             total += w;
         }
-        (total > 1e-6).then(|| {
-            let mean = sum / total;
-            let var = (sq / total - mean * mean).max(Vec3::ZERO);
-            SkinStats {
-                mean,
-                spread: var.sqrt().max(Vec3::splat(0.5)),
-            }
-        })
+        (total > 1e-6).then(|| SkinStats { mean: sum / total })
     };
     let rough = weighted(&|_, a| a)?;
     weighted(&|lab, a| a * skin_likeness(lab, &rough)).or(Some(rough))
@@ -201,7 +218,7 @@ pub fn skin_transfer_gain(dc: [f32; 3], from: &SkinStats, to: &SkinStats) -> Vec
     if !lab.is_finite() {
         return Vec3::ONE;
     }
-    transfer_gain(rgb, lab, skin_likeness(lab, from), from, to)
+    transfer_gain(rgb, lab, colour_only_skin_likeness(lab, from), from, to)
 }
 
 /// Regions that hold no skin at all: the semantic correction leaves them as
@@ -264,14 +281,16 @@ fn mostly_skin(region: Region) -> bool {
 }
 
 /// The gain moving `rgb` (at `lab`) a share `k` of the way along the
-/// Reinhard mean-and-spread transfer from `from` to `to`.
+/// skin transfer from `from` to `to` (the linear-RGB ratio of their means).
 fn transfer_gain(rgb: Vec3, lab: Vec3, k: f32, from: &SkinStats, to: &SkinStats) -> Vec3 {
     if k <= 0.0 {
         return Vec3::ONE;
     }
-    let ratio =
-        (to.spread / from.spread).clamp(Vec3::splat(SPREAD_RANGE.0), Vec3::splat(SPREAD_RANGE.1));
-    let moved = to.mean + (lab - from.mean) * ratio;
+    // Another skin under the same light: the albedo ratio of the two skins'
+    // means, per channel in linear RGB (shading and texture are products).
+    let ratio = srgb_to_linear(lab_to_srgb(to.mean))
+        / srgb_to_linear(lab_to_srgb(from.mean)).max(Vec3::splat(LINEAR_FLOOR));
+    let moved = srgb_to_lab(linear_to_srgb(srgb_to_linear(rgb) * ratio));
     let target = lab_to_srgb(lab.lerp(moved, k));
     let current = rgb.clamp(Vec3::ZERO, Vec3::ONE).max(Vec3::splat(DARK_MEAN));
     (target.max(Vec3::splat(DARK_MEAN)) / current)
@@ -339,11 +358,9 @@ mod tests {
     fn skin_transfer_moves_skin_and_leaves_hair() {
         let from = SkinStats {
             mean: srgb_to_lab(Vec3::new(0.9, 0.75, 0.65)),
-            spread: Vec3::splat(3.0),
         };
         let to = SkinStats {
             mean: srgb_to_lab(Vec3::new(0.45, 0.3, 0.2)),
-            spread: Vec3::splat(3.0),
         };
         let mut skin = vec![rgb_to_dc(0.9), rgb_to_dc(0.75), rgb_to_dc(0.65)];
         let gain = skin_transfer_gain([skin[0], skin[1], skin[2]], &from, &to);
@@ -360,7 +377,6 @@ mod tests {
     fn stats(rgb: Vec3) -> SkinStats {
         SkinStats {
             mean: srgb_to_lab(rgb),
-            spread: Vec3::splat(3.0),
         }
     }
 
@@ -372,6 +388,31 @@ mod tests {
         let mut sh = dc(rgb).to_vec();
         apply_gain(&mut sh, gain);
         Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]))
+    }
+
+    /// Another skin under the same light: lit and shaded skin of one person
+    /// become the other's skin at the same light (an albedo ratio in linear
+    /// RGB), and a highlight well above the mean still counts as skin.
+    #[test]
+    fn the_transfer_keeps_the_light_and_changes_the_albedo() {
+        let (light, dark) = (Vec3::new(0.82, 0.64, 0.50), Vec3::new(0.31, 0.20, 0.14));
+        let (from, to) = (stats(light), stats(dark));
+        let lit =
+            |albedo: Vec3, light_level: f32| linear_to_srgb(srgb_to_linear(albedo) * light_level);
+        for level in [0.45, 1.0, 1.3] {
+            let source = lit(light, level);
+            let gain = semantic_skin_gain(dc(source), Region::Nose, &from, &to);
+            let got = corrected(source, gain);
+            let want = lit(dark, level);
+            assert!(
+                (srgb_to_lab(got) - srgb_to_lab(want)).length() < 1.5,
+                "light {level}: {got} against {want}"
+            );
+        }
+        // A highlight 18 lighter than the mean is still skin (lightness counts half).
+        let highlight = lab_to_srgb(srgb_to_lab(light) + Vec3::new(18.0, 0.0, 0.0));
+        assert!(skin_likeness(srgb_to_lab(highlight), &from) > 0.99);
+        assert!(colour_only_skin_likeness(srgb_to_lab(highlight), &from) < 0.7);
     }
 
     #[test]

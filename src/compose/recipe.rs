@@ -62,7 +62,8 @@ pub enum ColourCorrection {
     Off,
     /// Thesis 4.2.2: per-region gain c̄_base / c̄_f on weighted mean colours.
     Thesis,
-    /// Mean and spread transfer in CIELAB on skin-coloured Gaussians only.
+    /// Skin transfer (the ratio of the sources' mean skin colours, per channel
+    /// in linear RGB) on skin-coloured Gaussians only.
     Skin,
     /// The same transfer on skin only by what it is: never in regions that
     /// hold no skin (eyeballs, teeth, the mouth's inside, hair),
