@@ -6,12 +6,11 @@
 //! Table 6.2.
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use clap::Args;
 use serde_json::json;
 
-use super::bench_train::{held_out_psnr, held_out_targets, BenchDataset};
+use super::bench_train::{held_out_psnr, held_out_targets, train_to_end, BenchDataset};
 use super::render::parse_size;
 use super::train::hole_json;
 use crate::error::{Error, Result};
@@ -23,7 +22,7 @@ use crate::train::holes::Obscurer;
 use crate::train::model::{Render, Trainable};
 use crate::train::project::TrainCamera;
 use crate::train::raster::Rasterizer;
-use crate::train::trainer::{training_arc, TrainOptions, Trainer};
+use crate::train::trainer::training_arc;
 
 /// Arguments of `visage bench holes`.
 #[derive(Args, Debug, Clone)]
@@ -114,23 +113,14 @@ pub fn run(args: &HolesBenchArgs) -> Result<()> {
         .into_iter()
         .filter(|(n, _)| args.variants.iter().any(|v| v == n))
     {
-        let mut trainer = Trainer::new(
+        let (trainer, train_s) = train_to_end(
             dataset,
-            head.clone(),
-            TrainOptions {
-                iterations: args.iterations,
-                seed: args.seed,
-                size: None,
-                background: [0.0; 3],
-                renderer: args.renderer,
-                holes,
-            },
+            &head,
+            args.iterations,
+            args.seed,
+            args.renderer,
+            holes,
         )?;
-        let start = Instant::now();
-        while trainer.iteration() < args.iterations {
-            trainer.step()?;
-        }
-        let train_s = start.elapsed().as_secs_f64();
         device = trainer.rasterizer();
         let model = Trainable::from_set(&trainer.gaussians());
         let metrics = hole_metrics::measure(&model, &head, &posed, &cameras);

@@ -9,12 +9,11 @@
 //! open at least 3° and the rest.
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use clap::Args;
 use serde_json::json;
 
-use super::bench_train::{held_out_targets, BenchDataset};
+use super::bench_train::{held_out_targets, train_to_end, BenchDataset};
 use super::render::parse_size;
 use crate::error::Result;
 use crate::io::avatar::read_flame_params;
@@ -26,7 +25,7 @@ use crate::train::composite_eval::OPEN_MOUTH_DEG;
 use crate::train::holes::HoleFilling;
 use crate::train::model::Trainable;
 use crate::train::project::TrainCamera;
-use crate::train::trainer::{evaluate_view, Target, TrainOptions, Trainer};
+use crate::train::trainer::{evaluate_view, Target};
 
 /// Arguments of `visage bench mouth`.
 #[derive(Args, Debug, Clone)]
@@ -177,23 +176,14 @@ pub fn run(args: &MouthBenchArgs) -> Result<()> {
     let open_views = mouths.iter().filter(|m| m.open).count();
     let mut rows = Vec::new();
     for (name, head) in [("pocket", &pocket), ("open", &open), ("cavity", &cavity)] {
-        let mut trainer = Trainer::new(
+        let (trainer, train_s) = train_to_end(
             dataset,
-            head.clone(),
-            TrainOptions {
-                iterations: args.iterations,
-                seed: args.seed,
-                size: None,
-                background: [0.0; 3],
-                renderer: args.renderer,
-                holes: HoleFilling::RECOMMENDED,
-            },
+            head,
+            args.iterations,
+            args.seed,
+            args.renderer,
+            HoleFilling::RECOMMENDED,
         )?;
-        let start = Instant::now();
-        while trainer.iteration() < args.iterations {
-            trainer.step()?;
-        }
-        let train_s = start.elapsed().as_secs_f64();
         let model = Trainable::from_set(&trainer.gaussians());
         let e = score(&model, head, dataset, &targets, &mouths)?;
         if !args.json {

@@ -114,6 +114,36 @@ pub(super) fn held_out_targets(
     Ok((frames, targets))
 }
 
+/// Trains `head` on `dataset` for `iterations` with one seed and returns the
+/// trainer at the end and the seconds it took (the hole and mouth benches
+/// train several variants this way).
+pub(super) fn train_to_end(
+    dataset: &Dataset,
+    head: &crate::model::head::HeadModel,
+    iterations: usize,
+    seed: u64,
+    renderer: Backend,
+    holes: crate::train::holes::HoleFilling,
+) -> Result<(Trainer, f64)> {
+    let mut trainer = Trainer::new(
+        dataset,
+        head.clone(),
+        TrainOptions {
+            iterations,
+            seed,
+            size: None,
+            background: [0.0; 3],
+            renderer,
+            holes,
+        },
+    )?;
+    let start = Instant::now();
+    while trainer.iteration() < iterations {
+        trainer.step()?;
+    }
+    Ok((trainer, start.elapsed().as_secs_f64()))
+}
+
 /// Mean held-out PSNR of a model.
 pub(super) fn held_out_psnr(
     model: &crate::train::model::Trainable,
