@@ -58,7 +58,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let w0 = world[3u * i];
     let q = world[3u * i + 1u];
     let s = world[3u * i + 2u].xyz * camera.extra.x;
-    let opacity = min(w0.w, 1.0);
+    let opacity = min(w0.w, MAX_OPACITY);
     if (!finite3(w0.xyz) || !finite3(s) || !(opacity > 0.0)) {
         cull(i);
         return;

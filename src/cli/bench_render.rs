@@ -17,6 +17,7 @@ use crate::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
 use crate::error::{Error, Result};
 use crate::pipeline::composer::{reference_image, Composer, Painter};
 use crate::render::image::{psnr_report, RgbImage};
+use crate::render::lod::LodPolicy;
 use crate::render::settings::RenderSettings;
 use crate::render::settings::StageTimings;
 use crate::render::Backend;
@@ -56,6 +57,10 @@ pub struct RenderBenchArgs {
     /// Skip the knob table.
     #[arg(long)]
     no_knobs: bool,
+    /// Level of detail measured beside the exact path on scenes: off, auto
+    /// (nodes of at most 1.5 px), or a budget of Gaussians (e.g. 300k).
+    #[arg(long, default_value = "auto", value_parser = LodPolicy::parse)]
+    lod: LodPolicy,
     /// Print one JSON document instead of tables.
     #[arg(long)]
     json: bool,
@@ -195,6 +200,7 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
             &args.renderers,
             (args.warmup, args.iterations),
             (!args.no_knobs).then_some(args.knob_size),
+            args.lod,
         )?;
         return print(&doc, args.json);
     }
@@ -383,10 +389,55 @@ fn print_tables(doc: &Value) {
             .as_f64()
             .map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
     );
+    if let Some(ms) = doc["lod_build_ms"].as_f64() {
+        println!(
+            "level of detail ({}): {} nodes built in {ms:.0} ms",
+            doc["lod"].as_str().unwrap_or(""),
+            doc["lod_nodes"]
+        );
+    }
     for r in doc["renderers"].as_array().into_iter().flatten() {
         print_renderer(r);
+        print_lod_rows(r);
     }
     print_skipped(doc);
+}
+
+/// The rows' level-of-detail columns, when measured: a moving camera's
+/// frame (cut, gather, upload, render), the cut's PSNR against the full
+/// scene's reference, and what it drew.
+fn print_lod_rows(doc: &Value) {
+    let rows: Vec<&Value> = doc["rows"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|r| r.get("lod_ms_median").is_some())
+        .collect();
+    if rows.is_empty() {
+        return;
+    }
+    println!(
+        "with level of detail:\n{:>10} {:>9} {:>7} {:>9} {:>9} {:>7} {:>7}",
+        "size", "median ms", "FPS", "PSNR dB", "drawn", "levels", "cut ms"
+    );
+    for r in rows {
+        println!(
+            "{:>10} {:>9.2} {:>7.1} {:>9.1} {:>9} {:>7} {:>7.2}",
+            format!("{}x{}", r["width"], r["height"]),
+            r["lod_ms_median"].as_f64().unwrap_or(0.0),
+            r["lod_fps"].as_f64().unwrap_or(0.0),
+            r["lod_psnr_db"].as_f64().unwrap_or(0.0),
+            match &r["lod_drawn"] {
+                Value::String(s) => s.clone(),
+                n => n.to_string(),
+            },
+            match &r["lod_levels"] {
+                Value::Array(l) => format!("{}-{}", l[0], l[1]),
+                _ => "all".into(),
+            },
+            r["lod_cut_ms"].as_f64().unwrap_or(0.0),
+        );
+    }
 }
 
 fn print_renderer(doc: &Value) {

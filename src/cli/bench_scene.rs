@@ -8,7 +8,9 @@ use serde_json::{json, Value};
 
 use super::bench::{median_stages, open_or_skip, summarize};
 use crate::error::{Error, Result};
+use crate::pipeline::lod::LodScene;
 use crate::render::image::{psnr_report, RgbImage};
+use crate::render::lod::{build, LodPolicy};
 use crate::render::reference::render_reference;
 use crate::render::settings::{RenderSettings, StageTimings};
 use crate::render::{Backend, SplatRenderer};
@@ -63,18 +65,66 @@ fn time_scene(
     Ok((totals, median_stages(&stages)))
 }
 
+/// One row's level-of-detail columns: the cut's PSNR against the full
+/// scene's reference, what it drew, and the frame time of a moving camera
+/// (cut, gather, upload and render every frame).
+fn lod_row(
+    renderer: &mut SplatRenderer,
+    hierarchy: &mut LodScene,
+    camera: &Camera,
+    reference: &RgbImage,
+    lod: LodPolicy,
+    (warmup, iterations): (usize, usize),
+) -> Result<serde_json::Map<String, Value>> {
+    let settings = RenderSettings::default();
+    hierarchy.forget();
+    let image = hierarchy.render(renderer, camera, lod, &settings)?;
+    let summary = hierarchy.summary();
+    let mut totals = Vec::new();
+    for it in 0..warmup + iterations {
+        hierarchy.forget();
+        let t = Instant::now();
+        hierarchy.render(renderer, camera, lod, &settings)?;
+        if it >= warmup {
+            totals.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    let (median, p90) = summarize(totals);
+    let row = json!({
+        "lod_ms_median": median, "lod_ms_p90": p90, "lod_fps": 1e3 / median,
+        "lod_psnr_db": psnr_report(&image, reference).unwrap_or(0.0),
+        "lod_drawn": summary.drawn, "lod_leaves": summary.leaves,
+        "lod_levels": [summary.levels.0, summary.levels.1], "lod_cut_ms": summary.cut_ms,
+    });
+    Ok(row.as_object().cloned().unwrap_or_default())
+}
+
+/// The level-of-detail columns of a row where the policy draws the scene
+/// as it is: the exact path's own figures.
+fn exact_as_lod_row(row: &Value) -> serde_json::Map<String, Value> {
+    let row = json!({
+        "lod_ms_median": row["ms_median"], "lod_ms_p90": row["ms_p90"], "lod_fps": row["fps"],
+        "lod_psnr_db": row["psnr_db"], "lod_drawn": "exact", "lod_levels": Value::Null,
+        "lod_cut_ms": 0.0,
+    });
+    row.as_object().cloned().unwrap_or_default()
+}
+
 /// The early-stop thresholds compared on scenes (the knob that trades
 /// accuracy for speed on every renderer without resampling the image).
 const EARLY_STOPS: [f32; 4] = [1e-4, 1e-3, 1e-2, 3e-2];
 
 /// Runs the scene benchmark and returns its JSON document; with `knob_size`,
-/// the early-stop thresholds are compared at that size.
+/// the early-stop thresholds are compared at that size; with a `lod` other
+/// than off, each row also measures the level-of-detail cut against the
+/// full scene's reference.
 pub fn bench_scene(
     source: SceneSource,
     sizes: &[(u32, u32)],
     renderers: &[Backend],
     rounds: (usize, usize),
     knob_size: Option<(u32, u32)>,
+    lod: LodPolicy,
 ) -> Result<Value> {
     let t = Instant::now();
     let (scene, name): (SplatScene, String) = match source {
@@ -99,6 +149,9 @@ pub fn bench_scene(
         let image = render_reference(&scene, &camera, &RenderSettings::default());
         references.push((camera, image, t.elapsed().as_secs_f64() * 1e3));
     }
+    let t = Instant::now();
+    let mut hierarchy = (lod != LodPolicy::Off).then(|| LodScene::new(build(&scene)));
+    let lod_build_ms = t.elapsed().as_secs_f64() * 1e3;
     let mut docs = Vec::new();
     let mut skipped = Vec::new();
     for &backend in renderers {
@@ -149,6 +202,19 @@ pub fn bench_scene(
             },
             None => Vec::new(),
         };
+        if let Some(hierarchy) = hierarchy.as_mut() {
+            for (row, (camera, reference, _)) in rows.iter_mut().zip(&references) {
+                if row.get("error").is_some() {
+                    continue;
+                }
+                let pixels = (camera.width * camera.height) as usize;
+                let measured = match lod.resolve(scene.len(), pixels) {
+                    LodPolicy::Off => exact_as_lod_row(row),
+                    policy => lod_row(&mut renderer, hierarchy, camera, reference, policy, rounds)?,
+                };
+                row.as_object_mut().unwrap().extend(measured);
+            }
+        }
         docs.push(json!({
             "renderer": backend,
             "device": renderer.description(),
@@ -163,6 +229,9 @@ pub fn bench_scene(
         "scene": name,
         "gaussians": scene.len(),
         "load_ms": load_ms,
+        "lod": lod.label(),
+        "lod_build_ms": hierarchy.is_some().then_some(lod_build_ms),
+        "lod_nodes": hierarchy.as_ref().map(|h| h.tree().len()),
         "load_peak_rss_mb": load_peak,
         "peak_rss_mb": peak_rss_mb(),
         "renderers": docs,

@@ -10,6 +10,7 @@ use crate::editor::command::Command;
 use crate::editor::replay::replay;
 use crate::error::{Error, Result};
 use crate::pipeline::{SceneSpec, Subject};
+use crate::render::lod::LodPolicy;
 use crate::render::Backend;
 use crate::tui::app::run_editor;
 use crate::tui::graphics::GraphicsChoice;
@@ -58,6 +59,12 @@ pub struct ViewArgs {
     /// A 3DGS scene: INRIA PLY (any SH degree, ASCII or binary), SuperSplat's
     /// compressed PLY, a .splat file or Niantic's SPZ (versions 2-4).
     file: PathBuf,
+    /// Level of detail: auto (a hierarchy's nodes of at most 1.5 px where
+    /// the scene holds more than 4 Gaussians a pixel), off (every Gaussian)
+    /// or a budget of Gaussians drawn (e.g. 300k). The `lod` command
+    /// changes it while viewing.
+    #[arg(long, default_value = "auto", value_parser = LodPolicy::parse)]
+    lod: LodPolicy,
     #[command(flatten)]
     terminal: TerminalArgs,
 }
@@ -70,14 +77,17 @@ pub fn run_edit(args: &EditArgs) -> Result<()> {
         None if args.db.spec() == crate::pipeline::DatabaseSpec::default() => None,
         None => Some(Subject::Avatars(args.db.spec())),
     };
-    run_terminal(subject, &args.terminal)
+    run_terminal(subject, &args.terminal, Vec::new())
 }
 
 /// Runs `visage view FILE`.
 pub fn run_view(args: &ViewArgs) -> Result<()> {
+    // The default needs no command: a scene view starts with auto.
+    let lod = (args.lod != LodPolicy::Auto).then_some(Command::Lod(args.lod));
     run_terminal(
         Some(scene_subject(&args.file, &args.terminal)?),
         &args.terminal,
+        lod.into_iter().collect(),
     )
 }
 
@@ -94,7 +104,13 @@ fn scene_subject(file: &std::path::Path, args: &TerminalArgs) -> Result<Subject>
     }))
 }
 
-fn run_terminal(subject: Option<Subject>, args: &TerminalArgs) -> Result<()> {
+/// Opens the editor on `subject` with `initial` commands applied after the
+/// camera overrides.
+fn run_terminal(
+    subject: Option<Subject>,
+    args: &TerminalArgs,
+    initial: Vec<Command>,
+) -> Result<()> {
     use std::io::IsTerminal;
     let mut overrides = args.camera.overrides()?;
     if matches!(subject, Some(Subject::Scene(_))) {
@@ -134,11 +150,11 @@ fn run_terminal(subject: Option<Subject>, args: &TerminalArgs) -> Result<()> {
         keymap: args.keymap.clone(),
         graphics: args.graphics,
         renderer: args.renderer,
-        initial: if overrides.is_empty() {
-            Vec::new()
-        } else {
-            vec![Command::SetCamera(overrides)]
-        },
+        initial: (!overrides.is_empty())
+            .then_some(Command::SetCamera(overrides))
+            .into_iter()
+            .chain(initial)
+            .collect(),
     })
 }
 

@@ -11,6 +11,8 @@ use super::DbArgs;
 use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
 use crate::pipeline::composer::{reference_image, Composer, Painter};
+use crate::pipeline::lod::LodScene;
+use crate::render::lod::LodPolicy;
 use crate::render::reference::render_reference;
 use crate::render::settings::RenderSettings;
 use crate::render::{Backend, SplatRenderer};
@@ -41,6 +43,11 @@ pub struct RenderArgs {
     /// Render with the CPU reference renderer (f64, exact depth order).
     #[arg(long)]
     reference: bool,
+    /// Level of detail for a scene (--ply): off (every Gaussian, the
+    /// default), auto (nodes of at most 1.5 px where the scene holds more
+    /// than 4 Gaussians a pixel), or a budget of Gaussians (e.g. 300k).
+    #[arg(long, default_value = "off", value_parser = LodPolicy::parse, conflicts_with = "reference")]
+    lod: LodPolicy,
     /// Renderer: auto (a hardware GPU if present, else the CPU renderer), gpu
     /// (wgpu on any adapter, lavapipe included) or cpu.
     #[arg(long, value_parser = Backend::parse, default_value = "auto")]
@@ -189,12 +196,31 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         ),
         (Subject::Ply(scene), false) => {
             let mut r = SplatRenderer::open(args.renderer)?;
-            r.set_world_scene(scene)?;
-            (
-                r.render_world(&camera, &settings)?,
-                scene.len(),
-                r.description(),
-            )
+            let pixels = (camera.width * camera.height) as usize;
+            match args.lod.resolve(scene.len(), pixels) {
+                LodPolicy::Off => {
+                    r.set_world_scene(scene)?;
+                    (
+                        r.render_world(&camera, &settings)?,
+                        scene.len(),
+                        r.description(),
+                    )
+                }
+                policy => {
+                    let mut hierarchy = LodScene::new(crate::render::lod::build(scene));
+                    let image = hierarchy.render(&mut r, &camera, policy, &settings)?;
+                    let cut = hierarchy.summary();
+                    let device = format!(
+                        "{} (level of detail: {} of {} Gaussians, levels {}-{})",
+                        r.description(),
+                        cut.drawn,
+                        scene.len(),
+                        cut.levels.0,
+                        cut.levels.1
+                    );
+                    (image, cut.drawn, device)
+                }
+            }
         }
         (Subject::Composite(c), false) => {
             let mut painter = Painter::open(args.renderer)?;

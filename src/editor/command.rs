@@ -14,6 +14,7 @@ use std::str::SplitWhitespace;
 
 use crate::compose::recipe::{AnimationMode, ColourCorrection, Deform, Membership, Smoothing};
 use crate::model::regions::Group;
+use crate::render::lod::LodPolicy;
 use crate::scene::camera::CameraOverrides;
 
 /// A joint the animation panel can offset.
@@ -375,6 +376,20 @@ impl ArgKind for Joint {
             }
             .to_string(),
         );
+    }
+}
+
+/// A level-of-detail policy: off, auto, or a budget of Gaussians.
+struct Lod;
+impl ArgKind for Lod {
+    type Value = LodPolicy;
+    const HINT: ArgHint = ArgHint::Choice(&["auto", "off"]);
+    fn parse(words: &mut Words, _: &str) -> Result<LodPolicy, String> {
+        LodPolicy::parse(next_word(words, "level of detail")?)
+            .map_err(|e| e.replacen("--lod ", "level of detail ", 1))
+    }
+    fn write(value: &LodPolicy, out: &mut Vec<String>) {
+        out.push(value.label());
     }
 }
 
@@ -776,6 +791,8 @@ commands! {
     ToggleMesh => "toggle-mesh", "", "draw the mesh instead of the Gaussians", Debug, avatar;
     /// Hide (or show again) the Gaussians the floater filter removes.
     ToggleFloaters => "toggle-floaters", "", "hide or show the floaters `visage clean` removes (scene view)", Debug;
+    /// Set how much of a scene's level-of-detail hierarchy is drawn.
+    Lod(policy: LodPolicy as Lod) => "lod", "auto|off|BUDGET", "level of detail of a scene view: auto, off (every Gaussian) or a budget (300k)", Debug;
     /// Toggle highlighting the selected group's regions.
     ToggleHighlight => "toggle-highlight", "", "highlight the selected group (Gaussians or mesh)", Debug, avatar;
     /// Write the recipe to a TOML file.
@@ -909,6 +926,9 @@ mod tests {
             "toggle-mesh",
             "toggle-highlight",
             "toggle-floaters",
+            "lod off",
+            "lod 300000",
+            "lod auto",
             "save-recipe out.toml",
             "export-ply out.ply",
             "snapshot view.png",

@@ -595,6 +595,15 @@ impl EditorState {
                 };
                 return Ok(Applied::said(said.to_string()));
             }
+            Command::Lod(policy) => {
+                if catalog.scene.is_none() {
+                    return Err(
+                        "lod: only a scene view (visage view FILE) has a level of detail".into(),
+                    );
+                }
+                debug.lod = *policy;
+                return Ok(Applied::said(format!("level of detail {}", policy.label())));
+            }
             other => return Err(misrouted(other)),
         }
         Ok(Applied::default())

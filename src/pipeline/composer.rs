@@ -13,12 +13,14 @@ use crate::compose::recipe::{Recipe, ResolvedRecipe};
 use crate::error::{Error, Result};
 use crate::model::regions::Group;
 use crate::render::image::RgbImage;
+use crate::render::lod::LodPolicy;
 use crate::render::reference::render_reference;
 use crate::render::settings::RenderSettings;
 use crate::render::{Backend, SplatRenderer};
 use crate::scene::camera::Camera;
 use crate::scene::splats::SplatScene;
 
+use super::lod::LodScene;
 use super::DatabaseSpec;
 
 /// Milliseconds spent building a composite from nothing.
@@ -208,6 +210,8 @@ enum Uploaded {
         /// Whether this is the scene without its floaters.
         cleaned: bool,
     },
+    /// A level-of-detail cut of a scene (the hierarchy knows which).
+    Cut,
 }
 
 /// One renderer drawing composers' posed composites (or one scene).
@@ -262,6 +266,22 @@ impl Painter {
             self.uploaded = which;
         }
         self.renderer.render_world(camera, settings)
+    }
+
+    /// Draws a scene through its hierarchy: the cut of `camera`, uploaded
+    /// when it changed or when this painter drew something else since.
+    pub fn render_lod(
+        &mut self,
+        hierarchy: &mut LodScene,
+        camera: &Camera,
+        policy: LodPolicy,
+        settings: &RenderSettings,
+    ) -> Result<RgbImage> {
+        if self.uploaded != Some(Uploaded::Cut) {
+            hierarchy.forget();
+            self.uploaded = Some(Uploaded::Cut);
+        }
+        hierarchy.render(&mut self.renderer, camera, policy, settings)
     }
 
     /// Gaussians drawn in the last frame, where the renderer counts them.

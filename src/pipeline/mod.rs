@@ -6,6 +6,7 @@
 
 pub mod composer;
 pub mod database;
+pub mod lod;
 pub mod subject;
 pub mod workbench;
 

@@ -11,6 +11,7 @@ use std::time::Instant;
 use glam::Vec3;
 
 use super::composer::{Composer, Painter};
+use super::lod::{CutSummary, LodScene};
 use super::subject::ViewedScene;
 use crate::compose::engine::Engine;
 use crate::compose::recipe::Recipe;
@@ -19,6 +20,7 @@ use crate::error::{Error, Result};
 use crate::io::obj::region_colour;
 use crate::model::regions::Group;
 use crate::render::image::RgbImage;
+use crate::render::lod::{build, LodPolicy};
 use crate::render::mesh_preview::render_mesh;
 use crate::render::reference::centre_depth;
 use crate::render::settings::RenderSettings;
@@ -39,6 +41,8 @@ pub struct DebugView {
     pub sh_degree: u8,
     /// Leave out what the floater filter removes (`scene::clean`; scene views).
     pub hide_floaters: bool,
+    /// How much of a scene's level-of-detail hierarchy to draw (scene views).
+    pub lod: LodPolicy,
 }
 
 impl Default for DebugView {
@@ -49,6 +53,7 @@ impl Default for DebugView {
             highlight: false,
             sh_degree: 3,
             hide_floaters: false,
+            lod: LodPolicy::Auto,
         }
     }
 }
@@ -98,6 +103,8 @@ pub struct FrameResult {
     pub stages: crate::render::settings::StageTimings,
     /// Border-smoothing extras among them.
     pub extras: usize,
+    /// What a scene's level of detail drew, when it drew a cut.
+    pub lod: Option<CutSummary>,
     /// State hash of the rendered recipe.
     pub state_hash: String,
 }
@@ -117,6 +124,8 @@ pub struct Workbench {
     painter: Painter,
     /// A scene without its floaters, made the first time they are hidden.
     cleaned: Option<SplatScene>,
+    /// The hierarchy of the scene as drawn (without its floaters, when so).
+    lod: Option<(bool, LodScene)>,
 }
 
 impl Workbench {
@@ -126,6 +135,7 @@ impl Workbench {
             content: Content::Composite(Box::new(Composer::new(engine))),
             painter: Painter::open(backend)?,
             cleaned: None,
+            lod: None,
         })
     }
 
@@ -135,6 +145,7 @@ impl Workbench {
             content: Content::Scene(Box::new(scene)),
             painter: Painter::open(backend)?,
             cleaned: None,
+            lod: None,
         })
     }
 
@@ -212,6 +223,7 @@ impl Workbench {
                 .flatten(),
             stages: self.painter.stage_timings(),
             extras,
+            lod: None,
             state_hash: state_hash(composer.engine().database(), &resolved),
         })
     }
@@ -237,9 +249,25 @@ impl Workbench {
         } else {
             &viewed.scene
         };
-        let image =
-            self.painter
-                .render_scene(scene, request.debug.hide_floaters, &camera, settings)?;
+        let cleaned = request.debug.hide_floaters;
+        let pixels = (camera.width * camera.height) as usize;
+        let (image, lod) = match request.debug.lod.resolve(scene.len(), pixels) {
+            LodPolicy::Off => (
+                self.painter
+                    .render_scene(scene, cleaned, &camera, settings)?,
+                None,
+            ),
+            policy => {
+                if self.lod.as_ref().is_none_or(|(c, _)| *c != cleaned) {
+                    self.lod = Some((cleaned, LodScene::new(build(scene))));
+                }
+                let (_, hierarchy) = self.lod.as_mut().expect("built above");
+                let image = self
+                    .painter
+                    .render_lod(hierarchy, &camera, policy, settings)?;
+                (image, Some(hierarchy.summary()))
+            }
+        };
         Ok(FrameResult {
             image,
             timings: FrameTimings {
@@ -250,6 +278,7 @@ impl Workbench {
             visible: self.painter.visible(),
             stages: self.painter.stage_timings(),
             extras: 0,
+            lod,
             state_hash: scene_view_hash(viewed, &request.recipe.camera),
         })
     }

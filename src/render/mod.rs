@@ -4,6 +4,7 @@
 pub mod cpu;
 pub mod gpu;
 pub mod image;
+pub mod lod;
 pub mod mesh_preview;
 pub mod projection;
 pub mod reference;

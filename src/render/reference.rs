@@ -17,7 +17,7 @@ struct Projected {
     index: usize,
 }
 
-/// Gaussian `i` projected in f64 with its opacity (clamped to 1), or `None`
+/// Gaussian `i` projected in f64 with its opacity (clamped to [`crate::scene::splats::MAX_OPACITY`]), or `None`
 /// when it cannot show (transparent, NaN, not finite, culled).
 fn project(
     scene: &SplatScene,
@@ -29,7 +29,7 @@ fn project(
     if opacity.is_nan() || opacity <= 0.0 || !scene.position[i].is_finite() {
         return None;
     }
-    let opacity = opacity.min(1.0);
+    let opacity = opacity.min(crate::scene::splats::MAX_OPACITY as f64);
     let splat = cam.project(
         scene.position[i],
         scene.rotation[i],

@@ -12,6 +12,14 @@ use crate::scene::camera::{Orbit, UpAxis};
 /// when framing a scene ([`SplatScene::robust_bounds`]).
 pub const FRAMING_QUANTILE: f64 = 0.01;
 
+/// The largest opacity a renderer honours. A scene file's Gaussians stay
+/// at or below 1; a level-of-detail node that stands for overlapping
+/// Gaussians may carry more (`render::lod`): its core saturates at the
+/// renderers' α cap and its reach widens, as the union of the splats it
+/// replaces does, where an opacity of 1 would leave a soft, see-through
+/// edge between neighbouring nodes.
+pub const MAX_OPACITY: f32 = 8.0;
+
 /// World-space Gaussians in structure-of-arrays form. `sh` holds
 /// `3 · (sh_degree+1)²` floats per Gaussian, coefficient-major (`[coef][channel]`).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -22,7 +30,8 @@ pub struct SplatScene {
     pub rotation: Vec<Quat>,
     /// Standard deviations along the rotated axes.
     pub scale: Vec<Vec3>,
-    /// Opacity in [0, 1] (after the sigmoid).
+    /// Opacity after the sigmoid: in [0, 1] for a scene's own Gaussians, up
+    /// to [`MAX_OPACITY`] for level-of-detail nodes.
     pub opacity: Vec<f32>,
     /// SH degree 0..=3.
     pub sh_degree: u8,

@@ -650,6 +650,7 @@ impl App {
         p.info = InfoPanel {
             gaussians: result.gaussians,
             visible: result.visible,
+            lod: result.lod,
             stages: result.stages,
             extras: result.extras,
             timings: result.timings,

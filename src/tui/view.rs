@@ -47,6 +47,8 @@ pub struct InfoPanel {
     pub image_size: (u32, u32),
     /// What renders.
     pub renderer: String,
+    /// What a scene's level of detail drew, when it drew a cut.
+    pub lod: Option<crate::pipeline::lod::CutSummary>,
 }
 
 /// What the layout depends on besides the terminal's size.
@@ -589,6 +591,16 @@ fn scene_sections(scene: &SceneSummary, vm: &ViewModel) -> Vec<Section> {
             "info",
             vec![
                 format!(" {visible} of {} drawn", i.gaussians),
+                match i.lod {
+                    Some(cut) => format!(
+                        " LOD {} {} nodes, levels {}-{}",
+                        s.debug.lod.label(),
+                        cut.drawn,
+                        cut.levels.0,
+                        cut.levels.1
+                    ),
+                    None => format!(" LOD {}: every Gaussian", s.debug.lod.label()),
+                },
                 format!(
                     " project {:.1} sort {:.1} raster {:.1} ms",
                     i.stages.project, i.stages.sort, i.stages.rasterize

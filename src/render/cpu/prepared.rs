@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use crate::avatar::binding::normalize_quat;
 use crate::avatar::gaussians::{sh_coefficients, sigmoid, GaussianSet};
 use crate::render::projection::MIN_ALPHA;
-use crate::scene::splats::SplatScene;
+use crate::scene::splats::{SplatScene, MAX_OPACITY};
 
 /// One Gaussian as the projection reads it, in its triangle's frame.
 #[derive(Clone, Copy, Debug, Default)]
@@ -38,7 +38,7 @@ pub(super) struct Core {
 impl Core {
     fn new(position: Vec3, binding: u32, rotation: Quat, scale: Vec3, opacity: f32) -> Self {
         let m = Mat3::from_quat(normalize_quat(rotation)) * Mat3::from_diagonal(scale);
-        let opacity = opacity.min(1.0);
+        let opacity = opacity.min(MAX_OPACITY);
         let usable = opacity >= MIN_ALPHA as f32 && m.is_finite() && position.is_finite();
         let opacity = if usable { opacity } else { 0.0 };
         Self {

@@ -24,6 +24,13 @@ pub const SPLAT_GRAD_FLOATS: u32 = 9;
 pub const REDUCE_PARTS: u32 = 16;
 const _: () = assert!(REDUCE_PARTS * REDUCE_PARTS == TILE * TILE);
 
+/// Where the bind kernel's opacity code stops being a logit: a code
+/// above it is `OPACITY_LITERAL − 1 + opacity`, an opacity above 1 (a
+/// level-of-detail node, [`crate::scene::splats::MAX_OPACITY`]). A logit
+/// this large is an opacity of 1 in f32 already, so clamping files' logits
+/// to it changes nothing they show.
+pub const OPACITY_LITERAL: f32 = 64.0;
+
 /// The WGSL declarations of every shared constant.
 pub fn wgsl_header() -> String {
     let u = |name: &str, v: u32| format!("const {name}: u32 = {v}u;\n");
@@ -31,6 +38,8 @@ pub fn wgsl_header() -> String {
     let f = |name: &str, v: f64| format!("const {name}: f32 = {:?};\n", v as f32);
     [
         "// Generated from src/render/gpu/constants.rs.\n".to_string(),
+        f("MAX_OPACITY", crate::scene::splats::MAX_OPACITY as f64),
+        f("OPACITY_LITERAL", OPACITY_LITERAL as f64),
         u("TILE", TILE),
         u("GROUP", GROUP),
         u("SORT_BLOCK", SORT_BLOCK),

@@ -30,8 +30,8 @@ pub mod constants;
 pub mod device;
 pub mod kernels;
 
-use constants::GROUP;
 pub use constants::TILE;
+use constants::{GROUP, OPACITY_LITERAL};
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -58,6 +58,16 @@ struct SceneBuffers {
     world: wgpu::Buffer,
     projected: wgpu::Buffer,
     keys: wgpu::Buffer,
+}
+
+/// The bind kernel's code for an opacity (a logit up to 1, above 1 the
+/// literal form of [`constants::OPACITY_LITERAL`]).
+fn opacity_code(opacity: f32) -> f32 {
+    if opacity > 1.0 {
+        OPACITY_LITERAL - 1.0 + opacity
+    } else {
+        logit(opacity).min(OPACITY_LITERAL)
+    }
 }
 
 /// The wgpu splat renderer. Create once; call [`GpuRenderer::set_gaussians`] when
@@ -216,7 +226,7 @@ impl GpuRenderer {
                 set.binding[i],
                 set.rotation[i],
                 set.log_scale[i],
-                set.opacity_logit[i],
+                set.opacity_logit[i].min(OPACITY_LITERAL),
             )
         });
         self.upload(&local, &set.sh, set.sh_degree)
@@ -232,7 +242,7 @@ impl GpuRenderer {
                 0,
                 scene.rotation[i],
                 scene.scale[i].max(Vec3::splat(1e-30)).ln(),
-                logit(scene.opacity[i]),
+                opacity_code(scene.opacity[i]),
             )
         });
         self.upload(&local, &scene.sh, scene.sh_degree)
