@@ -9,6 +9,7 @@ use clap::Args;
 use serde_json::{json, Value};
 
 use super::bench::{median_stages, open_or_skip, print_skipped, summarize};
+use super::bench_paged::{bench_paged, print_paged};
 use super::bench_scene::{bench_scene, peak_rss_mb, SceneSource, SCENE_SIZES};
 use super::compose::{build, build_from};
 use super::render::parse_size;
@@ -16,6 +17,7 @@ use super::DbArgs;
 use crate::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
 use crate::error::{Error, Result};
 use crate::pipeline::composer::{reference_image, Composer, Painter};
+use crate::pipeline::lod::parse_memory_budget;
 use crate::render::image::{psnr_report, RgbImage};
 use crate::render::lod::LodPolicy;
 use crate::render::settings::RenderSettings;
@@ -61,6 +63,15 @@ pub struct RenderBenchArgs {
     /// (nodes of at most 1.5 px), or a budget of Gaussians (e.g. 300k).
     #[arg(long, default_value = "auto", value_parser = LodPolicy::parse)]
     lod: LodPolicy,
+    /// Draw the scene (--ply) from its level-of-detail cache within this
+    /// much memory (e.g. 1G), as `view` does a scene larger than memory:
+    /// the cache is built first where it is missing, and the camera turns
+    /// between frames.
+    #[arg(long, value_name = "SIZE", value_parser = parse_memory_budget, requires = "ply")]
+    memory_budget: Option<usize>,
+    /// Frames per size with --memory-budget.
+    #[arg(long, default_value_t = 60)]
+    frames: usize,
     /// Print one JSON document instead of tables.
     #[arg(long)]
     json: bool,
@@ -194,6 +205,22 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
         } else {
             args.sizes.clone()
         };
+        if let (Some(budget), Some(path)) = (args.memory_budget, &args.ply) {
+            let doc = bench_paged(
+                path,
+                &sizes,
+                &args.renderers,
+                args.frames.max(1),
+                args.lod,
+                budget,
+            )?;
+            if args.json {
+                println!("{}", serde_json::to_string_pretty(&doc).unwrap_or_default());
+            } else {
+                print_paged(&doc);
+            }
+            return Ok(());
+        }
         let doc = bench_scene(
             source,
             &sizes,

@@ -231,7 +231,7 @@ pub fn bench_scene(
         "load_ms": load_ms,
         "lod": lod.label(),
         "lod_build_ms": hierarchy.is_some().then_some(lod_build_ms),
-        "lod_nodes": hierarchy.as_ref().map(|h| h.tree().len()),
+        "lod_nodes": hierarchy.as_ref().map(LodScene::nodes),
         "load_peak_rss_mb": load_peak,
         "peak_rss_mb": peak_rss_mb(),
         "renderers": docs,

@@ -9,6 +9,7 @@ use super::DbArgs;
 use crate::editor::command::Command;
 use crate::editor::replay::replay;
 use crate::error::{Error, Result};
+use crate::pipeline::lod::parse_memory_budget;
 use crate::pipeline::{SceneSpec, Subject};
 use crate::render::lod::LodPolicy;
 use crate::render::Backend;
@@ -65,6 +66,12 @@ pub struct ViewArgs {
     /// changes it while viewing.
     #[arg(long, default_value = "auto", value_parser = LodPolicy::parse)]
     lod: LodPolicy,
+    /// Draw the scene from its level-of-detail cache within this much
+    /// memory (e.g. 1G; built first where missing). Files of 1 GiB or more
+    /// always are, within a quarter of the machine's memory (at most 1.5G)
+    /// unless this says otherwise.
+    #[arg(long, value_name = "SIZE", value_parser = parse_memory_budget)]
+    memory_budget: Option<usize>,
     #[command(flatten)]
     terminal: TerminalArgs,
 }
@@ -72,7 +79,7 @@ pub struct ViewArgs {
 /// Runs the editor (or, given a scene file, the viewer).
 pub fn run_edit(args: &EditArgs) -> Result<()> {
     let subject = match &args.scene {
-        Some(file) => Some(scene_subject(file, &args.terminal)?),
+        Some(file) => Some(scene_subject(file, &args.terminal, None)?),
         // The built-in database by default: a journal being continued keeps its own.
         None if args.db.spec() == crate::pipeline::DatabaseSpec::default() => None,
         None => Some(Subject::Avatars(args.db.spec())),
@@ -85,13 +92,21 @@ pub fn run_view(args: &ViewArgs) -> Result<()> {
     // The default needs no command: a scene view starts with auto.
     let lod = (args.lod != LodPolicy::Auto).then_some(Command::Lod(args.lod));
     run_terminal(
-        Some(scene_subject(&args.file, &args.terminal)?),
+        Some(scene_subject(
+            &args.file,
+            &args.terminal,
+            args.memory_budget,
+        )?),
         &args.terminal,
         lod.into_iter().collect(),
     )
 }
 
-fn scene_subject(file: &std::path::Path, args: &TerminalArgs) -> Result<Subject> {
+fn scene_subject(
+    file: &std::path::Path,
+    args: &TerminalArgs,
+    memory_budget: Option<usize>,
+) -> Result<Subject> {
     if !file.is_file() {
         return Err(Error::input(format!(
             "{} is not a file (visage view takes a .ply, .compressed.ply, .splat or .spz scene)",
@@ -101,6 +116,7 @@ fn scene_subject(file: &std::path::Path, args: &TerminalArgs) -> Result<Subject>
     Ok(Subject::Scene(SceneSpec {
         path: file.to_path_buf(),
         up: args.camera.overrides()?.up,
+        memory_budget,
     }))
 }
 

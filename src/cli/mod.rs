@@ -5,6 +5,7 @@ mod bench;
 mod bench_composites;
 mod bench_holes;
 mod bench_mouth;
+mod bench_paged;
 mod bench_render;
 mod bench_scene;
 mod bench_terminal;

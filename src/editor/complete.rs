@@ -210,6 +210,7 @@ mod tests {
                 sh_degree: 0,
                 home: crate::scene::camera::Orbit::default(),
                 up_reason: "default",
+                from_cache: false,
             }),
             ..Catalog::default()
         };

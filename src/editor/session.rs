@@ -474,7 +474,11 @@ fn parse_scene(rest: &str) -> std::result::Result<SceneSpec, String> {
             )
         })?;
     }
-    Ok(SceneSpec { path, up: Some(up) })
+    Ok(SceneSpec {
+        path,
+        up: Some(up),
+        memory_budget: None,
+    })
 }
 
 fn parse_expectation(text: &str) -> std::result::Result<Expectation, String> {
@@ -749,6 +753,7 @@ mod tests {
         let subject = Subject::Scene(SceneSpec {
             path: "my scans/garden.ply".into(),
             up: Some(UpAxis::NegY),
+            memory_budget: None,
         });
         let header = SessionHeader::for_subject(&subject, (90, 30), Protocol::Kitty);
         let mut text = Vec::new();

@@ -8,6 +8,7 @@ use crate::compose::recipe::{
 };
 use crate::model::regions::Group;
 use crate::pipeline::workbench::DebugView;
+use crate::render::lod::LodPolicy;
 use crate::scene::camera::Orbit;
 
 use super::command::{Area, Command, PoseJoint};
@@ -37,6 +38,8 @@ pub struct SceneSummary {
     pub home: Orbit,
     /// How its up axis was chosen, in words.
     pub up_reason: &'static str,
+    /// Drawn from its level-of-detail cache (too large to hold).
+    pub from_cache: bool,
 }
 
 impl Catalog {
@@ -47,8 +50,9 @@ impl Catalog {
             (None, Some(viewed)) => Catalog {
                 scene: Some(SceneSummary {
                     name: viewed.name.clone(),
-                    gaussians: viewed.scene.len(),
-                    sh_degree: viewed.scene.sh_degree,
+                    gaussians: viewed.gaussians,
+                    sh_degree: viewed.sh_degree,
+                    from_cache: viewed.from_cache,
                     home: viewed.home,
                     up_reason: viewed.up_reason.describe(),
                 }),
@@ -581,11 +585,14 @@ impl EditorState {
             Command::ToggleMesh => debug.mesh = !debug.mesh,
             Command::ToggleHighlight => debug.highlight = !debug.highlight,
             Command::ToggleFloaters => {
-                if catalog.scene.is_none() {
-                    return Err(
-                        "toggle-floaters: only a scene view (visage view FILE) has floaters to hide"
-                            .into(),
-                    );
+                match &catalog.scene {
+                    None => {
+                        return Err("toggle-floaters: only a scene view (visage view FILE) has floaters to hide".into())
+                    }
+                    Some(s) if s.from_cache => {
+                        return Err(format!("toggle-floaters: {} is drawn from its level-of-detail cache; run visage clean on the file and view what it writes", s.name))
+                    }
+                    Some(_) => {}
                 }
                 debug.hide_floaters = !debug.hide_floaters;
                 let said = if debug.hide_floaters {
@@ -596,10 +603,17 @@ impl EditorState {
                 return Ok(Applied::said(said.to_string()));
             }
             Command::Lod(policy) => {
-                if catalog.scene.is_none() {
-                    return Err(
-                        "lod: only a scene view (visage view FILE) has a level of detail".into(),
-                    );
+                match &catalog.scene {
+                    None => {
+                        return Err(
+                            "lod: only a scene view (visage view FILE) has a level of detail"
+                                .into(),
+                        )
+                    }
+                    Some(s) if s.from_cache && *policy == LodPolicy::Off => {
+                        return Err(format!("lod off: {} is drawn from its level-of-detail cache; every Gaussian would not fit the memory budget", s.name))
+                    }
+                    Some(_) => {}
                 }
                 debug.lod = *policy;
                 return Ok(Applied::said(format!("level of detail {}", policy.label())));
@@ -790,6 +804,7 @@ mod tests {
                     ..Orbit::STUDY
                 },
                 up_reason: "as given",
+                from_cache: false,
             }),
             ..Catalog::default()
         }

@@ -1,16 +1,24 @@
-//! A scene drawn through its level-of-detail hierarchy: the tree, and the
-//! cut of the last camera with its Gaussians gathered, kept until the camera
-//! or the policy changes (a still view costs nothing to re-cut).
+//! A scene drawn through its level-of-detail hierarchy: the tree (in
+//! memory, or paged in from its cache file), and the cut of the last camera
+//! with its Gaussians gathered, kept until the camera or the policy changes
+//! (a still view costs nothing to re-cut). Also where a scene file's cache
+//! is found, checked, and built when missing or stale.
 
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::error::Result;
 use crate::render::image::RgbImage;
-use crate::render::lod::{Cut, LodPolicy, LodTree};
+use crate::render::lod::cache::{
+    cache_dir, cache_path, content_hash, fingerprint, modified_ns, still_matches, write_cache,
+    SourceFacts,
+};
+use crate::render::lod::{cut, layout, Cut, LodPolicy, LodTree, PagedTree};
 use crate::render::settings::RenderSettings;
 use crate::render::SplatRenderer;
 use crate::scene::camera::Camera;
 use crate::scene::splats::SplatScene;
+use crate::scene::upright::ground_up;
 
 /// What the last frame drew of the hierarchy.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -23,11 +31,22 @@ pub struct CutSummary {
     pub levels: (u16, u16),
     /// Milliseconds choosing and gathering the cut (0 when it was kept).
     pub cut_ms: f64,
+    /// Chunks of a paged hierarchy read for this frame's cut: the next
+    /// frame draws finer while this is not zero.
+    pub chunks_read: usize,
+    /// Bytes of a paged hierarchy held in memory.
+    pub resident_bytes: usize,
+}
+
+/// Where the hierarchy lives.
+enum Tree {
+    Memory(LodTree),
+    Paged(Box<PagedTree>),
 }
 
 /// A hierarchy with its last cut.
 pub struct LodScene {
-    tree: LodTree,
+    tree: Tree,
     last: Option<(Camera, LodPolicy)>,
     drawn: SplatScene,
     summary: CutSummary,
@@ -36,6 +55,15 @@ pub struct LodScene {
 impl LodScene {
     /// Keeps `tree` to draw from.
     pub fn new(tree: LodTree) -> Self {
+        Self::with(Tree::Memory(tree))
+    }
+
+    /// Draws from a hierarchy paged in from its cache.
+    pub fn paged(tree: PagedTree) -> Self {
+        Self::with(Tree::Paged(Box::new(tree)))
+    }
+
+    fn with(tree: Tree) -> Self {
         Self {
             tree,
             last: None,
@@ -44,35 +72,60 @@ impl LodScene {
         }
     }
 
-    /// The hierarchy.
-    pub fn tree(&self) -> &LodTree {
-        &self.tree
+    /// Number of nodes.
+    pub fn nodes(&self) -> usize {
+        match &self.tree {
+            Tree::Memory(t) => t.len(),
+            Tree::Paged(t) => t.header().nodes as usize,
+        }
     }
 
     /// The Gaussians `camera` draws under `policy`, and whether they differ
-    /// from the last call's (so a renderer must take them again).
+    /// from the last call's (so a renderer must take them again). A paged
+    /// hierarchy reads the chunks the cut wanted afterwards, so the next
+    /// call draws finer.
     pub fn gaussians_for(&mut self, camera: &Camera, policy: LodPolicy) -> (&SplatScene, bool) {
         let key = Some((*camera, policy));
         if self.last == key {
             self.summary.cut_ms = 0.0;
+            self.summary.chunks_read = 0;
             return (&self.drawn, false);
         }
         let t = Instant::now();
-        let cut: Cut = self.tree.cut(camera, policy);
-        self.drawn = self.tree.gather(&cut, camera);
+        let (cut, chunks_read, resident_bytes): (Cut, usize, usize) = match &mut self.tree {
+            Tree::Memory(tree) => {
+                let cut = tree.cut(camera, policy);
+                self.drawn = tree.gather(&cut, camera);
+                (cut, 0, 0)
+            }
+            Tree::Paged(tree) => {
+                let cut = cut(tree.as_ref(), camera, policy);
+                self.drawn = tree.gather(&cut, camera);
+                let read = tree.refine(&cut);
+                (cut, read, tree.resident_bytes())
+            }
+        };
         self.summary = CutSummary {
             drawn: cut.nodes.len(),
             leaves: cut.leaves,
             levels: cut.levels,
             cut_ms: t.elapsed().as_secs_f64() * 1e3,
+            chunks_read,
+            resident_bytes,
         };
-        self.last = key;
+        // Chunks arrived: the same camera cuts finer next time.
+        self.last = if chunks_read > 0 { None } else { key };
         (&self.drawn, true)
     }
 
     /// What the last frame drew.
     pub fn summary(&self) -> CutSummary {
         self.summary
+    }
+
+    /// The Gaussians the last frame drew.
+    pub fn drawn(&self) -> &SplatScene {
+        &self.drawn
     }
 
     /// Draws the cut of `camera` with `renderer` (uploading it when it changed).
@@ -96,4 +149,133 @@ impl LodScene {
     pub fn forget(&mut self) {
         self.last = None;
     }
+}
+
+/// How a scene's cache was come by.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CacheOrigin {
+    /// It was there and still matched the file.
+    Found,
+    /// It was built now: why, seconds it took, its size in bytes.
+    Built {
+        /// Why: missing, stale, or what was wrong with the old one.
+        why: String,
+        /// Seconds reading the scene, building and writing.
+        seconds: f64,
+        /// The cache file's size.
+        bytes: u64,
+    },
+}
+
+/// Opens the level-of-detail cache of the scene file at `path` (in `dir`,
+/// by default the user's cache folder), building it first when it is
+/// missing, stale (the file changed) or damaged (truncated, corrupted, from
+/// another version): the old one is replaced. `note` hears what is going on,
+/// one line at a time. Building reads the whole scene into memory once.
+pub fn open_cached(
+    path: &Path,
+    dir: Option<&Path>,
+    budget: usize,
+    note: &dyn Fn(&str),
+) -> Result<(PagedTree, CacheOrigin, PathBuf)> {
+    let fingerprint = fingerprint(path)?;
+    let dir = dir.map_or_else(cache_dir, Path::to_path_buf);
+    let cache = cache_path(&dir, &fingerprint);
+    let why = if cache.is_file() {
+        match PagedTree::open(&cache, budget) {
+            Ok(tree) if still_matches(&tree.header().source, path)? => {
+                return Ok((tree, CacheOrigin::Found, cache));
+            }
+            Ok(_) => "the scene file changed since it was built".to_string(),
+            Err(e) => e.to_string(),
+        }
+    } else {
+        "there is none yet".to_string()
+    };
+    note(&format!(
+        "building the level-of-detail cache of {} ({why})…",
+        path.display()
+    ));
+    let t = Instant::now();
+    let bytes = build_cache(path, fingerprint, &cache)?;
+    let seconds = t.elapsed().as_secs_f64();
+    note(&format!(
+        "level-of-detail cache written: {} ({:.0} MB in {seconds:.1} s)",
+        cache.display(),
+        bytes as f64 / 1e6
+    ));
+    let tree = PagedTree::open(&cache, budget)?;
+    Ok((
+        tree,
+        CacheOrigin::Built {
+            why,
+            seconds,
+            bytes,
+        },
+        cache,
+    ))
+}
+
+/// Reads the scene, builds its hierarchy and writes the cache.
+fn build_cache(path: &Path, fingerprint: [u8; 32], cache: &Path) -> Result<u64> {
+    let modified = modified_ns(path);
+    let content = content_hash(path)?;
+    let scene = crate::io::splat::read_scene(path)?;
+    let facts = SourceFacts {
+        fingerprint,
+        content,
+        len: std::fs::metadata(path)
+            .map_err(|e| crate::error::Error::io("read", path, e))?
+            .len(),
+        modified_ns: modified,
+        bounds: scene.robust_bounds().unwrap_or_default(),
+        ground_up: ground_up(&scene),
+        gaussians: scene.len() as u64,
+    };
+    let name = path.display();
+    let layout = layout(scene).ok_or_else(|| {
+        crate::error::Error::input(format!("{name} holds no Gaussian that can be drawn"))
+    })?;
+    write_cache(&layout, &facts, cache)
+}
+
+/// The default memory budget of a paged hierarchy: a quarter of the
+/// machine's memory, at most 1.5 GiB (so that with the renderer's own
+/// buffers a view stays under 2 GiB whatever the scene's size).
+pub fn default_memory_budget() -> usize {
+    const CAP: usize = 3 << 29;
+    let total = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|info| {
+            let line = info.lines().find(|l| l.starts_with("MemTotal:"))?;
+            let kb: usize = line.split_whitespace().nth(1)?.parse().ok()?;
+            Some(kb * 1024)
+        });
+    total.map_or(CAP, |t| (t / 4).min(CAP))
+}
+
+/// Reads a memory budget: bytes with an optional K, M or G (powers of
+/// 1024), at least 16M (one chunk of a degree-3 scene is ~2 MiB).
+pub fn parse_memory_budget(text: &str) -> std::result::Result<usize, String> {
+    let bad = || {
+        format!(
+            "memory budget '{}' is not a size such as 512M or 2G",
+            crate::text::printable(text)
+        )
+    };
+    let (digits, unit) = match text.char_indices().last() {
+        Some((at, 'k' | 'K')) => (&text[..at], 1usize << 10),
+        Some((at, 'm' | 'M')) => (&text[..at], 1 << 20),
+        Some((at, 'g' | 'G')) => (&text[..at], 1 << 30),
+        _ => (text, 1),
+    };
+    let value: f64 = digits.parse().map_err(|_| bad())?;
+    let bytes = value * unit as f64;
+    if !bytes.is_finite() || bytes < (16 << 20) as f64 {
+        return Err(format!(
+            "memory budget '{}' is below 16M",
+            crate::text::printable(text)
+        ));
+    }
+    Ok(bytes.min(usize::MAX as f64) as usize)
 }

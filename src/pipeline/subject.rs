@@ -6,10 +6,12 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use super::database::DatabaseSpec;
+use super::lod::{default_memory_budget, open_cached};
 use super::workbench::Workbench;
 use crate::compose::engine::Engine;
 use crate::error::{Error, Result};
 use crate::io::Progress;
+use crate::render::lod::PagedTree;
 use crate::render::Backend;
 use crate::scene::camera::{Orbit, UpAxis};
 use crate::scene::splats::SplatScene;
@@ -23,13 +25,32 @@ pub struct SceneSpec {
     /// Up on screen (`-y` for COLMAP / INRIA captures); `None`: detect it
     /// (`crate::scene::upright`).
     pub up: Option<UpAxis>,
+    /// Draw the scene from its level-of-detail cache within this many
+    /// bytes; None: do so for files of [`LARGE_SCENE_BYTES`] or more, with
+    /// [`default_memory_budget`].
+    pub memory_budget: Option<usize>,
 }
 
-/// A scene read from its file, with the camera it opens with.
-#[derive(Clone, Debug)]
+/// Scene files at least this large open from their level-of-detail cache
+/// rather than into memory (1 GiB, about 4M Gaussians of SH degree 3).
+pub const LARGE_SCENE_BYTES: u64 = 1 << 30;
+
+/// A scene read from its file (or opened from its level-of-detail cache),
+/// with the camera it opens with.
+#[derive(Debug)]
 pub struct ViewedScene {
-    /// The Gaussians.
+    /// The Gaussians; empty for a scene drawn from its cache.
     pub scene: SplatScene,
+    /// The scene's hierarchy paged in from its cache, for a scene too large
+    /// to hold (the workbench takes it over).
+    pub paged: Option<PagedTree>,
+    /// Whether the scene is drawn from its cache (nothing else of it is in
+    /// memory: no floater filter, no export, no exact path).
+    pub from_cache: bool,
+    /// Gaussians in the file.
+    pub gaussians: usize,
+    /// The file's SH degree.
+    pub sh_degree: u8,
     /// The file's name, for the panel and messages.
     pub name: String,
     /// The framed camera (`camera-reset` returns to it).
@@ -39,9 +60,17 @@ pub struct ViewedScene {
 }
 
 impl SceneSpec {
-    /// Reads and frames the scene; `progress` hears the bytes read.
+    /// Reads and frames the scene; `progress` hears the bytes read. A large
+    /// scene (or any, given a memory budget) opens from its level-of-detail
+    /// cache instead, built first when missing or stale.
     pub fn load(&self, progress: Progress) -> Result<(ViewedScene, Duration)> {
         let start = Instant::now();
+        let len = std::fs::metadata(&self.path)
+            .map_err(|e| Error::io("read", &self.path, e))?
+            .len();
+        if self.memory_budget.is_some() || len >= LARGE_SCENE_BYTES {
+            return Ok((self.open_cached()?, start.elapsed()));
+        }
         let scene = crate::io::splat::read_scene_with(&self.path, progress)?;
         let (up, up_reason) = self.up_axis(&scene);
         let home = scene.home_orbit(None, up).ok_or_else(|| {
@@ -50,14 +79,14 @@ impl SceneSpec {
                 self.path.display()
             ))
         })?;
-        let name = self.path.file_name().map_or_else(
-            || self.path.display().to_string(),
-            |n| crate::text::printable(&n.to_string_lossy()),
-        );
         Ok((
             ViewedScene {
+                gaussians: scene.len(),
+                sh_degree: scene.sh_degree,
                 scene,
-                name,
+                paged: None,
+                from_cache: false,
+                name: self.display_name(),
                 home,
                 up_reason,
             },
@@ -65,9 +94,49 @@ impl SceneSpec {
         ))
     }
 
+    /// The file's name, for the panel and messages.
+    fn display_name(&self) -> String {
+        self.path.file_name().map_or_else(
+            || self.path.display().to_string(),
+            |n| crate::text::printable(&n.to_string_lossy()),
+        )
+    }
+
+    /// Opens the scene from its level-of-detail cache (built first when
+    /// missing or stale), framed by the bounds and ground the cache keeps.
+    fn open_cached(&self) -> Result<ViewedScene> {
+        let budget = self.memory_budget.unwrap_or_else(default_memory_budget);
+        let note = |line: &str| eprintln!("visage: {line}");
+        let (tree, _, _) = open_cached(&self.path, None, budget, &note)?;
+        let source = &tree.header().source;
+        let (up, up_reason) = self.up_axis_with(|| source.ground_up);
+        let (lo, hi) = source.bounds;
+        let home = Orbit {
+            fov_deg: 40.0,
+            up,
+            ..Orbit::STUDY
+        }
+        .framing(lo, hi);
+        let sh_degree = tree.header().sh_degree;
+        Ok(ViewedScene {
+            scene: SplatScene::with_degree(sh_degree),
+            gaussians: source.gaussians as usize,
+            sh_degree,
+            paged: Some(tree),
+            from_cache: true,
+            name: self.display_name(),
+            home,
+            up_reason,
+        })
+    }
+
     /// The up axis: as given, else from the capture's cameras, else from the
     /// ground, else +y.
     fn up_axis(&self, scene: &SplatScene) -> (UpAxis, UpReason) {
+        self.up_axis_with(|| ground_up(scene))
+    }
+
+    fn up_axis_with(&self, ground: impl FnOnce() -> Option<UpAxis>) -> (UpAxis, UpReason) {
         if let Some(up) = self.up {
             return (up, UpReason::Given);
         }
@@ -77,7 +146,7 @@ impl SceneSpec {
         if let Some(up) = cameras {
             return (up, UpReason::Cameras);
         }
-        match ground_up(scene) {
+        match ground() {
             Some(up) => (up, UpReason::Ground),
             None => (UpAxis::default(), UpReason::Default),
         }
@@ -88,6 +157,7 @@ impl SceneSpec {
         SceneSpec {
             path: std::path::absolute(&self.path).unwrap_or_else(|_| self.path.clone()),
             up: self.up,
+            memory_budget: self.memory_budget,
         }
     }
 }

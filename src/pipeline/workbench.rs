@@ -140,12 +140,13 @@ impl Workbench {
     }
 
     /// A workbench viewing a scene with a renderer of the given kind.
-    pub fn for_scene(scene: ViewedScene, backend: Backend) -> Result<Self> {
+    pub fn for_scene(mut scene: ViewedScene, backend: Backend) -> Result<Self> {
+        let lod = scene.paged.take().map(|t| (false, LodScene::paged(t)));
         Ok(Self {
             content: Content::Scene(Box::new(scene)),
             painter: Painter::open(backend)?,
             cleaned: None,
-            lod: None,
+            lod,
         })
     }
 
@@ -249,9 +250,14 @@ impl Workbench {
         } else {
             &viewed.scene
         };
-        let cleaned = request.debug.hide_floaters;
+        let cleaned = request.debug.hide_floaters && !viewed.from_cache;
         let pixels = (camera.width * camera.height) as usize;
-        let (image, lod) = match request.debug.lod.resolve(scene.len(), pixels) {
+        let policy = match request.debug.lod.resolve(viewed.gaussians, pixels) {
+            // Every Gaussian of a scene drawn from its cache would not fit.
+            LodPolicy::Off if viewed.from_cache => LodPolicy::Auto,
+            policy => policy,
+        };
+        let (image, lod) = match policy {
             LodPolicy::Off => (
                 self.painter
                     .render_scene(scene, cleaned, &camera, settings)?,
@@ -274,7 +280,7 @@ impl Workbench {
                 render: t.elapsed().as_secs_f64() * 1e3,
                 ..FrameTimings::default()
             },
-            gaussians: scene.len(),
+            gaussians: viewed.gaussians,
             visible: self.painter.visible(),
             stages: self.painter.stage_timings(),
             extras: 0,
@@ -293,6 +299,10 @@ impl Workbench {
                 crate::io::splat::write_scene(path, &scene)?;
                 Ok(scene.len())
             }
+            Content::Scene(viewed) if viewed.from_cache => Err(Error::input(format!(
+                "export-ply: {} is drawn from its level-of-detail cache, not held in memory; convert the file itself (visage convert)",
+                viewed.name
+            ))),
             Content::Scene(viewed) => {
                 crate::io::splat::write_scene(path, &viewed.scene)?;
                 Ok(viewed.scene.len())
@@ -314,6 +324,11 @@ impl Workbench {
                 composer.update(&request.recipe)?;
                 centre_depth(&composer.scene(), &camera, &settings)
             }
+            // A scene drawn from its cache: what its last cut drew.
+            Content::Scene(viewed) if viewed.from_cache => match &self.lod {
+                Some((_, hierarchy)) => centre_depth(hierarchy.drawn(), &camera, &settings),
+                None => None,
+            },
             Content::Scene(viewed) => centre_depth(&viewed.scene, &camera, &settings),
         };
         Ok(depth.map(|d| d as f32))
@@ -347,7 +362,7 @@ fn settings_for(request: &FrameRequest) -> RenderSettings {
 /// views — SH degree, hidden floaters — are not part of it).
 fn scene_view_hash(viewed: &ViewedScene, camera: &crate::scene::camera::Orbit) -> String {
     let mut h = blake3::Hasher::new();
-    h.update(format!("{} {} {camera:?}", viewed.name, viewed.scene.len()).as_bytes());
+    h.update(format!("{} {} {camera:?}", viewed.name, viewed.gaussians).as_bytes());
     h.finalize().to_hex()[..16].to_string()
 }
 

@@ -627,6 +627,10 @@ impl App {
         let p = &mut self.picture;
         p.last_exact = exact;
         p.shown_version = version;
+        // A paged scene read chunks for this frame: draw again, finer.
+        if result.lod.is_some_and(|cut| cut.chunks_read > 0) {
+            p.version += 1;
+        }
         let t = &result.timings;
         let spent = t.compose + t.pose + t.render + encode_ms;
         if !exact {

@@ -10,7 +10,7 @@ use std::collections::BinaryHeap;
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
-use super::LodTree;
+use super::{Hierarchy, LodTree, NodeLink};
 use crate::render::projection::FRUSTUM_GUARD;
 use crate::scene::camera::Camera;
 
@@ -94,6 +94,9 @@ pub struct Cut {
     pub levels: (u16, u16),
     /// How many of the drawn nodes are the scene's own Gaussians.
     pub leaves: usize,
+    /// Drawn nodes the cut would have opened had their children been at
+    /// hand (a paged hierarchy's chunks not loaded yet).
+    pub wanting: Vec<u32>,
 }
 
 /// Where a node's bounding sphere falls for one camera.
@@ -115,6 +118,8 @@ enum Verdict {
     Draw,
     /// Too large on screen: its children decide, largest first by this size.
     Open(f32),
+    /// Too large, but its children are not at hand: drawn for now.
+    Want,
 }
 
 impl View {
@@ -133,9 +138,11 @@ impl View {
         }
     }
 
-    fn judge(&self, tree: &LodTree, node: usize, threshold: f32) -> Verdict {
-        let link = tree.links[node];
-        let p: Vec3 = self.view.transform_point3(tree.nodes.position[node]);
+    fn judge<H: Hierarchy + ?Sized>(&self, tree: &H, node: u32, threshold: f32) -> Verdict {
+        let Some((link, position)) = tree.node(node) else {
+            return Verdict::Skip;
+        };
+        let p: Vec3 = self.view.transform_point3(position);
         let (depth, r) = (-p.z, link.extent);
         let beyond = |offset: f32, tan: f32, norm: f32| (offset.abs() - tan * depth) / norm > r;
         if depth + r < self.near
@@ -148,14 +155,17 @@ impl View {
             return Verdict::Draw;
         }
         let nearest = depth - r;
-        if nearest <= self.near {
-            return Verdict::Open(f32::INFINITY);
-        }
-        let size = 2.0 * self.focal * r / nearest;
+        let size = if nearest <= self.near {
+            f32::INFINITY
+        } else {
+            2.0 * self.focal * r / nearest
+        };
         if size <= threshold {
             Verdict::Draw
-        } else {
+        } else if tree.has_children_of(link) {
             Verdict::Open(size)
+        } else {
+            Verdict::Want
         }
     }
 }
@@ -184,112 +194,154 @@ impl LodTree {
     /// The nodes `camera` draws under `policy`; `Off` draws every leaf in
     /// view (what the exact path draws).
     pub fn cut(&self, camera: &Camera, policy: LodPolicy) -> Cut {
-        let (threshold, budget) = match policy {
-            LodPolicy::Off => (0.0, usize::MAX),
-            LodPolicy::Auto => (AUTO_PIXELS, usize::MAX),
-            LodPolicy::Budget(n) => (AUTO_PIXELS, n.max(1)),
-        };
-        self.cut_at(camera, threshold, budget)
+        cut(self, camera, policy)
     }
 
     /// The cut that draws nodes of at most `threshold` pixels on screen,
     /// at most `budget` of them.
     pub fn cut_at(&self, camera: &Camera, threshold: f32, budget: usize) -> Cut {
-        let mut cut = Cut::default();
-        if self.links.is_empty() {
-            return cut;
-        }
-        let view = View::new(camera);
-        cut.nodes = if budget == usize::MAX {
-            self.cut_unbounded(&view, threshold)
-        } else {
-            self.cut_within(&view, threshold, budget)
-        };
-        cut.nodes.sort_unstable();
-        self.describe(&mut cut);
-        cut
+        cut_at(self, camera, threshold, budget)
     }
+}
 
+/// The nodes of `tree` that `camera` draws under `policy`.
+pub fn cut<H: Hierarchy + ?Sized>(tree: &H, camera: &Camera, policy: LodPolicy) -> Cut {
+    let (threshold, budget) = match policy {
+        LodPolicy::Off => (0.0, usize::MAX),
+        LodPolicy::Auto => (AUTO_PIXELS, usize::MAX),
+        LodPolicy::Budget(n) => (AUTO_PIXELS, n.max(1)),
+    };
+    cut_at(tree, camera, threshold, budget)
+}
+
+/// The cut of `tree` that draws nodes of at most `threshold` pixels on
+/// screen, at most `budget` of them.
+pub fn cut_at<H: Hierarchy + ?Sized>(
+    tree: &H,
+    camera: &Camera,
+    threshold: f32,
+    budget: usize,
+) -> Cut {
+    let mut walk = Walk {
+        tree,
+        view: View::new(camera),
+        threshold,
+    };
+    let mut cut = Cut::default();
+    if tree.node(0).is_none() {
+        return cut;
+    }
+    let (mut nodes, mut wanting) = if budget == usize::MAX {
+        walk.unbounded()
+    } else {
+        walk.within(budget)
+    };
+    nodes.sort_unstable();
+    wanting.sort_unstable();
+    cut.nodes = nodes;
+    cut.wanting = wanting;
+    walk.describe(&mut cut);
+    cut
+}
+
+/// One cut under way.
+struct Walk<'a, H: ?Sized> {
+    tree: &'a H,
+    view: View,
+    threshold: f32,
+}
+
+/// Nodes drawn and, of them, those wanting their children.
+type Drawn = (Vec<u32>, Vec<u32>);
+
+impl<H: Hierarchy + ?Sized> Walk<'_, H> {
+    fn link(&self, node: u32) -> NodeLink {
+        self.tree.node(node).map(|(l, _)| l).unwrap_or_default()
+    }
     /// Every node the threshold draws: the top of the tree is opened
     /// breadth-first until there is work for every thread, then each open
     /// subtree is walked depth-first on its own.
-    fn cut_unbounded(&self, view: &View, threshold: f32) -> Vec<u32> {
+    fn unbounded(&mut self) -> Drawn {
         const PARALLEL_FRONTIER: usize = 256;
-        let mut drawn = Vec::new();
+        let mut drawn = (Vec::new(), Vec::new());
         let mut frontier = vec![0u32];
         while !frontier.is_empty() && frontier.len() < PARALLEL_FRONTIER {
             let mut next = Vec::new();
             for node in frontier {
-                self.visit(view, threshold, node, &mut drawn, &mut next);
+                self.visit(node, &mut drawn, &mut next);
             }
             frontier = next;
         }
-        let below: Vec<Vec<u32>> = frontier
+        let below: Vec<Drawn> = frontier
             .par_iter()
             .map(|&node| {
-                let (mut drawn, mut stack) = (Vec::new(), vec![node]);
+                let (mut drawn, mut stack) = ((Vec::new(), Vec::new()), vec![node]);
                 while let Some(node) = stack.pop() {
-                    self.visit(view, threshold, node, &mut drawn, &mut stack);
+                    self.visit(node, &mut drawn, &mut stack);
                 }
                 drawn
             })
             .collect();
-        drawn.extend(below.into_iter().flatten());
+        for (nodes, wanting) in below {
+            drawn.0.extend(nodes);
+            drawn.1.extend(wanting);
+        }
         drawn
     }
 
-    /// Judges one node: drawn, skipped, or its children queued in `open`
-    /// (the root's own verdict included: it is judged like any child).
-    fn visit(
-        &self,
-        view: &View,
-        threshold: f32,
-        node: u32,
-        drawn: &mut Vec<u32>,
-        open: &mut Vec<u32>,
-    ) {
-        match view.judge(self, node as usize, threshold) {
+    /// Judges one node: drawn, skipped, or its children queued in `open`.
+    fn visit(&self, node: u32, drawn: &mut Drawn, open: &mut Vec<u32>) {
+        match self.view.judge(self.tree, node, self.threshold) {
             Verdict::Skip => {}
-            Verdict::Draw => drawn.push(node),
+            Verdict::Draw => drawn.0.push(node),
+            Verdict::Want => {
+                drawn.0.push(node);
+                drawn.1.push(node);
+            }
             Verdict::Open(_) => {
-                let link = self.links[node as usize];
+                let link = self.link(node);
                 open.extend(link.first_child..link.first_child + link.children);
             }
         }
     }
 
     /// The threshold's cut, refined largest spot first until `budget`.
-    fn cut_within(&self, view: &View, threshold: f32, budget: usize) -> Vec<u32> {
-        let mut drawn = Vec::new();
+    fn within(&mut self, budget: usize) -> Drawn {
+        let mut drawn = (Vec::new(), Vec::new());
         let mut open = BinaryHeap::new();
-        let judge = |drawn: &mut Vec<u32>, open: &mut BinaryHeap<Pending>, node: u32| match view
-            .judge(self, node as usize, threshold)
+        let judge = |drawn: &mut Drawn, open: &mut BinaryHeap<Pending>, node: u32| match self
+            .view
+            .judge(self.tree, node, self.threshold)
         {
             Verdict::Skip => {}
-            Verdict::Draw => drawn.push(node),
+            Verdict::Draw => drawn.0.push(node),
+            Verdict::Want => {
+                drawn.0.push(node);
+                drawn.1.push(node);
+            }
             Verdict::Open(size) => open.push(Pending(size, node)),
         };
         judge(&mut drawn, &mut open, 0);
         // Opening a node replaces it by its children: the budget counts
         // what is drawn and what waits, as all of it would be drawn.
         while let Some(Pending(_, node)) = open.pop() {
-            let link = self.links[node as usize];
-            if drawn.len() + open.len() + link.children as usize > budget {
-                drawn.push(node);
+            let link = self.link(node);
+            if drawn.0.len() + open.len() + link.children as usize > budget {
+                drawn.0.push(node);
                 break;
             }
             for child in link.first_child..link.first_child + link.children {
                 judge(&mut drawn, &mut open, child);
             }
         }
-        drawn.extend(open.into_iter().map(|p| p.1));
+        drawn.0.extend(open.into_iter().map(|p| p.1));
         drawn
     }
 
     fn describe(&self, cut: &mut Cut) {
         let mut levels = (u16::MAX, 0);
         for &n in &cut.nodes {
-            let link = self.links[n as usize];
+            let link = self.link(n);
             levels = (levels.0.min(link.level), levels.1.max(link.level));
             cut.leaves += usize::from(link.children == 0);
         }

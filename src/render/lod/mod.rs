@@ -5,13 +5,16 @@
 //! subtree projects to a pixel or less (`cut.rs`). The cost of a frame then
 //! follows the image, not the file.
 
+pub mod cache;
 mod cut;
 mod merge;
+mod paged;
 mod tree;
 
-pub use cut::{Cut, LodPolicy, AUTO_PER_PIXEL, AUTO_PIXELS};
+pub use cut::{cut, cut_at, Cut, LodPolicy, AUTO_PER_PIXEL, AUTO_PIXELS};
 pub use merge::{mean_area, merge, Member, Merged};
-pub use tree::{build, MAX_CHILDREN};
+pub use paged::PagedTree;
+pub use tree::{build, layout, Layout, MAX_CHILDREN};
 
 use std::sync::Arc;
 
@@ -42,6 +45,31 @@ pub struct NodeLink {
     /// Their opacities, summed: what the renderers' dilation adds to
     /// that mass per unit of dilated area ([`LodTree::gather`]).
     pub coverage: f32,
+}
+
+/// What a cut reads of a hierarchy: in memory ([`LodTree`]) or paged in
+/// from its cache file by chunks (`paged.rs`).
+pub trait Hierarchy: Sync {
+    /// Node `i`'s place and centre; None when it is not at hand.
+    fn node(&self, i: u32) -> Option<(NodeLink, glam::Vec3)>;
+
+    /// Whether every child of the node with `link` is at hand.
+    fn has_children_of(&self, link: NodeLink) -> bool {
+        link.children > 0
+            && self.node(link.first_child).is_some()
+            && self.node(link.first_child + link.children - 1).is_some()
+    }
+}
+
+impl Hierarchy for LodTree {
+    fn node(&self, i: u32) -> Option<(NodeLink, glam::Vec3)> {
+        let link = *self.links.get(i as usize)?;
+        Some((link, self.nodes.position[i as usize]))
+    }
+
+    fn has_children_of(&self, link: NodeLink) -> bool {
+        link.children > 0
+    }
 }
 
 /// A scene's hierarchy: node 0 is the root, nodes are breadth-first (so
@@ -94,24 +122,14 @@ impl LodTree {
                 .zip(&cut.nodes)
                 .for_each(|(out, &n)| out.copy_from_slice(self.nodes.sh_of(n as usize)));
         }
-        let view = camera.view();
-        let focal = camera.focal_px().1.max(f32::MIN_POSITIVE) as f64;
+        let opacity_for = DrawnOpacity::new(camera);
         let opacity = cut
             .nodes
             .par_iter()
             .map(|&n| {
-                let (n, link) = (n as usize, self.links[n as usize]);
-                if link.children == 0 {
-                    return self.nodes.opacity[n];
-                }
-                let depth = -(view.transform_point3(self.nodes.position[n]).z as f64);
-                let pixel = depth.max(camera.near as f64) / focal;
-                let dilation = COVARIANCE_DILATION * pixel * pixel;
-                let s = self.nodes.scale[n].as_dvec3();
-                let grown = (s * s + glam::DVec3::splat(dilation)).map(f64::sqrt);
-                let mass = link.mass as f64 + 3.0 * dilation * link.coverage as f64;
-                let area = mean_area(grown.as_vec3()).max(f64::MIN_POSITIVE);
-                ((mass / area) as f32).clamp(0.0, MAX_OPACITY)
+                let n = n as usize;
+                let (position, scale) = (self.nodes.position[n], self.nodes.scale[n]);
+                opacity_for.node(self.links[n], position, scale, self.nodes.opacity[n])
             })
             .collect();
         SplatScene {
@@ -122,6 +140,47 @@ impl LodTree {
             sh_degree: self.nodes.sh_degree,
             sh: Arc::new(sh),
         }
+    }
+}
+
+/// A drawn node's opacity for one camera (see [`LodTree::gather`]).
+pub(crate) struct DrawnOpacity {
+    view: glam::Mat4,
+    focal: f64,
+    near: f64,
+}
+
+impl DrawnOpacity {
+    /// For drawing from `camera`.
+    pub fn new(camera: &Camera) -> Self {
+        Self {
+            view: camera.view(),
+            focal: camera.focal_px().1.max(f32::MIN_POSITIVE) as f64,
+            near: camera.near as f64,
+        }
+    }
+
+    /// The opacity a node with `link` at `position` of `scale` is drawn
+    /// with: a leaf's own; a merged node's, its leaves' dilated mass over
+    /// its own dilated area.
+    pub fn node(
+        &self,
+        link: NodeLink,
+        position: glam::Vec3,
+        scale: glam::Vec3,
+        opacity: f32,
+    ) -> f32 {
+        if link.children == 0 {
+            return opacity;
+        }
+        let depth = -(self.view.transform_point3(position).z as f64);
+        let pixel = depth.max(self.near) / self.focal;
+        let dilation = COVARIANCE_DILATION * pixel * pixel;
+        let s = scale.as_dvec3();
+        let grown = (s * s + glam::DVec3::splat(dilation)).map(f64::sqrt);
+        let mass = link.mass as f64 + 3.0 * dilation * link.coverage as f64;
+        let area = mean_area(grown.as_vec3()).max(f64::MIN_POSITIVE);
+        ((mass / area) as f32).clamp(0.0, MAX_OPACITY)
     }
 }
 

@@ -85,28 +85,41 @@ fn morton(cell: [u32; 3]) -> u64 {
     spread(cell[0]) | spread(cell[1]) << 1 | spread(cell[2]) << 2
 }
 
-/// Builds the hierarchy of `scene`. Gaussians that can never be drawn
-/// (non-finite, or below α = 1/255) are left out and counted.
+/// Builds the hierarchy of `scene` in memory. Gaussians that can never be
+/// drawn (non-finite, or below α = 1/255) are left out and counted.
 pub fn build(scene: &SplatScene) -> LodTree {
-    let kept: Vec<usize> = (0..scene.len()).filter(|&i| usable(scene, i)).collect();
-    let dropped = scene.len() - kept.len();
-    let mut source = SplatScene::with_degree(scene.sh_degree);
-    for &i in &kept {
-        source.push(
-            scene.position[i],
-            scene.rotation[i],
-            scene.scale[i],
-            scene.opacity[i],
-            scene.sh_of(i),
-        );
-    }
-    if source.is_empty() {
-        return LodTree {
-            nodes: source,
-            links: Vec::new(),
-            leaves: 0,
+    let dropped = (0..scene.len()).filter(|&i| !usable(scene, i)).count();
+    match layout(scene.clone()) {
+        Some(layout) => layout.into_tree(),
+        None => LodTree {
+            nodes: SplatScene::with_degree(scene.sh_degree),
             dropped,
-        };
+            ..LodTree::default()
+        },
+    }
+}
+
+/// Builds the hierarchy of `scene`, taking it over (no copy of a scene
+/// whose every Gaussian is drawable); None when nothing in it is.
+pub fn layout(scene: SplatScene) -> Option<Layout> {
+    let total = scene.len();
+    let source = if (0..total).all(|i| usable(&scene, i)) {
+        scene
+    } else {
+        let mut kept = SplatScene::with_degree(scene.sh_degree);
+        for i in (0..total).filter(|&i| usable(&scene, i)) {
+            kept.push(
+                scene.position[i],
+                scene.rotation[i],
+                scene.scale[i],
+                scene.opacity[i],
+                scene.sh_of(i),
+            );
+        }
+        kept
+    };
+    if source.is_empty() {
+        return None;
     }
     let leaves = source.len();
     let extent = source
@@ -129,7 +142,7 @@ pub fn build(scene: &SplatScene) -> LodTree {
     };
     let order = morton_order(&arena.scene);
     let root = merge_levels(&mut arena, order);
-    breadth_first(&arena, root, dropped)
+    Some(breadth_first(arena, root, total - leaves))
 }
 
 /// The usable Gaussians' ids with their Morton codes, in curve order.
@@ -275,8 +288,73 @@ fn push_chain(arena: &mut Arena, nodes: Vec<NewNode>) -> u32 {
     arena.scene.len() as u32 - 1
 }
 
+/// A built hierarchy in node order, its Gaussians still where they were
+/// made: what [`LodTree`] and the cache file are written from.
+pub struct Layout {
+    arena: Arena,
+    /// Arena id of each node, in node order.
+    order: Vec<u32>,
+    links: Vec<NodeLink>,
+    dropped: usize,
+}
+
+impl Layout {
+    /// Number of nodes.
+    pub fn len(&self) -> usize {
+        self.order.len()
+    }
+
+    /// True for no nodes (never: a layout has a root).
+    pub fn is_empty(&self) -> bool {
+        self.order.is_empty()
+    }
+
+    /// Of the nodes, the scene's own Gaussians.
+    pub fn leaves(&self) -> usize {
+        self.arena.leaves
+    }
+
+    /// Gaussians left out as undrawable.
+    pub fn dropped(&self) -> usize {
+        self.dropped
+    }
+
+    /// SH degree of every node.
+    pub fn sh_degree(&self) -> u8 {
+        self.arena.scene.sh_degree
+    }
+
+    /// Node `i`: its place and its Gaussian.
+    pub fn node(&self, i: usize) -> (NodeLink, Member<'_>) {
+        (self.links[i], self.arena.member(self.order[i]))
+    }
+
+    /// The hierarchy in memory.
+    pub fn into_tree(self) -> LodTree {
+        let arena = &self.arena;
+        let mut nodes = SplatScene::with_degree(arena.scene.sh_degree);
+        let stride = nodes.sh_stride();
+        let sh = std::sync::Arc::make_mut(&mut nodes.sh);
+        sh.reserve(self.order.len() * stride);
+        for &id in &self.order {
+            let i = id as usize;
+            nodes.position.push(arena.scene.position[i]);
+            nodes.rotation.push(arena.scene.rotation[i]);
+            nodes.scale.push(arena.scene.scale[i]);
+            nodes.opacity.push(arena.scene.opacity[i]);
+            sh.extend_from_slice(arena.scene.sh_of(i));
+        }
+        LodTree {
+            nodes,
+            links: self.links,
+            leaves: arena.leaves,
+            dropped: self.dropped,
+        }
+    }
+}
+
 /// The arena laid out breadth-first from `root`.
-fn breadth_first(arena: &Arena, root: u32, dropped: usize) -> LodTree {
+fn breadth_first(arena: Arena, root: u32, dropped: usize) -> Layout {
     let mut order = vec![root];
     let mut links = Vec::with_capacity(arena.scene.len());
     let mut level = vec![0u16];
@@ -303,22 +381,10 @@ fn breadth_first(arena: &Arena, root: u32, dropped: usize) -> LodTree {
         }
         at += 1;
     }
-    let mut nodes = SplatScene::with_degree(arena.scene.sh_degree);
-    let stride = nodes.sh_stride();
-    let sh = std::sync::Arc::make_mut(&mut nodes.sh);
-    sh.reserve(order.len() * stride);
-    for &id in &order {
-        let i = id as usize;
-        nodes.position.push(arena.scene.position[i]);
-        nodes.rotation.push(arena.scene.rotation[i]);
-        nodes.scale.push(arena.scene.scale[i]);
-        nodes.opacity.push(arena.scene.opacity[i]);
-        sh.extend_from_slice(arena.scene.sh_of(i));
-    }
-    LodTree {
-        nodes,
+    Layout {
+        arena,
+        order,
         links,
-        leaves: arena.leaves,
         dropped,
     }
 }
