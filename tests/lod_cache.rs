@@ -53,12 +53,14 @@ fn a_cache_is_built_once_then_found_and_draws_what_memory_draws() {
     let dir = folder("found");
     let file = scene_file(&dir, 30_000);
     let caches = dir.join("cache");
-    let (tree, origin, path) = open_cached(&file, Some(&caches), 1 << 30, &quiet).unwrap();
+    let (tree, origin, path) =
+        open_cached(&file, Some(&caches), 1 << 30, &quiet, &|_, _| {}).unwrap();
     assert_eq!(origin_why(&origin), "there is none yet");
     assert!(path.starts_with(&caches) && path.is_file());
     assert!(!path.with_extension("lod.partial").exists());
     drop(tree);
-    let (tree, origin, again) = open_cached(&file, Some(&caches), 1 << 30, &quiet).unwrap();
+    let (tree, origin, again) =
+        open_cached(&file, Some(&caches), 1 << 30, &quiet, &|_, _| {}).unwrap();
     assert_eq!((origin, &again), (CacheOrigin::Found, &path));
     // With room for all of it, the paged cut is the in-memory cut.
     let memory = build(&visage::io::splat::read_scene(&file).unwrap());
@@ -83,14 +85,14 @@ fn a_changed_scene_or_a_damaged_cache_is_rebuilt() {
     // of 64 KiB leave gaps.
     let file = scene_file(&dir, 30_000);
     let caches = dir.join("cache");
-    let (_, _, path) = open_cached(&file, Some(&caches), 1 << 30, &quiet).unwrap();
+    let (_, _, path) = open_cached(&file, Some(&caches), 1 << 30, &quiet, &|_, _| {}).unwrap();
     // One byte changed between the first two sampled windows: the same
     // fingerprint (so the same cache name) but not the same content.
     let mut bytes = std::fs::read(&file).unwrap();
     bytes[(64 << 10) + 100] ^= 0x40;
     std::thread::sleep(std::time::Duration::from_millis(20));
     std::fs::write(&file, &bytes).unwrap();
-    let (_, origin, same) = open_cached(&file, Some(&caches), 1 << 30, &quiet).unwrap();
+    let (_, origin, same) = open_cached(&file, Some(&caches), 1 << 30, &quiet, &|_, _| {}).unwrap();
     assert_eq!(same, path);
     assert_eq!(
         origin_why(&origin),
@@ -111,7 +113,7 @@ fn a_changed_scene_or_a_damaged_cache_is_rebuilt() {
     );
     let notes = std::sync::Mutex::new(Vec::new());
     let note = |line: &str| notes.lock().unwrap().push(line.to_string());
-    let (_, origin, _) = open_cached(&file, Some(&caches), 1 << 30, &note).unwrap();
+    let (_, origin, _) = open_cached(&file, Some(&caches), 1 << 30, &note, &|_, _| {}).unwrap();
     assert!(origin_why(&origin).contains("truncated"));
     assert!(notes.lock().unwrap()[0].contains("building the level-of-detail cache"));
     // A damaged header, and a damaged first chunk: refused, rebuilt.
@@ -121,12 +123,13 @@ fn a_changed_scene_or_a_damaged_cache_is_rebuilt() {
         std::fs::write(&path, &cache).unwrap();
         let refused = PagedTree::open(&path, 1 << 30).unwrap_err().to_string();
         assert!(refused.contains("damaged"), "{refused}");
-        let (_, origin, _) = open_cached(&file, Some(&caches), 1 << 30, &quiet).unwrap();
+        let (_, origin, _) =
+            open_cached(&file, Some(&caches), 1 << 30, &quiet, &|_, _| {}).unwrap();
         assert!(origin_why(&origin).contains("damaged"));
     }
     // Not a cache at all.
     std::fs::write(&path, b"hello").unwrap();
-    let (_, origin, _) = open_cached(&file, Some(&caches), 1 << 30, &quiet).unwrap();
+    let (_, origin, _) = open_cached(&file, Some(&caches), 1 << 30, &quiet, &|_, _| {}).unwrap();
     assert!(origin_why(&origin).contains("shorter than its header"));
 }
 
@@ -135,7 +138,7 @@ fn a_damaged_chunk_past_the_coarse_levels_is_never_drawn() {
     let dir = folder("chunk");
     let file = scene_file(&dir, 30_000);
     let caches = dir.join("cache");
-    let (tree, _, path) = open_cached(&file, Some(&caches), 1 << 30, &quiet).unwrap();
+    let (tree, _, path) = open_cached(&file, Some(&caches), 1 << 30, &quiet, &|_, _| {}).unwrap();
     let record = tree.header().record_bytes();
     drop(tree);
     // A budget that pins only the first chunk; the close view reads more.

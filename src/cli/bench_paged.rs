@@ -34,7 +34,7 @@ pub fn bench_paged(
 ) -> Result<Value> {
     let start = Instant::now();
     let note = |line: &str| eprintln!("visage: {line}");
-    let (tree, origin, cache) = open_cached(path, None, budget, &note)?;
+    let (tree, origin, cache) = open_cached(path, None, budget, &note, &|_, _| {})?;
     let open_ms = start.elapsed().as_secs_f64() * 1e3;
     let header = tree.header().clone();
     let (lo, hi) = header.source.bounds;

@@ -69,7 +69,7 @@ impl SceneSpec {
             .map_err(|e| Error::io("read", &self.path, e))?
             .len();
         if self.memory_budget.is_some() || len >= LARGE_SCENE_BYTES {
-            return Ok((self.open_cached()?, start.elapsed()));
+            return Ok((self.open_cached(progress)?, start.elapsed()));
         }
         let scene = crate::io::splat::read_scene_with(&self.path, progress)?;
         let (up, up_reason) = self.up_axis(&scene);
@@ -104,10 +104,10 @@ impl SceneSpec {
 
     /// Opens the scene from its level-of-detail cache (built first when
     /// missing or stale), framed by the bounds and ground the cache keeps.
-    fn open_cached(&self) -> Result<ViewedScene> {
+    fn open_cached(&self, progress: Progress) -> Result<ViewedScene> {
         let budget = self.memory_budget.unwrap_or_else(default_memory_budget);
-        let note = |line: &str| eprintln!("visage: {line}");
-        let (tree, _, _) = open_cached(&self.path, None, budget, &note)?;
+        let note = |line: &str| eprintln!("\nvisage: {line}");
+        let (tree, _, _) = open_cached(&self.path, None, budget, &note, progress)?;
         let source = &tree.header().source;
         let (up, up_reason) = self.up_axis_with(|| source.ground_up);
         let (lo, hi) = source.bounds;
