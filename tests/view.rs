@@ -128,7 +128,7 @@ fn y_down_scenes_open_upright() {
     std::fs::write(
         &session,
         format!(
-            "visage-session 1\nscene \"{}\" up=-y\nrender 80x60\n---\n0 snapshot v.png\n",
+            "visage-session 1\nscene \"{}\" up=-y\nrender 80x60\n---\n0 snapshot v.png\n0 lod off\n0 snapshot exact.png\n",
             scene.display()
         ),
     )
@@ -147,11 +147,37 @@ fn y_down_scenes_open_upright() {
         "-y",
         "--size",
         "80x60",
+        // The view's default level of detail (this scene has more than 4
+        // Gaussians a pixel at 80x60, so the view draws its hierarchy).
+        "--lod",
+        "auto",
         "-o",
         reference.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert_eq!(png(&out.join("v.png")).pixels, png(&reference).pixels);
+    assert!(png(&out.join("v.png")).pixels == png(&reference).pixels);
+    // `lod off` draws every Gaussian: what render draws by default.
+    let exact = out.join("exact-ref.png");
+    let o = visage(&[
+        "render",
+        "--ply",
+        scene.to_str().unwrap(),
+        "--renderer",
+        "cpu",
+        "--up",
+        "-y",
+        "--size",
+        "80x60",
+        "-o",
+        exact.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let shown = png(&out.join("exact.png")).pixels;
+    assert!(shown == png(&exact).pixels);
+    assert!(
+        shown != png(&reference).pixels,
+        "the hierarchy drew something else"
+    );
     std::fs::remove_dir_all(&out).ok();
     std::fs::remove_file(&scene).ok();
 }

@@ -912,6 +912,38 @@ mod tests {
         assert!(s.debug.hide_floaters);
         s.apply(&catalog, &Command::ToggleFloaters).unwrap();
         assert!(!s.debug.hide_floaters);
+        // lod sets the level of detail; auto is where a view starts.
+        assert_eq!(s.debug.lod, LodPolicy::Auto);
+        for (line, policy) in [
+            ("lod off", LodPolicy::Off),
+            ("lod 300k", LodPolicy::Budget(300_000)),
+            ("lod auto", LodPolicy::Auto),
+        ] {
+            s.apply(&catalog, &Command::parse(line).unwrap()).unwrap();
+            assert_eq!(s.debug.lod, policy, "{line}");
+        }
+        assert!(Command::parse("lod lots").is_err() && Command::parse("lod 0").is_err());
+    }
+
+    /// A scene drawn from its level-of-detail cache cannot draw every
+    /// Gaussian, hide floaters (nothing else of it is in memory): it says so.
+    #[test]
+    fn a_scene_from_its_cache_refuses_what_needs_it_in_memory() {
+        let mut catalog = scene_catalog();
+        catalog.scene.as_mut().unwrap().from_cache = true;
+        let mut s = crate::editor::Editor::new(catalog.clone()).state;
+        for command in [Command::Lod(LodPolicy::Off), Command::ToggleFloaters] {
+            let e = s.apply(&catalog, &command).unwrap_err();
+            assert!(e.contains("level-of-detail cache"), "{e}");
+        }
+        assert_eq!(s.debug.lod, LodPolicy::Auto);
+        assert!(!s.debug.hide_floaters);
+        s.apply(&catalog, &Command::Lod(LodPolicy::Budget(5_000)))
+            .unwrap();
+        let e = EditorState::new(Recipe::unedited("ada"))
+            .apply(&self::catalog(), &Command::Lod(LodPolicy::Off))
+            .unwrap_err();
+        assert!(e.contains("only a scene view"), "{e}");
     }
 
     /// An avatar editor has no floaters to hide: the command says so.

@@ -11,8 +11,8 @@ use crate::error::Result;
 use crate::io::Progress;
 use crate::render::image::RgbImage;
 use crate::render::lod::cache::{
-    cache_dir, cache_path, content_hash, fingerprint, modified_ns, still_matches, write_cache,
-    SourceFacts,
+    cache_dir, cache_path, content_hash, fingerprint, modified_ns, read_error, still_matches,
+    write_cache, SourceFacts,
 };
 use crate::render::lod::{cut, layout, Cut, LodPolicy, LodTree, PagedTree};
 use crate::render::settings::RenderSettings;
@@ -235,7 +235,7 @@ fn build_cache(
         fingerprint,
         content,
         len: std::fs::metadata(path)
-            .map_err(|e| crate::error::Error::io("read", path, e))?
+            .map_err(|e| read_error(path, e))?
             .len(),
         modified_ns: modified,
         bounds: scene.robust_bounds().unwrap_or_default(),
@@ -269,7 +269,7 @@ fn build_memory_per_file_byte(path: &Path) -> f64 {
 /// clear error rather than the kernel killing the process half-way).
 fn check_memory_for_build(path: &Path) -> Result<()> {
     let len = std::fs::metadata(path)
-        .map_err(|e| crate::error::Error::io("read", path, e))?
+        .map_err(|e| read_error(path, e))?
         .len();
     let needed = len as f64 * build_memory_per_file_byte(path);
     let Some(available) = meminfo_bytes("MemAvailable:") else {

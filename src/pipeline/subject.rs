@@ -11,6 +11,7 @@ use super::workbench::Workbench;
 use crate::compose::engine::Engine;
 use crate::error::{Error, Result};
 use crate::io::Progress;
+use crate::render::lod::cache::read_error;
 use crate::render::lod::PagedTree;
 use crate::render::Backend;
 use crate::scene::camera::{Orbit, UpAxis};
@@ -66,7 +67,7 @@ impl SceneSpec {
     pub fn load(&self, progress: Progress) -> Result<(ViewedScene, Duration)> {
         let start = Instant::now();
         let len = std::fs::metadata(&self.path)
-            .map_err(|e| Error::io("read", &self.path, e))?
+            .map_err(|e| read_error(&self.path, e))?
             .len();
         if self.memory_budget.is_some() || len >= LARGE_SCENE_BYTES {
             return Ok((self.open_cached(progress)?, start.elapsed()));

@@ -199,6 +199,11 @@ impl Header {
     }
 }
 
+/// A file that cannot be read: bad input (exit 2), as every reader has it.
+pub fn read_error(path: &Path, error: std::io::Error) -> Error {
+    crate::io::FileError::access("read", path, error).into()
+}
+
 /// The folder caches live in: `$VISAGE_CACHE_DIR`, else
 /// `$XDG_CACHE_HOME/visage/lod`, else `~/.cache/visage/lod`.
 pub fn cache_dir() -> PathBuf {
@@ -232,11 +237,8 @@ const FINGERPRINT_WINDOW: u64 = 64 << 10;
 /// none of those bytes nor the size is caught by the modification time and
 /// the full content hash ([`still_matches`]).
 pub fn fingerprint(path: &Path) -> Result<[u8; 32]> {
-    let mut file = File::open(path).map_err(|e| Error::io("read", path, e))?;
-    let len = file
-        .metadata()
-        .map_err(|e| Error::io("read", path, e))?
-        .len();
+    let mut file = File::open(path).map_err(|e| read_error(path, e))?;
+    let len = file.metadata().map_err(|e| read_error(path, e))?.len();
     let mut hasher = blake3::Hasher::new();
     hasher.update(&len.to_le_bytes());
     let mut window = vec![0u8; FINGERPRINT_WINDOW as usize];
@@ -246,7 +248,7 @@ pub fn fingerprint(path: &Path) -> Result<[u8; 32]> {
         let take = FINGERPRINT_WINDOW.min(len - start) as usize;
         file.seek(SeekFrom::Start(start))
             .and_then(|_| file.read_exact(&mut window[..take]))
-            .map_err(|e| Error::io("read", path, e))?;
+            .map_err(|e| read_error(path, e))?;
         hasher.update(&window[..take]);
     }
     Ok(*hasher.finalize().as_bytes())
@@ -254,13 +256,11 @@ pub fn fingerprint(path: &Path) -> Result<[u8; 32]> {
 
 /// The BLAKE3 hash of a whole file, read in 8 MiB blocks.
 pub fn content_hash(path: &Path) -> Result<[u8; 32]> {
-    let mut file = File::open(path).map_err(|e| Error::io("read", path, e))?;
+    let mut file = File::open(path).map_err(|e| read_error(path, e))?;
     let mut hasher = blake3::Hasher::new();
     let mut block = vec![0u8; 8 << 20];
     loop {
-        let n = file
-            .read(&mut block)
-            .map_err(|e| Error::io("read", path, e))?;
+        let n = file.read(&mut block).map_err(|e| read_error(path, e))?;
         if n == 0 {
             break;
         }
@@ -283,7 +283,7 @@ pub fn modified_ns(path: &Path) -> u64 {
 /// touch), the same content.
 pub fn still_matches(facts: &SourceFacts, path: &Path) -> Result<bool> {
     let len = std::fs::metadata(path)
-        .map_err(|e| Error::io("read", path, e))?
+        .map_err(|e| read_error(path, e))?
         .len();
     if len != facts.len {
         return Ok(false);

@@ -12,7 +12,9 @@ use std::sync::Arc;
 use glam::{Quat, Vec3};
 use rayon::prelude::*;
 
-use super::cache::{read_header, Header, RecordHead, CHUNK_NODES, HEADER_BYTES, RECORD_HEAD};
+use super::cache::{
+    read_error, read_header, Header, RecordHead, CHUNK_NODES, HEADER_BYTES, RECORD_HEAD,
+};
 use super::{Cut, DrawnOpacity, Hierarchy, NodeLink};
 use crate::error::{Error, Result};
 use crate::scene::camera::Camera;
@@ -58,7 +60,7 @@ impl PagedTree {
     /// (up to a quarter of `budget` bytes). The error is one line naming
     /// what is wrong with the file.
     pub fn open(path: &Path, budget: usize) -> Result<PagedTree> {
-        let mut file = File::open(path).map_err(|e| Error::io("read", path, e))?;
+        let mut file = File::open(path).map_err(|e| read_error(path, e))?;
         let (header, table) = read_header(&mut file).map_err(|why| {
             Error::input(format!("level-of-detail cache {}: {why}", path.display()))
         })?;
