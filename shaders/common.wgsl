@@ -11,7 +11,7 @@ struct Camera {
     size: vec4<u32>,          // width, height, tiles_x, tiles_y
     counts: vec4<u32>,        // gaussians, sh degree used, sh stride (floats), triangles
     extra: vec4<f32>,         // scale modifier, background r, g, b
-    tuning: vec4<f32>,        // transmittance at which a pixel stops, unused x3
+    tuning: vec4<f32>,        // transmittance at which a pixel stops, SH split (u32 bits), unused x2
 }
 
 // TILE, GROUP, SORT_BLOCK, SORT_ITEMS, DILATION, RADIUS_SIGMAS, MAX_ALPHA and

@@ -3,42 +3,51 @@
 
 @group(0) @binding(0) var<uniform> camera: Camera;
 @group(0) @binding(1) var<storage, read> world: array<vec4<f32>>;
+// SH coefficients, `counts.z` floats a Gaussian, in two bindings so a scene
+// may hold twice what one binding can: Gaussians below bitcast<u32>(tuning.y)
+// in `sh`, the rest in `sh_rest`.
 @group(0) @binding(2) var<storage, read> sh: array<f32>;
+@group(0) @binding(3) var<storage, read> sh_rest: array<f32>;
 // Per Gaussian, 3 x vec4: (centre x, y, depth, radius), (conic a, b, c, opacity), (rgb, 0).
-@group(0) @binding(3) var<storage, read_write> projected: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> projected: array<vec4<f32>>;
 // Per Gaussian: (depth bits, first tile x | y << 16, last tile x | y << 16, visible).
-@group(0) @binding(4) var<storage, read_write> keys: array<vec4<u32>>;
+@group(0) @binding(5) var<storage, read_write> keys: array<vec4<u32>>;
 
 const SH_C0: f32 = 0.28209479177387814;
 const SH_C1: f32 = 0.4886025119029199;
 
-fn coef(base: u32, k: u32) -> vec3<f32> {
-    let o = base + 3u * k;
-    return vec3<f32>(sh[o], sh[o + 1u], sh[o + 2u]);
+// Coefficient k of Gaussian i.
+fn coef(i: u32, k: u32) -> vec3<f32> {
+    let split = bitcast<u32>(camera.tuning.y);
+    if (i < split) {
+        let o = i * camera.counts.z + 3u * k;
+        return vec3<f32>(sh[o], sh[o + 1u], sh[o + 2u]);
+    }
+    let o = (i - split) * camera.counts.z + 3u * k;
+    return vec3<f32>(sh_rest[o], sh_rest[o + 1u], sh_rest[o + 2u]);
 }
 
 fn sh_colour(i: u32, dir: vec3<f32>) -> vec3<f32> {
-    let base = i * camera.counts.z;
     let degree = camera.counts.y;
-    var c = SH_C0 * coef(base, 0u);
+    var c = SH_C0 * coef(i, 0u);
     if (degree >= 1u) {
         let x = dir.x; let y = dir.y; let z = dir.z;
-        c += SH_C1 * (-y * coef(base, 1u) + z * coef(base, 2u) - x * coef(base, 3u));
+        c += SH_C1 * (-y * coef(i, 1u) + z * coef(i, 2u) - x * coef(i, 3u));
         if (degree >= 2u) {
             let xx = x * x; let yy = y * y; let zz = z * z;
-            c += 1.0925484305920792 * x * y * coef(base, 4u)
-               - 1.0925484305920792 * y * z * coef(base, 5u)
-               + 0.31539156525252005 * (2.0 * zz - xx - yy) * coef(base, 6u)
-               - 1.0925484305920792 * x * z * coef(base, 7u)
-               + 0.5462742152960396 * (xx - yy) * coef(base, 8u);
+            c += 1.0925484305920792 * x * y * coef(i, 4u)
+               - 1.0925484305920792 * y * z * coef(i, 5u)
+               + 0.31539156525252005 * (2.0 * zz - xx - yy) * coef(i, 6u)
+               - 1.0925484305920792 * x * z * coef(i, 7u)
+               + 0.5462742152960396 * (xx - yy) * coef(i, 8u);
             if (degree >= 3u) {
-                c += -0.5900435899266435 * y * (3.0 * xx - yy) * coef(base, 9u)
-                   + 2.890611442640554 * x * y * z * coef(base, 10u)
-                   - 0.4570457994644658 * y * (4.0 * zz - xx - yy) * coef(base, 11u)
-                   + 0.3731763325901154 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * coef(base, 12u)
-                   - 0.4570457994644658 * x * (4.0 * zz - xx - yy) * coef(base, 13u)
-                   + 1.445305721320277 * z * (xx - yy) * coef(base, 14u)
-                   - 0.5900435899266435 * x * (xx - 3.0 * yy) * coef(base, 15u);
+                c += -0.5900435899266435 * y * (3.0 * xx - yy) * coef(i, 9u)
+                   + 2.890611442640554 * x * y * z * coef(i, 10u)
+                   - 0.4570457994644658 * y * (4.0 * zz - xx - yy) * coef(i, 11u)
+                   + 0.3731763325901154 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy) * coef(i, 12u)
+                   - 0.4570457994644658 * x * (4.0 * zz - xx - yy) * coef(i, 13u)
+                   + 1.445305721320277 * z * (xx - yy) * coef(i, 14u)
+                   - 0.5900435899266435 * x * (xx - 3.0 * yy) * coef(i, 15u);
             }
         }
     }

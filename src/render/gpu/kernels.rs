@@ -111,7 +111,7 @@ kernels! {
     /// Places triangle-local Gaussians in world space from the triangle frames.
     Bind = "bind" { local: read, frames: read, world: write }
     /// Culls and projects world Gaussians, evaluates SH, writes sort keys.
-    Project = "project" { world: read, sh: read, projected: write, keys: write }
+    Project = "project" { world: read, sh: read, sh_rest: read, projected: write, keys: write }
     /// Pairs each Gaussian's depth bits with its index (culled ones last).
     SortKeys = "sort_keys" { keys: read, depth: write, index: write }
     /// Counts each block's keys per digit of one radix pass.

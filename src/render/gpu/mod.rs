@@ -53,8 +53,11 @@ struct SceneBuffers {
     /// device could not bind all of it).
     stored_sh_degree: u8,
     sh_stride: u32,
+    /// Gaussians whose SH is in `sh`; the rest are in `sh_rest`.
+    sh_split: u32,
     local: wgpu::Buffer,
     sh: wgpu::Buffer,
+    sh_rest: wgpu::Buffer,
     world: wgpu::Buffer,
     projected: wgpu::Buffer,
     keys: wgpu::Buffer,
@@ -101,6 +104,9 @@ pub struct GpuRenderer {
     /// Wait for the device after every stage so `timings` attribute GPU time to
     /// the right stage (costs a round trip per stage; off for normal frames).
     pub profile_stages: bool,
+    /// The largest SH binding, when smaller than the device's (tests make
+    /// a small scene need both SH bindings this way).
+    sh_binding_limit: Option<u64>,
 }
 
 impl GpuRenderer {
@@ -181,6 +187,7 @@ impl GpuRenderer {
             cut_short,
             bound_frames: None,
             bind_dispatches: 0,
+            sh_binding_limit: None,
             timings: StageTimings::default(),
             profile_stages: false,
         }))
@@ -253,7 +260,11 @@ impl GpuRenderer {
     fn upload(&mut self, local: &[f32], all_sh: &[f32], stored_degree: u8) -> Result<()> {
         let n = local.len() / 12;
         let max_binding = self.limits.max_storage_buffer_binding_size;
-        let degree = sh_degree_that_fits(n, stored_degree, max_binding);
+        let sh_binding = self
+            .sh_binding_limit
+            .unwrap_or(max_binding)
+            .min(max_binding);
+        let degree = sh_degree_that_fits(n, stored_degree, sh_binding);
         if (n as u64) * 48 > max_binding {
             return Err(Error::input(format!(
                 "{n} Gaussians do not fit this device's largest storage buffer ({max_binding} bytes)"
@@ -261,6 +272,8 @@ impl GpuRenderer {
         }
         let stride = 3 * (degree as usize + 1).pow(2);
         let sh = sh_up_to_degree(all_sh, stored_degree, degree);
+        let split = gaussians_per_binding(sh_binding, degree).min(n as u64) as usize;
+        let (sh_first, sh_rest) = sh.split_at(split * stride);
         let storage = wgpu::BufferUsages::STORAGE;
         let init = |label, contents: &[u8], usage| {
             self.device
@@ -288,8 +301,10 @@ impl GpuRenderer {
             sh_degree: degree,
             stored_sh_degree: stored_degree,
             sh_stride: stride as u32,
+            sh_split: split as u32,
             local: init("local gaussians", bytemuck::cast_slice(local), storage),
-            sh: init("sh", bytemuck::cast_slice(&sh), storage),
+            sh: init("sh", bytemuck::cast_slice(sh_first), storage),
+            sh_rest: init("sh, the rest", bytemuck::cast_slice(sh_rest), storage),
             // COPY_SRC: the kernel tests read it back.
             world: empty(
                 "world gaussians",
@@ -373,6 +388,7 @@ impl GpuRenderer {
                 camera,
                 &scene.world,
                 &scene.sh,
+                &scene.sh_rest,
                 &scene.projected,
                 &scene.keys,
                 (groups, 1),
@@ -527,7 +543,12 @@ fn camera_uniform(
             settings.background[1],
             settings.background[2],
         ],
-        tuning: [settings.early_stop.clamp(0.0, 1.0), 0.0, 0.0, 0.0],
+        tuning: [
+            settings.early_stop.clamp(0.0, 1.0),
+            f32::from_bits(scene.sh_split),
+            0.0,
+            0.0,
+        ],
     }
 }
 
@@ -580,14 +601,23 @@ fn sh_up_to_degree(sh: &[f32], stored: u8, degree: u8) -> std::borrow::Cow<'_, [
 fn sh_degree_that_fits(count: usize, stored: u8, max_binding: u64) -> u8 {
     (0..=stored)
         .rev()
-        .find(|&d| count as u64 * 12 * (u64::from(d) + 1).pow(2) <= max_binding)
+        .find(|&d| count as u64 <= SH_BINDINGS * gaussians_per_binding(max_binding, d))
         .unwrap_or(0)
+}
+
+/// Bindings the SH is split over (the project kernel's `sh` and `sh_rest`).
+const SH_BINDINGS: u64 = 2;
+
+/// Gaussians whose SH of `degree` one binding of `max_binding` bytes holds.
+fn gaussians_per_binding(max_binding: u64, degree: u8) -> u64 {
+    max_binding / (12 * (u64::from(degree) + 1).pow(2))
 }
 
 #[cfg(test)]
 mod tests {
-    /// lavapipe binds 128 MiB: a million degree-3 Gaussians (192 MB of SH)
-    /// drop to degree 2, 2.7 million to degree 1; a big binding keeps all.
+    /// lavapipe binds 128 MiB and the SH has two bindings: a million
+    /// degree-3 Gaussians (192 MB of SH) keep degree 3, 1.5 million drop to
+    /// degree 2, 2.7 million to degree 1; a big binding keeps all.
     /// Dropping bands keeps each Gaussian's lowest coefficients in order;
     /// keeping them all copies nothing.
     #[test]
@@ -606,7 +636,8 @@ mod tests {
     fn sh_bands_are_dropped_only_when_the_binding_is_too_small() {
         let lavapipe = 128 << 20;
         assert_eq!(super::sh_degree_that_fits(600_000, 3, lavapipe), 3);
-        assert_eq!(super::sh_degree_that_fits(1_000_000, 3, lavapipe), 2);
+        assert_eq!(super::sh_degree_that_fits(1_000_000, 3, lavapipe), 3);
+        assert_eq!(super::sh_degree_that_fits(1_500_000, 3, lavapipe), 2);
         assert_eq!(super::sh_degree_that_fits(2_700_000, 3, lavapipe), 1);
         assert_eq!(super::sh_degree_that_fits(20_000_000, 3, lavapipe), 0);
         assert_eq!(
@@ -629,6 +660,38 @@ mod tests {
     /// The bind kernel runs only when the frames change: a camera move (or
     /// a world scene's every frame after the first) reuses the bound
     /// Gaussians, and each image equals a fresh renderer's.
+    /// A scene whose SH outgrows one binding is drawn from two, with every
+    /// band: the same image as from one binding; past two bindings, bands
+    /// are dropped and the renderer says so.
+    #[test]
+    fn sh_split_over_two_bindings_draws_the_same_image() {
+        let scene = crate::scene::synthetic::synthetic_scene(1_000, 2);
+        let camera = scene
+            .home_orbit(None, crate::scene::camera::UpAxis::default())
+            .unwrap()
+            .camera(64, 48);
+        let settings = RenderSettings::default();
+        let draw = |limit: Option<u64>| {
+            let mut r = GpuRenderer::new().unwrap();
+            r.sh_binding_limit = limit;
+            r.set_world_scene(&scene).unwrap();
+            let image = r.render(&[crate::scene::splats::IDENTITY_FRAME], &camera, &settings);
+            (
+                image.unwrap(),
+                r.sh_notice(),
+                r.scene.as_ref().unwrap().sh_split,
+            )
+        };
+        let (whole, notice, split) = draw(None);
+        assert_eq!((notice, split), (None, 1_000));
+        // 192 bytes of SH a Gaussian: 600 fit one binding of 115,200 bytes.
+        let (halves, notice, split) = draw(Some(115_200));
+        assert_eq!((notice, split), (None, 600));
+        assert!(halves == whole);
+        let (_, notice, _) = draw(Some(60_000));
+        assert!(notice.unwrap().contains("SH degree 2 of 3"));
+    }
+
     #[test]
     fn binding_is_redone_only_when_the_frames_change() {
         let positions = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
