@@ -52,6 +52,8 @@ pub struct ViewedScene {
     pub gaussians: usize,
     /// The file's SH degree.
     pub sh_degree: u8,
+    /// The file, where its hierarchy is cached.
+    pub path: PathBuf,
     /// The file's name, for the panel and messages.
     pub name: String,
     /// The framed camera (`camera-reset` returns to it).
@@ -87,6 +89,7 @@ impl SceneSpec {
                 scene,
                 paged: None,
                 from_cache: false,
+                path: self.path.clone(),
                 name: self.display_name(),
                 home,
                 up_reason,
@@ -125,6 +128,7 @@ impl SceneSpec {
             sh_degree,
             paged: Some(tree),
             from_cache: true,
+            path: self.path.clone(),
             name: self.display_name(),
             home,
             up_reason,

@@ -265,7 +265,9 @@ impl Workbench {
             ),
             policy => {
                 if self.lod.as_ref().is_none_or(|(c, _)| *c != cleaned) {
-                    self.lod = Some((cleaned, LodScene::new(build(scene))));
+                    let cached = (!cleaned).then(|| cached_hierarchy(&viewed.path)).flatten();
+                    let hierarchy = cached.unwrap_or_else(|| LodScene::new(build(scene)));
+                    self.lod = Some((cleaned, hierarchy));
                 }
                 let (_, hierarchy) = self.lod.as_mut().expect("built above");
                 let image = self
@@ -356,6 +358,17 @@ fn settings_for(request: &FrameRequest) -> RenderSettings {
     settings.scale_modifier = request.debug.scale;
     settings.sh_degree = request.debug.sh_degree;
     settings
+}
+
+/// The hierarchy of the scene file at `path` from its cache, built there
+/// first when missing or stale, held whole (the scene is in memory anyway);
+/// None where the cache cannot be had (a read-only cache folder, too little
+/// memory to build it), and the caller builds it in memory instead.
+fn cached_hierarchy(path: &Path) -> Option<LodScene> {
+    let quiet = |_: &str| {};
+    let (tree, _, _) =
+        super::lod::open_cached(path, None, usize::MAX / 2, &quiet, &|_, _| {}).ok()?;
+    Some(LodScene::paged(tree))
 }
 
 /// A scene view's state hash: the file's name and size and the camera (debug

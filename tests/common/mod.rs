@@ -12,9 +12,19 @@ use std::process::{Command, Output};
 pub fn visage(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_visage"))
         .env("NODEVICE_SELECT", "1")
+        .env("VISAGE_CACHE_DIR", test_cache_dir())
         .args(args)
         .output()
         .unwrap()
+}
+
+/// Where level-of-detail caches built by tests go (not the user's cache):
+/// `$VISAGE_CACHE_DIR` when set (`.ci/run` sets it), else a folder in the
+/// temporary folder.
+pub fn test_cache_dir() -> PathBuf {
+    std::env::var_os("VISAGE_CACHE_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| std::env::temp_dir().join("visage-test-cache"))
 }
 
 /// A path in the temporary folder, unique to this test process and `tag`.
