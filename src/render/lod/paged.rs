@@ -220,26 +220,30 @@ impl PagedTree {
     /// [`super::LodTree::gather`]); every drawn node is at hand.
     pub fn gather(&self, cut: &Cut, camera: &Camera) -> SplatScene {
         let opacity_for = DrawnOpacity::new(camera);
+        let picked: Vec<(&Chunk, usize)> =
+            cut.nodes.iter().filter_map(|&n| self.chunk_of(n)).collect();
+        fn pick<T: Send>(
+            picked: &[(&Chunk, usize)],
+            value: impl Fn(&Chunk, usize) -> T + Sync,
+        ) -> Vec<T> {
+            picked.par_iter().map(|&(c, at)| value(c, at)).collect()
+        }
         let mut scene = SplatScene::with_degree(self.header.sh_degree);
         let stride = scene.sh_stride();
-        let sh = Arc::make_mut(&mut scene.sh);
-        sh.reserve(cut.nodes.len() * stride);
-        for &n in &cut.nodes {
-            let Some((chunk, at)) = self.chunk_of(n) else {
-                continue;
-            };
-            let c = &chunk.nodes;
-            scene.position.push(c.position[at]);
-            scene.rotation.push(c.rotation[at]);
-            scene.scale.push(c.scale[at]);
-            scene.opacity.push(opacity_for.node(
-                chunk.links[at],
-                c.position[at],
-                c.scale[at],
-                c.opacity[at],
-            ));
-            sh.extend_from_slice(c.sh_of(at));
+        let mut sh = vec![0.0; picked.len() * stride];
+        if stride > 0 {
+            sh.par_chunks_mut(stride)
+                .zip(&picked)
+                .for_each(|(out, &(c, at))| out.copy_from_slice(c.nodes.sh_of(at)));
         }
+        scene.position = pick(&picked, |c, at| c.nodes.position[at]);
+        scene.rotation = pick(&picked, |c, at| c.nodes.rotation[at]);
+        scene.scale = pick(&picked, |c, at| c.nodes.scale[at]);
+        scene.opacity = pick(&picked, |c, at| {
+            let n = &c.nodes;
+            opacity_for.node(c.links[at], n.position[at], n.scale[at], n.opacity[at])
+        });
+        scene.sh = Arc::new(sh);
         scene
     }
 }
