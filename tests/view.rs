@@ -136,42 +136,33 @@ fn y_down_scenes_open_upright() {
     let out = temp_path("view", "ydown-out");
     std::fs::create_dir_all(&out).unwrap();
     replay_json(&session, &out);
-    let reference = out.join("ref.png");
-    let o = visage(&[
-        "render",
-        "--ply",
-        scene.to_str().unwrap(),
-        "--renderer",
-        "cpu",
-        "--up",
-        "-y",
-        "--size",
-        "80x60",
-        // The view's default level of detail (this scene has more than 4
-        // Gaussians a pixel at 80x60, so the view draws its hierarchy).
-        "--lod",
-        "auto",
-        "-o",
-        reference.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // What render draws with a level of detail, upright as the view is.
+    let render = |name: &str, lod: &str| {
+        let path = out.join(name);
+        let o = visage(&[
+            "render",
+            "--ply",
+            scene.to_str().unwrap(),
+            "--renderer",
+            "cpu",
+            "--up",
+            "-y",
+            "--size",
+            "80x60",
+            "--lod",
+            lod,
+            "-o",
+            path.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        path
+    };
+    // The view's default level of detail (this scene has more than 4
+    // Gaussians a pixel at 80x60, so the view draws its hierarchy).
+    let reference = render("ref.png", "auto");
     assert!(png(&out.join("v.png")).pixels == png(&reference).pixels);
     // `lod off` draws every Gaussian: what render draws by default.
-    let exact = out.join("exact-ref.png");
-    let o = visage(&[
-        "render",
-        "--ply",
-        scene.to_str().unwrap(),
-        "--renderer",
-        "cpu",
-        "--up",
-        "-y",
-        "--size",
-        "80x60",
-        "-o",
-        exact.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let exact = render("exact-ref.png", "off");
     let shown = png(&out.join("exact.png")).pixels;
     assert!(shown == png(&exact).pixels);
     assert!(

@@ -4,25 +4,9 @@ use super::*;
 use crate::scene::camera::Camera;
 use crate::scene::synthetic::synthetic_scene;
 
-/// The synthetic scene plus a few large splats among its small ones.
-fn mixed_scales(n: usize) -> SplatScene {
-    let mut scene = synthetic_scene(n, 3);
-    for k in 0..20 {
-        let t = k as f32 / 20.0;
-        scene.push(
-            Vec3::new(t * 2.0 - 1.0, 0.2, -0.5),
-            Quat::from_rotation_y(t * 3.0),
-            Vec3::new(0.3, 0.05, 0.01),
-            0.4,
-            &[0.8; 48],
-        );
-    }
-    scene
-}
-
 #[test]
 fn every_drawable_gaussian_is_one_leaf_below_the_root() {
-    let mut scene = mixed_scales(3_000);
+    let mut scene = synthetic_scene(3_000, 3);
     scene.push(Vec3::NAN, Quat::IDENTITY, Vec3::ONE, 0.5, &[0.0; 48]);
     scene.push(Vec3::ZERO, Quat::IDENTITY, Vec3::ONE, 0.0, &[0.0; 48]);
     let tree = build(&scene);
