@@ -7,6 +7,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use visage::pipeline::lod::{open_cached, CacheOrigin, LodScene};
+use visage::render::lod::cache::{cache_path, fingerprint};
 use visage::render::lod::{build, cut, Hierarchy, LodPolicy, PagedTree};
 use visage::scene::camera::{Camera, UpAxis};
 use visage::scene::synthetic::synthetic_scene;
@@ -53,11 +54,28 @@ fn a_cache_is_built_once_then_found_and_draws_what_memory_draws() {
     let dir = folder("found");
     let file = scene_file(&dir, 30_000);
     let caches = dir.join("cache");
+    // What a build killed in a process that is gone left behind.
+    let name = cache_path(&caches, &fingerprint(&file).unwrap());
+    std::fs::create_dir_all(&caches).unwrap();
+    std::fs::write(name.with_extension("lod.partial.4000000000"), b"half").unwrap();
     let (tree, origin, path) =
         open_cached(&file, Some(&caches), 1 << 30, &quiet, &|_, _| {}).unwrap();
     assert_eq!(origin_why(&origin), "there is none yet");
-    assert!(path.starts_with(&caches) && path.is_file());
-    assert!(!path.with_extension("lod.partial").exists());
+    assert!(path == name && path.is_file());
+    let partials = std::fs::read_dir(&caches)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .contains("partial")
+        })
+        .count();
+    assert_eq!(
+        partials, 0,
+        "this build's partial renamed, the dead one removed"
+    );
     drop(tree);
     let (tree, origin, again) =
         open_cached(&file, Some(&caches), 1 << 30, &quiet, &|_, _| {}).unwrap();

@@ -294,9 +294,11 @@ pub fn still_matches(facts: &SourceFacts, path: &Path) -> Result<bool> {
     Ok(content_hash(path)? == facts.content)
 }
 
-/// Writes a built hierarchy's cache to `path`, through `path.partial`
-/// renamed at the end, so a kill leaves no half-written cache under the
-/// real name. Returns the file's size.
+/// Writes a built hierarchy's cache to `path`, through a partial file of
+/// this process (`NAME.lod.partial.PID`) renamed at the end, so a kill
+/// leaves no half-written cache under the real name and two processes
+/// building the same cache at once never write into one file. Returns the
+/// file's size.
 pub fn write_cache(tree: &Layout, source: &SourceFacts, path: &Path) -> Result<u64> {
     let header = Header {
         source: source.clone(),
@@ -308,7 +310,8 @@ pub fn write_cache(tree: &Layout, source: &SourceFacts, path: &Path) -> Result<u
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| Error::io("create", dir, e))?;
     }
-    let partial = path.with_extension("lod.partial");
+    remove_abandoned_partials(path);
+    let partial = path.with_extension(format!("lod.partial.{}", std::process::id()));
     let written = write_records(tree, &header, &partial);
     if let Err(e) = written {
         let _ = std::fs::remove_file(&partial);
@@ -316,6 +319,30 @@ pub fn write_cache(tree: &Layout, source: &SourceFacts, path: &Path) -> Result<u
     }
     std::fs::rename(&partial, path).map_err(|e| Error::io("write", path, e))?;
     Ok(header.file_len())
+}
+
+/// Removes partial files of `path` left by processes that are gone (killed
+/// during a build); a build under way in another process keeps its own.
+fn remove_abandoned_partials(path: &Path) {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
+        return;
+    };
+    let prefix = format!("{}.partial.", name.to_string_lossy());
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let file = entry.file_name().to_string_lossy().into_owned();
+        let Some(pid) = file.strip_prefix(&prefix) else {
+            continue;
+        };
+        let alive = pid
+            .parse::<u32>()
+            .is_ok_and(|pid| Path::new(&format!("/proc/{pid}")).exists());
+        if !alive {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
 }
 
 fn write_records(tree: &Layout, header: &Header, path: &Path) -> Result<()> {
