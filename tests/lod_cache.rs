@@ -250,3 +250,47 @@ fn a_scene_larger_than_the_budget_stays_within_it() {
         "the build held the scene"
     );
 }
+
+/// `visage lod` builds a cache ahead of viewing, finds it again (also once
+/// the file's time changed, as a copy's does, by its content), and refuses
+/// what is not a scene with one line and exit 2.
+#[test]
+fn the_lod_command_builds_and_checks_caches() {
+    let dir = folder("command");
+    let file = scene_file(&dir, 5_000);
+    let caches = dir.join("cache");
+    let lod = |file: &Path| {
+        common::visage(&[
+            "lod",
+            file.to_str().unwrap(),
+            "--cache-dir",
+            caches.to_str().unwrap(),
+            "--json",
+        ])
+    };
+    let status = |out: &std::process::Output| {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        doc["caches"][0]["status"].as_str().unwrap().to_string()
+    };
+    assert_eq!(status(&lod(&file)), "built");
+    assert_eq!(status(&lod(&file)), "found");
+    // A copy carries a new modification time: the content decides.
+    let bytes = std::fs::read(&file).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    std::fs::write(&file, &bytes).unwrap();
+    assert_eq!(status(&lod(&file)), "found");
+    for bad in [dir.join("missing.ply"), dir.join("junk.ply")] {
+        if bad.ends_with("junk.ply") {
+            std::fs::write(&bad, b"not a scene at all").unwrap();
+        }
+        let out = lod(&bad);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+}

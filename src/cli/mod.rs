@@ -19,6 +19,7 @@ mod db;
 mod edit;
 mod eval_composite;
 mod info;
+mod lod;
 mod random;
 mod render;
 mod study;
@@ -63,6 +64,8 @@ enum Command {
     Convert(convert::ConvertArgs),
     /// Remove floaters from a 3DGS scene: broken, transparent, huge and isolated Gaussians.
     Clean(clean::CleanArgs),
+    /// Build (or find and check) the level-of-detail cache of scene files, ahead of viewing them.
+    Lod(lod::LodArgs),
     /// Capture a multi-view dataset (GaussianAvatars layout) of a built-in source.
     Capture(capture::CaptureArgs),
     /// Train a GaussianAvatars avatar from a multi-view dataset.
@@ -104,6 +107,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Render(args)) => render::run(&args),
         Some(Command::Convert(args)) => convert::run(&args),
         Some(Command::Clean(args)) => clean::run(&args),
+        Some(Command::Lod(args)) => lod::run(&args),
         Some(Command::Bench(args)) => bench::run(&args),
         Some(Command::Random(args)) => random::run(&args),
         Some(Command::Study(args)) => study::run(&args),

@@ -196,13 +196,9 @@ pub fn open_cached(
     } else {
         "there is none yet".to_string()
     };
-    note(&format!(
-        "building the level-of-detail cache of {} ({why})…",
-        path.display()
-    ));
     check_memory_for_build(path)?;
     let t = Instant::now();
-    let bytes = build_cache(path, fingerprint, &cache, progress)?;
+    let bytes = build_cache(path, fingerprint, &cache, &why, note, progress)?;
     let seconds = t.elapsed().as_secs_f64();
     note(&format!(
         "level-of-detail cache written: {} ({:.0} MB in {seconds:.1} s)",
@@ -226,11 +222,20 @@ fn build_cache(
     path: &Path,
     fingerprint: [u8; 32],
     cache: &Path,
+    why: &str,
+    note: &dyn Fn(&str),
     progress: Progress,
 ) -> Result<u64> {
     let modified = modified_ns(path);
     let content = content_hash(path)?;
+    // Read first, so a file that is no scene fails in one line.
     let scene = crate::io::splat::read_scene_with(path, progress)?;
+    let t = Instant::now();
+    note(&format!(
+        "building the level-of-detail cache of {} ({why}): merging {} Gaussians…",
+        path.display(),
+        scene.len()
+    ));
     let facts = SourceFacts {
         fingerprint,
         content,
@@ -246,6 +251,11 @@ fn build_cache(
     let layout = layout(scene).ok_or_else(|| {
         crate::error::Error::input(format!("{name} holds no Gaussian that can be drawn"))
     })?;
+    note(&format!(
+        "{} nodes merged in {:.1} s; writing…",
+        layout.len(),
+        t.elapsed().as_secs_f64()
+    ));
     write_cache(&layout, &facts, cache)
 }
 
