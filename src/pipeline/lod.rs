@@ -11,8 +11,8 @@ use crate::error::Result;
 use crate::io::Progress;
 use crate::render::image::RgbImage;
 use crate::render::lod::cache::{
-    cache_dir, cache_path, content_hash, fingerprint, modified_ns, read_error, still_matches,
-    write_cache, SourceFacts,
+    cache_dir, cache_path, content_hash, fingerprint, modified_ns, read_error, read_header,
+    still_matches, write_cache, SourceFacts,
 };
 use crate::render::lod::{cut, layout, Cut, LodPolicy, LodTree, PagedTree};
 use crate::render::settings::RenderSettings;
@@ -185,16 +185,19 @@ pub fn open_cached(
     let fingerprint = fingerprint(path)?;
     let dir = dir.map_or_else(cache_dir, Path::to_path_buf);
     let cache = cache_path(&dir, &fingerprint);
-    let why = if cache.is_file() {
-        match PagedTree::open(&cache, budget) {
-            Ok(tree) if still_matches(&tree.header().source, path)? => {
-                return Ok((tree, CacheOrigin::Found, cache));
+    // The header decides staleness before any chunk is read.
+    let why = match std::fs::File::open(&cache) {
+        Err(_) => "there is none yet".to_string(),
+        Ok(mut file) => match read_header(&mut file) {
+            Err(why) => format!("level-of-detail cache {}: {why}", cache.display()),
+            Ok((header, _)) if !still_matches(&header.source, path)? => {
+                "the scene file changed since it was built".to_string()
             }
-            Ok(_) => "the scene file changed since it was built".to_string(),
-            Err(e) => e.to_string(),
-        }
-    } else {
-        "there is none yet".to_string()
+            Ok(_) => match PagedTree::open(&cache, budget) {
+                Ok(tree) => return Ok((tree, CacheOrigin::Found, cache)),
+                Err(e) => e.to_string(),
+            },
+        },
     };
     check_memory_for_build(path)?;
     let t = Instant::now();

@@ -222,7 +222,7 @@ pub fn cut_at<H: Hierarchy + ?Sized>(
     threshold: f32,
     budget: usize,
 ) -> Cut {
-    let mut walk = Walk {
+    let walk = Walk {
         tree,
         view: View::new(camera),
         threshold,
@@ -261,7 +261,7 @@ impl<H: Hierarchy + ?Sized> Walk<'_, H> {
     /// Every node the threshold draws: the top of the tree is opened
     /// breadth-first until there is work for every thread, then each open
     /// subtree is walked depth-first on its own.
-    fn unbounded(&mut self) -> Drawn {
+    fn unbounded(&self) -> Drawn {
         const PARALLEL_FRONTIER: usize = 256;
         let mut drawn = (Vec::new(), Vec::new());
         let mut frontier = vec![0u32];
@@ -306,7 +306,7 @@ impl<H: Hierarchy + ?Sized> Walk<'_, H> {
     }
 
     /// The threshold's cut, refined largest spot first until `budget`.
-    fn within(&mut self, budget: usize) -> Drawn {
+    fn within(&self, budget: usize) -> Drawn {
         let mut drawn = (Vec::new(), Vec::new());
         let mut open = BinaryHeap::new();
         let judge = |drawn: &mut Drawn, open: &mut BinaryHeap<Pending>, node: u32| match self

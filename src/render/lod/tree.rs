@@ -88,12 +88,12 @@ fn morton(cell: [u32; 3]) -> u64 {
 /// Builds the hierarchy of `scene` in memory. Gaussians that can never be
 /// drawn (non-finite, or below α = 1/255) are left out and counted.
 pub fn build(scene: &SplatScene) -> LodTree {
-    let dropped = (0..scene.len()).filter(|&i| !usable(scene, i)).count();
     match layout(scene.clone()) {
         Some(layout) => layout.into_tree(),
+        // Nothing drawable: every Gaussian was dropped.
         None => LodTree {
             nodes: SplatScene::with_degree(scene.sh_degree),
-            dropped,
+            dropped: scene.len(),
             ..LodTree::default()
         },
     }
