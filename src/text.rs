@@ -22,9 +22,43 @@ pub fn id_text(x: f64) -> String {
     }
 }
 
+/// Reads an image size written `WxH` (each side 1 to 8192 pixels), for the
+/// command line and the editor's prompt alike.
+pub fn parse_image_size(text: &str) -> Result<(u32, u32), String> {
+    let bad = || {
+        format!(
+            "'{}' is not a size: write WxH, e.g. 640x480",
+            printable(text)
+        )
+    };
+    let (w, h) = text.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = (
+        w.trim().parse().map_err(|_| bad())?,
+        h.trim().parse().map_err(|_| bad())?,
+    );
+    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
+        return Err(format!("{w}x{h}: each side must be 1 to 8192 pixels"));
+    }
+    Ok((w, h))
+}
+
 #[cfg(test)]
 mod tests {
-    use super::{id_text, printable};
+    use super::{id_text, parse_image_size, printable};
+
+    #[test]
+    fn sizes_parse_within_limits() {
+        assert_eq!(parse_image_size("640x480"), Ok((640, 480)));
+        assert_eq!(parse_image_size("8X 16"), Ok((8, 16)));
+        assert!(parse_image_size("0x10").unwrap_err().contains("1 to 8192"));
+        assert!(parse_image_size("9000x10")
+            .unwrap_err()
+            .contains("1 to 8192"));
+        assert!(parse_image_size("wide").unwrap_err().contains("WxH"));
+        assert!(parse_image_size("\u{1b}[2Jx4")
+            .unwrap_err()
+            .starts_with("'[2Jx4'"));
+    }
 
     #[test]
     fn ids_print_as_integers() {

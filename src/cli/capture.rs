@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use clap::Args;
 
-use super::render::parse_size;
+use super::values::parse_size;
 use crate::error::Result;
 use crate::pipeline::DatabaseSpec;
 use crate::train::capture::{capture_sitter, CaptureOptions};

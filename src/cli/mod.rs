@@ -2,14 +2,6 @@
 //! contract (0 ok, 1 a check failed, 2 bad input, always one line on stderr).
 
 mod bench;
-mod bench_composites;
-mod bench_holes;
-mod bench_mouth;
-mod bench_paged;
-mod bench_render;
-mod bench_scene;
-mod bench_terminal;
-mod bench_train;
 mod camera;
 mod capture;
 mod clean;
@@ -24,6 +16,7 @@ mod random;
 mod render;
 mod study;
 mod train;
+mod values;
 
 use std::process::ExitCode;
 

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::render::parse_size;
+use super::values::{parse_group, parse_size};
 use super::DbArgs;
 use crate::compose::composition::{Attributes, StudyGroup};
 use crate::compose::engine::Engine;
@@ -54,10 +54,6 @@ pub struct RandomArgs {
     /// Renderer for `--render`.
     #[arg(long, value_parser = Backend::parse, default_value = "auto")]
     renderer: Backend,
-}
-
-fn parse_group(s: &str) -> std::result::Result<StudyGroup, String> {
-    StudyGroup::from_name(s).map_err(|e| e.to_string())
 }
 
 /// Runs `visage random`.

@@ -7,6 +7,7 @@ use clap::Args;
 
 use super::camera::CameraArgs;
 use super::compose::{build, build_from};
+use super::values::{parse_range, parse_size};
 use super::DbArgs;
 use crate::compose::recipe::Recipe;
 use crate::error::{Error, Result};
@@ -59,37 +60,6 @@ pub struct RenderArgs {
     /// Output PNG.
     #[arg(short = 'o', long = "output", value_name = "OUT.png")]
     output: PathBuf,
-}
-
-/// Parses "A..B" with A < B.
-pub fn parse_range(s: &str) -> std::result::Result<(usize, usize), String> {
-    let (a, b) = s
-        .split_once("..")
-        .ok_or_else(|| format!("'{s}' is not START..END"))?;
-    let a: usize = a.parse().map_err(|_| format!("'{s}' is not START..END"))?;
-    let b: usize = b.parse().map_err(|_| format!("'{s}' is not START..END"))?;
-    if a >= b {
-        return Err(format!("'{s}' is empty: END must be greater than START"));
-    }
-    if b - a > 100_000 {
-        return Err(format!("'{s}' has more than 100000 frames"));
-    }
-    Ok((a, b))
-}
-
-/// Parses "WxH" with both sides in 1..=8192.
-pub fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("size '{s}' is not WxH"))?;
-    let parse = |v: &str| -> std::result::Result<u32, String> {
-        v.trim()
-            .parse::<u32>()
-            .ok()
-            .filter(|n| (1..=8192).contains(n))
-            .ok_or_else(|| format!("size '{s}' needs sides between 1 and 8192"))
-    };
-    Ok((parse(w)?, parse(h)?))
 }
 
 /// Renders frames `start..end` of a composite's motion to numbered PNGs.

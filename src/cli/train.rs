@@ -9,7 +9,7 @@ use clap::Args;
 use crate::tui::terminal::{signal_name, StopSignal};
 use serde_json::json;
 
-use super::render::parse_size;
+use super::values::parse_size;
 use crate::error::{Error, Result};
 use crate::model::head::HeadModel;
 use crate::render::image::RgbImage;
@@ -326,7 +326,7 @@ pub fn run_eval(args: &EvalArgs) -> Result<()> {
         }
     }
     let holes = if args.holes {
-        let (posed, cameras) = training_arc(&dataset, &head, HOLE_METRIC_SIDE)?;
+        let (posed, cameras) = training_arc(&dataset, &head, hole_metrics::METRIC_SIDE)?;
         Some(hole_metrics::measure(&model, &head, &posed, &cameras))
     } else {
         None
@@ -337,7 +337,7 @@ pub fn run_eval(args: &EvalArgs) -> Result<()> {
             json!({
                 "avatar": args.avatar.display().to_string(),
                 "splits": rows,
-                "holes": holes.as_ref().map(hole_json),
+                "holes": holes.as_ref().map(HoleMetrics::summary),
             })
         );
     } else {
@@ -355,27 +355,6 @@ pub fn run_eval(args: &EvalArgs) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// Longest image side the hole metrics render at.
-pub const HOLE_METRIC_SIDE: u32 = 128;
-
-/// Hole metrics as JSON: leak, and coverage per group and on average.
-pub fn hole_json(h: &HoleMetrics) -> serde_json::Value {
-    let groups = |c: &[(crate::model::regions::Group, f64)]| -> serde_json::Value {
-        c.iter()
-            .map(|(g, v)| (g.name().to_string(), json!(v)))
-            .collect()
-    };
-    let (mean, beyond) = h.mean_coverage();
-    json!({
-        "leak_delta_e": h.leak_delta_e,
-        "leak_psnr_db": h.leak_psnr_db,
-        "coverage": mean,
-        "coverage_beyond": beyond,
-        "coverage_by_group": groups(&h.coverage),
-        "coverage_beyond_by_group": groups(&h.coverage_beyond),
-    })
 }
 
 /// Prints hole metrics as two lines.

@@ -16,6 +16,7 @@ use crate::compose::recipe::{AnimationMode, ColourCorrection, Deform, Membership
 use crate::model::regions::Group;
 use crate::render::lod::LodPolicy;
 use crate::scene::camera::CameraOverrides;
+use crate::text::parse_image_size;
 
 /// A joint the animation panel can offset.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -213,29 +214,13 @@ impl ArgKind for Topic {
     }
 }
 
-/// Reads an image size written `WxH` (each side 1 to 8192 pixels).
-pub fn parse_size(text: &str) -> Result<(u32, u32), String> {
-    let bad = || {
-        format!(
-            "'{}' is not a size: write WxH, e.g. 640x480",
-            crate::text::printable(text)
-        )
-    };
-    let (w, h) = text.split_once(['x', 'X']).ok_or_else(bad)?;
-    let (w, h): (u32, u32) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
-    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
-        return Err(format!("{w}x{h}: each side must be 1 to 8192 pixels"));
-    }
-    Ok((w, h))
-}
-
 /// An optional image size, `WxH`.
 struct OptionalSize;
 impl ArgKind for OptionalSize {
     type Value = Option<(u32, u32)>;
     const HINT: ArgHint = ArgHint::Size;
     fn parse(words: &mut Words, _: &str) -> Result<Option<(u32, u32)>, String> {
-        words.next().map(parse_size).transpose()
+        words.next().map(parse_image_size).transpose()
     }
     fn write(value: &Option<(u32, u32)>, out: &mut Vec<String>) {
         out.extend(value.map(|(w, h)| format!("{w}x{h}")));
@@ -1029,8 +1014,8 @@ mod tests {
         );
         let e = Command::parse("snapshot a.png big").unwrap_err();
         assert!(e.contains("WxH"), "{e}");
-        assert_eq!(parse_size("640x480"), Ok((640, 480)));
-        assert!(parse_size("0x4").is_err());
+        assert_eq!(parse_image_size("640x480"), Ok((640, 480)));
+        assert!(parse_image_size("0x4").is_err());
     }
 
     #[test]

@@ -31,6 +31,9 @@ pub const BORDER_PX: u32 = 2;
 /// Degrees the coverage views are turned beyond the training views.
 pub const BEYOND_DEG: f64 = 30.0;
 
+/// Longest image side the hole metrics render at.
+pub const METRIC_SIDE: u32 = 128;
+
 /// Leak and coverage of one avatar.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct HoleMetrics {
@@ -48,7 +51,38 @@ pub struct HoleMetrics {
     pub coverage_beyond: Vec<(Group, f64)>,
 }
 
+/// Hole metrics as reported: leak, and coverage on average and per group.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct HoleSummary {
+    /// [`HoleMetrics::leak_delta_e`].
+    pub leak_delta_e: f64,
+    /// [`HoleMetrics::leak_psnr_db`].
+    pub leak_psnr_db: f64,
+    /// Mean coverage over the covered groups, training views.
+    pub coverage: f64,
+    /// The same from the turned views.
+    pub coverage_beyond: f64,
+    /// Coverage per group name, training views.
+    pub coverage_by_group: std::collections::BTreeMap<&'static str, f64>,
+    /// Coverage per group name, turned views.
+    pub coverage_beyond_by_group: std::collections::BTreeMap<&'static str, f64>,
+}
+
 impl HoleMetrics {
+    /// The figures as reported.
+    pub fn summary(&self) -> HoleSummary {
+        let by_group = |c: &[(Group, f64)]| c.iter().map(|(g, v)| (g.name(), *v)).collect();
+        let (coverage, coverage_beyond) = self.mean_coverage();
+        HoleSummary {
+            leak_delta_e: self.leak_delta_e,
+            leak_psnr_db: self.leak_psnr_db,
+            coverage,
+            coverage_beyond,
+            coverage_by_group: by_group(&self.coverage),
+            coverage_beyond_by_group: by_group(&self.coverage_beyond),
+        }
+    }
+
     /// Mean coverage over the covered groups (training views, turned views).
     pub fn mean_coverage(&self) -> (f64, f64) {
         let mean =

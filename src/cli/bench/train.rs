@@ -6,11 +6,11 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Args;
-use serde_json::json;
+use serde::Serialize;
 
-use super::bench_scene::peak_rss_mb;
-use super::render::parse_size;
+use super::stats::{emit, peak_rss_mb};
 use crate::avatar::binding::TriangleFrame;
+use crate::cli::values::parse_size;
 use crate::error::Result;
 use crate::pipeline::DatabaseSpec;
 use crate::render::Backend;
@@ -50,7 +50,7 @@ pub struct TrainBenchArgs {
 
 /// The dataset a training bench runs on: the user's, or a fresh capture of
 /// the built-in `ada` (16 cameras, 20 frames of `talk`) removed afterwards.
-pub(super) struct BenchDataset {
+pub struct BenchDataset {
     /// The dataset.
     pub dataset: Dataset,
     scratch: Option<PathBuf>,
@@ -97,11 +97,11 @@ impl Drop for BenchDataset {
 }
 
 /// Triangle frames per timestep.
-pub(super) type TimestepFrames = BTreeMap<usize, Vec<TriangleFrame>>;
+pub type TimestepFrames = BTreeMap<usize, Vec<TriangleFrame>>;
 
 /// The held-out (val and test) views read once: each timestep's triangle
 /// frames and the targets.
-pub(super) fn held_out_targets(
+pub fn held_out_targets(
     dataset: &Dataset,
     head: &crate::model::head::HeadModel,
 ) -> Result<(TimestepFrames, Vec<Target>)> {
@@ -117,7 +117,7 @@ pub(super) fn held_out_targets(
 /// Trains `head` on `dataset` for `iterations` with one seed and returns the
 /// trainer at the end and the seconds it took (the hole and mouth benches
 /// train several variants this way).
-pub(super) fn train_to_end(
+pub fn train_to_end(
     dataset: &Dataset,
     head: &crate::model::head::HeadModel,
     iterations: usize,
@@ -145,7 +145,7 @@ pub(super) fn train_to_end(
 }
 
 /// Mean held-out PSNR of a model.
-pub(super) fn held_out_psnr(
+pub fn held_out_psnr(
     model: &crate::train::model::Trainable,
     frames: &BTreeMap<usize, Vec<TriangleFrame>>,
     targets: &[Target],
@@ -164,7 +164,7 @@ fn run_one(
     frames: &BTreeMap<usize, Vec<TriangleFrame>>,
     targets: &[Target],
     renderer: Backend,
-) -> Result<serde_json::Value> {
+) -> Result<RendererRun> {
     let mut trainer = Trainer::new(
         dataset,
         crate::model::builtin::build_head(),
@@ -189,73 +189,96 @@ fn run_one(
             trainer.step()?;
         }
         training_s += t.elapsed().as_secs_f64();
-        curve.push(json!({
-            "iteration": trainer.iteration(),
-            "train_s": training_s,
-            "held_out_psnr_db": held_out_psnr(&trainer.model, frames, targets),
-            "gaussians": trainer.model.len(),
-        }));
+        curve.push(CurvePoint {
+            iteration: trainer.iteration(),
+            train_s: training_s,
+            held_out_psnr_db: held_out_psnr(&trainer.model, frames, targets),
+            gaussians: trainer.model.len(),
+        });
     }
-    Ok(json!({
-        "renderer": renderer,
-        "device": trainer.rasterizer(),
-        "iterations_per_s": args.iterations as f64 / training_s,
-        "gradient_difference_from_cpu": agreement,
-        "curve": curve,
-    }))
+    Ok(RendererRun {
+        renderer,
+        device: trainer.rasterizer(),
+        iterations_per_s: args.iterations as f64 / training_s,
+        gradient_difference_from_cpu: agreement,
+        curve,
+    })
 }
 
-/// Prints one renderer's run as a table.
-fn print_run(run: &serde_json::Value) {
+/// The train bench's report.
+#[derive(Serialize)]
+struct TrainReport {
+    #[serde(skip)]
+    dataset: String,
+    threads: usize,
+    gradient_max_relative_error: f64,
+    gradient_parameters_checked: usize,
+    peak_rss_mb: Option<f64>,
+    renderers: Vec<RendererRun>,
+}
+
+/// One rasteriser's training run.
+#[derive(Serialize)]
+struct RendererRun {
+    renderer: Backend,
+    device: String,
+    iterations_per_s: f64,
+    gradient_difference_from_cpu: f64,
+    curve: Vec<CurvePoint>,
+}
+
+/// The held-out PSNR after so many iterations.
+#[derive(Serialize)]
+struct CurvePoint {
+    iteration: usize,
+    train_s: f64,
+    held_out_psnr_db: f64,
+    gaussians: usize,
+}
+
+fn print_report(report: &TrainReport) {
     println!(
-        "{}: {:.2} iterations/s; gradients within {:.1e} of the CPU's (largest difference over the largest gradient)",
-        run["device"].as_str().unwrap_or("?"),
-        run["iterations_per_s"].as_f64().unwrap_or(0.0),
-        run["gradient_difference_from_cpu"].as_f64().unwrap_or(0.0),
+        "training on {} ({} threads); gradient error {:.1e} (max relative against central differences, {} parameters); peak memory {:.0} MiB",
+        report.dataset,
+        report.threads,
+        report.gradient_max_relative_error,
+        report.gradient_parameters_checked,
+        report.peak_rss_mb.unwrap_or(0.0)
     );
-    println!("  iteration  train s  held-out PSNR dB  Gaussians");
-    for row in run["curve"].as_array().into_iter().flatten() {
+    for run in &report.renderers {
         println!(
-            "  {:>9}  {:>7.1}  {:>16.2}  {:>9}",
-            row["iteration"],
-            row["train_s"].as_f64().unwrap_or(0.0),
-            row["held_out_psnr_db"].as_f64().unwrap_or(0.0),
-            row["gaussians"]
+            "{}: {:.2} iterations/s; gradients within {:.1e} of the CPU's (largest difference over the largest gradient)",
+            run.device, run.iterations_per_s, run.gradient_difference_from_cpu,
         );
+        println!("  iteration  train s  held-out PSNR dB  Gaussians");
+        for row in &run.curve {
+            println!(
+                "  {:>9}  {:>7.1}  {:>16.2}  {:>9}",
+                row.iteration, row.train_s, row.held_out_psnr_db, row.gaussians
+            );
+        }
     }
 }
 
 /// Runs `visage bench train`.
 pub fn run(args: &TrainBenchArgs) -> Result<()> {
     let (gradient_error, checked) = gradient_check::worst_relative_error();
-    let bench = BenchDataset::open(args.dataset.as_deref(), args.capture_size, "train")?;
-    let (dataset, root) = (&bench.dataset, &bench.dataset.root);
+    let data = BenchDataset::open(args.dataset.as_deref(), args.capture_size, "train")?;
+    let dataset = &data.dataset;
     let head = crate::model::builtin::build_head();
     let (frames, targets) = held_out_targets(dataset, &head)?;
     let mut runs = Vec::new();
     for &renderer in &args.renderers {
         runs.push(run_one(args, dataset, &frames, &targets, renderer)?);
     }
-    let report = json!({
-        "threads": rayon::current_num_threads(),
-        "gradient_max_relative_error": gradient_error,
-        "gradient_parameters_checked": checked,
-        "peak_rss_mb": peak_rss_mb(),
-        "renderers": runs,
-    });
-    if args.json {
-        println!("{report}");
-        return Ok(());
-    }
-    println!(
-        "training on {} ({} threads); gradient error {:.1e} (max relative against central differences, {checked} parameters); peak memory {:.0} MiB",
-        root.display(),
-        rayon::current_num_threads(),
-        gradient_error,
-        peak_rss_mb().unwrap_or(0.0)
-    );
-    for run in &runs {
-        print_run(run);
-    }
+    let report = TrainReport {
+        dataset: dataset.root.display().to_string(),
+        threads: rayon::current_num_threads(),
+        gradient_max_relative_error: gradient_error,
+        gradient_parameters_checked: checked,
+        peak_rss_mb: peak_rss_mb(),
+        renderers: runs,
+    };
+    emit(&report, args.json, print_report);
     Ok(())
 }

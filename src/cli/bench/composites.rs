@@ -11,8 +11,9 @@ use std::time::Instant;
 use clap::Args;
 use serde::Serialize;
 
-use super::render::parse_size;
+use super::stats::emit;
 use crate::avatar::database::Database;
+use crate::cli::values::parse_size;
 use crate::compose::recipe::{ColourCorrection, PostProcess, Recipe, Smoothing};
 use crate::error::{Error, Result};
 use crate::pipeline::DatabaseSpec;
@@ -305,7 +306,7 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
             .collect();
         values.iter().sum::<f64>() / values.len().max(1) as f64
     };
-    let bench = CompositesBench {
+    let report = CompositesBench {
         bench: "composites",
         size: [args.size.0, args.size.1],
         cameras: args.cameras,
@@ -329,14 +330,7 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
         sources,
         recipes: rows,
     };
-    if args.json {
-        println!(
-            "{}",
-            serde_json::to_string(&bench).expect("reports serialise")
-        );
-    } else {
-        print_table(&bench);
-    }
+    emit(&report, args.json, print_table);
     Ok(())
 }
 

@@ -8,15 +8,17 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use serde_json::json;
+use serde::Serialize;
 
-use super::bench_train::{held_out_psnr, held_out_targets, train_to_end, BenchDataset};
-use super::render::parse_size;
-use super::train::hole_json;
+use super::stats::emit;
+use super::train::{held_out_psnr, held_out_targets, train_to_end, BenchDataset};
+use crate::cli::values::parse_size;
 use crate::error::{Error, Result};
 use crate::render::image::RgbImage;
 use crate::render::Backend;
-use crate::train::hole_metrics::{self, head_centre, repaint, turn, FAR_SIDE, LEAK_COLOUR};
+use crate::train::hole_metrics::{
+    self, head_centre, repaint, turn, HoleSummary, FAR_SIDE, LEAK_COLOUR,
+};
 use crate::train::holes::HoleFilling;
 use crate::train::holes::Obscurer;
 use crate::train::model::{Render, Trainable};
@@ -77,11 +79,11 @@ pub fn run(args: &HolesBenchArgs) -> Result<()> {
             args.cull_backfaces
         )));
     }
-    let bench = BenchDataset::open(args.dataset.as_deref(), args.capture_size, "holes")?;
-    let dataset = &bench.dataset;
+    let data = BenchDataset::open(args.dataset.as_deref(), args.capture_size, "holes")?;
+    let dataset = &data.dataset;
     let head = crate::model::builtin::build_head();
     let (frames, targets) = held_out_targets(dataset, &head)?;
-    let (posed, cameras) = training_arc(dataset, &head, super::train::HOLE_METRIC_SIDE)?;
+    let (posed, cameras) = training_arc(dataset, &head, hole_metrics::METRIC_SIDE)?;
     let tau = Some(args.cull_backfaces);
     let variant = |obscuring, interior, cull_below| HoleFilling {
         obscuring,
@@ -125,54 +127,74 @@ pub fn run(args: &HolesBenchArgs) -> Result<()> {
         let model = Trainable::from_set(&trainer.gaussians());
         let metrics = hole_metrics::measure(&model, &head, &posed, &cameras);
         grid.push(turning_row(&model, &head, &posed, &front));
-        let mut row = hole_json(&metrics);
-        row["variant"] = json!(name);
-        row["psnr_db"] = json!(held_out_psnr(&model, &frames, &targets));
-        row["gaussians"] = json!(trainer.model.len());
-        row["triangles_trained"] = json!(trainer.triangles_kept().0);
-        row["train_s"] = json!(train_s);
         if !args.json {
             eprintln!("visage: {name} done in {train_s:.0} s");
         }
-        rows.push(row);
+        rows.push(VariantRow {
+            variant: name,
+            holes: metrics.summary(),
+            psnr_db: held_out_psnr(&model, &frames, &targets),
+            gaussians: trainer.model.len(),
+            triangles_trained: trainer.triangles_kept().0,
+            train_s,
+        });
     }
     write_rows(&grid, &args.grid)?;
-    let report = json!({
-        "dataset": dataset.root.display().to_string(),
-        "iterations": args.iterations,
-        "cull_backfaces": args.cull_backfaces,
-        "device": device,
-        "grid": args.grid.display().to_string(),
-        "variants": rows,
-    });
-    if args.json {
-        println!("{report}");
-        return Ok(());
-    }
+    let report = HolesReport {
+        dataset: dataset.root.display().to_string(),
+        iterations: args.iterations,
+        cull_backfaces: args.cull_backfaces,
+        device,
+        grid: args.grid.display().to_string(),
+        variants: rows,
+    };
+    emit(&report, args.json, print_table);
+    Ok(())
+}
+
+/// The holes bench's report.
+#[derive(Serialize)]
+struct HolesReport {
+    dataset: String,
+    iterations: usize,
+    cull_backfaces: f64,
+    device: String,
+    grid: String,
+    variants: Vec<VariantRow>,
+}
+
+/// One variant's figures.
+#[derive(Serialize)]
+struct VariantRow {
+    variant: &'static str,
+    #[serde(flatten)]
+    holes: HoleSummary,
+    psnr_db: f64,
+    gaussians: usize,
+    triangles_trained: usize,
+    train_s: f64,
+}
+
+fn print_table(report: &HolesReport) {
     println!(
         "{} iterations per variant on {}; τ = {}; grid in {}",
-        args.iterations,
-        dataset.root.display(),
-        args.cull_backfaces,
-        args.grid.display()
+        report.iterations, report.dataset, report.cull_backfaces, report.grid
     );
     println!("  variant           leak ΔE  leak PSNR  coverage  beyond ±30°  PSNR dB  Gaussians  triangles  train s");
-    for r in report["variants"].as_array().into_iter().flatten() {
-        let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+    for r in &report.variants {
         println!(
             "  {:<16} {:>8.2} {:>10.1} {:>9.3} {:>12.3} {:>8.2} {:>10} {:>10} {:>8.0}",
-            r["variant"].as_str().unwrap_or(""),
-            f("leak_delta_e"),
-            f("leak_psnr_db"),
-            f("coverage"),
-            f("coverage_beyond"),
-            f("psnr_db"),
-            r["gaussians"],
-            r["triangles_trained"],
-            f("train_s")
+            r.variant,
+            r.holes.leak_delta_e,
+            r.holes.leak_psnr_db,
+            r.holes.coverage,
+            r.holes.coverage_beyond,
+            r.psnr_db,
+            r.gaussians,
+            r.triangles_trained,
+            r.train_s
         );
     }
-    Ok(())
 }
 
 /// The training camera looking most squarely at the head's front (the one

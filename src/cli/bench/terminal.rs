@@ -10,11 +10,12 @@ use rand_chacha::ChaCha8Rng;
 use ratatui::backend::CrosstermBackend;
 use ratatui::layout::Rect;
 use ratatui::{Terminal, TerminalOptions, Viewport};
-use serde_json::{json, Value};
+use serde::Serialize;
 
-use super::bench::summarize;
-use super::bench_render::bench_recipe_for;
-use super::DbArgs;
+use super::render::bench_recipe_for;
+use super::stats::{emit, summarize};
+use crate::cli::values::parse_size;
+use crate::cli::DbArgs;
 use crate::compose::engine::Engine;
 use crate::editor::pacing::next_scale;
 use crate::error::{Error, Result};
@@ -35,10 +36,10 @@ pub struct TerminalBenchArgs {
     #[command(flatten)]
     db: DbArgs,
     /// Terminal sizes in cells, comma-separated COLSxROWS.
-    #[arg(long, value_delimiter = ',', default_values = ["80x24", "120x40", "200x60"], value_parser = super::render::parse_size)]
+    #[arg(long, value_delimiter = ',', default_values = ["80x24", "120x40", "200x60"], value_parser = parse_size)]
     terminals: Vec<(u32, u32)>,
     /// Cell size in pixels for the image protocols.
-    #[arg(long, default_value = "8x16", value_parser = super::render::parse_size)]
+    #[arg(long, default_value = "8x16", value_parser = parse_size)]
     cell_px: (u32, u32),
     /// Animated frames per end-to-end run.
     #[arg(long, default_value_t = 60)]
@@ -105,8 +106,8 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
         .iter()
         .map(|s| s.name.clone())
         .collect();
-    let mut bench = Workbench::new(engine, args.renderer)?;
-    let device = bench.renderer_description();
+    let mut workbench = Workbench::new(engine, args.renderer)?;
+    let device = workbench.renderer_description();
     let mut rows = Vec::new();
     let mut latency = Vec::new();
     for &(cols, lines) in &args.terminals {
@@ -149,8 +150,8 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
             };
             // Encoding alone, on two alternating frames (so half-block diffs rewrite the view).
             let frames = [
-                bench.render(&request(10, full.0, full.1, false))?.image,
-                bench.render(&request(40, full.0, full.1, false))?.image,
+                workbench.render(&request(10, full.0, full.1, false))?.image,
+                workbench.render(&request(40, full.0, full.1, false))?.image,
             ];
             let (mut enc, mut bytes) = (Vec::new(), Vec::new());
             for k in 0..10 {
@@ -170,7 +171,7 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
                     ((full.1 as f64 * scale) as u32).max(8),
                 );
                 let t = Instant::now();
-                let frame = bench.render(&request(k, w, h, false))?;
+                let frame = workbench.render(&request(k, w, h, false))?;
                 encode_frame(protocol, &frame.image, cells, full, &mut halfblocks)?;
                 let spent = t.elapsed().as_secs_f64() * 1e3;
                 totals.push(spent);
@@ -179,7 +180,7 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
                 last = Some((k, frame.image));
             }
             let (k, image) = last.expect("frames ≥ 2");
-            let exact = bench.render(&request(k, full.0, full.1, true))?.image;
+            let exact = workbench.render(&request(k, full.0, full.1, true))?.image;
             let shown = if (image.width, image.height) != full {
                 image.resized(full.0, full.1)
             } else {
@@ -190,19 +191,19 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
             let (median, p90) = summarize(steady.to_vec());
             let mean_scale = scales[scales.len() / 2..].iter().sum::<f64>()
                 / (scales.len() - scales.len() / 2) as f64;
-            rows.push(json!({
-                "terminal": format!("{cols}x{lines}"),
-                "protocol": protocol.name(),
-                "viewport_cells": [v.width, v.height],
-                "full_pixels": [full.0, full.1],
-                "encode_ms_median": enc_median,
-                "bytes_per_frame": bytes.iter().sum::<usize>() / bytes.len(),
-                "e2e_ms_median": median,
-                "e2e_ms_p90": p90,
-                "fps": 1e3 / median,
-                "mean_scale": mean_scale,
-                "psnr_db": psnr_db,
-            }));
+            rows.push(ProtocolRow {
+                terminal: format!("{cols}x{lines}"),
+                protocol: protocol.name(),
+                viewport_cells: [v.width, v.height],
+                full_pixels: [full.0, full.1],
+                encode_ms_median: enc_median,
+                bytes_per_frame: bytes.iter().sum::<usize>() / bytes.len(),
+                e2e_ms_median: median,
+                e2e_ms_p90: p90,
+                fps: 1e3 / median,
+                mean_scale,
+                psnr_db,
+            });
             // Edit latency at 120x40: a random assignment change until the encoded frame.
             if (cols, lines) == (120, 40)
                 && matches!(protocol, Protocol::Halfblocks | Protocol::Kitty)
@@ -234,55 +235,92 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
                         exact: false,
                     };
                     let t = Instant::now();
-                    let frame = bench.render(&req)?;
+                    let frame = workbench.render(&req)?;
                     encode_frame(protocol, &frame.image, cells, full, &mut halfblocks)?;
                     ms.push(t.elapsed().as_secs_f64() * 1e3);
                 }
                 let (median, p90) = summarize(ms);
-                latency.push(json!({"terminal": "120x40", "protocol": protocol.name(), "edit_ms_median": median, "edit_ms_p90": p90}));
+                latency.push(EditLatency {
+                    terminal: "120x40",
+                    protocol: protocol.name(),
+                    edit_ms_median: median,
+                    edit_ms_p90: p90,
+                });
             }
         }
     }
-    let doc = json!({"bench": "terminal", "device": device, "cell_px": [args.cell_px.0, args.cell_px.1], "rows": rows, "edit_latency": latency});
-    if args.json {
-        println!("{doc}");
-    } else {
-        print_table(&doc);
-    }
+    let report = TerminalReport {
+        bench: "terminal",
+        device,
+        cell_px: [args.cell_px.0, args.cell_px.1],
+        rows,
+        edit_latency: latency,
+    };
+    emit(&report, args.json, print_table);
     Ok(())
 }
 
-fn print_table(doc: &Value) {
+/// The terminal bench's report.
+#[derive(Serialize)]
+struct TerminalReport {
+    bench: &'static str,
+    device: String,
+    cell_px: [u32; 2],
+    rows: Vec<ProtocolRow>,
+    edit_latency: Vec<EditLatency>,
+}
+
+/// One protocol at one terminal size.
+#[derive(Serialize)]
+struct ProtocolRow {
+    terminal: String,
+    protocol: &'static str,
+    viewport_cells: [u16; 2],
+    full_pixels: [u32; 2],
+    encode_ms_median: f64,
+    bytes_per_frame: usize,
+    e2e_ms_median: f64,
+    e2e_ms_p90: f64,
+    fps: f64,
+    mean_scale: f64,
+    psnr_db: f64,
+}
+
+/// Edit latency: an assignment change until the encoded frame.
+#[derive(Serialize)]
+struct EditLatency {
+    terminal: &'static str,
+    protocol: &'static str,
+    edit_ms_median: f64,
+    edit_ms_p90: f64,
+}
+
+fn print_table(report: &TerminalReport) {
     println!(
         "terminal bench on {} (cells of {}x{} px for image protocols)",
-        doc["device"].as_str().unwrap_or(""),
-        doc["cell_px"][0],
-        doc["cell_px"][1]
+        report.device, report.cell_px[0], report.cell_px[1]
     );
     println!(
         "{:>8} {:<10} {:>10} {:>9} {:>10} {:>7} {:>6} {:>6}",
         "terminal", "protocol", "pixels", "enc ms", "bytes", "FPS", "scale", "PSNR"
     );
-    for r in doc["rows"].as_array().into_iter().flatten() {
+    for r in &report.rows {
         println!(
             "{:>8} {:<10} {:>10} {:>9.2} {:>10} {:>7.1} {:>6.2} {:>6.1}",
-            r["terminal"].as_str().unwrap_or(""),
-            r["protocol"].as_str().unwrap_or(""),
-            format!("{}x{}", r["full_pixels"][0], r["full_pixels"][1]),
-            r["encode_ms_median"].as_f64().unwrap_or(0.0),
-            r["bytes_per_frame"],
-            r["fps"].as_f64().unwrap_or(0.0),
-            r["mean_scale"].as_f64().unwrap_or(0.0),
-            r["psnr_db"].as_f64().unwrap_or(0.0)
+            r.terminal,
+            r.protocol,
+            format!("{}x{}", r.full_pixels[0], r.full_pixels[1]),
+            r.encode_ms_median,
+            r.bytes_per_frame,
+            r.fps,
+            r.mean_scale,
+            r.psnr_db
         );
     }
-    for l in doc["edit_latency"].as_array().into_iter().flatten() {
+    for l in &report.edit_latency {
         println!(
             "edit latency at {} with {}: median {:.1} ms, p90 {:.1} ms",
-            l["terminal"].as_str().unwrap_or(""),
-            l["protocol"].as_str().unwrap_or(""),
-            l["edit_ms_median"].as_f64().unwrap_or(0.0),
-            l["edit_ms_p90"].as_f64().unwrap_or(0.0)
+            l.terminal, l.protocol, l.edit_ms_median, l.edit_ms_p90
         );
     }
 }

@@ -6,14 +6,16 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Args;
-use serde_json::{json, Value};
 
-use super::bench::{median_stages, open_or_skip, print_skipped, summarize};
-use super::bench_paged::{bench_paged, print_paged};
-use super::bench_scene::{bench_scene, peak_rss_mb, SceneSource, SCENE_SIZES};
-use super::compose::{build, build_from};
-use super::render::parse_size;
-use super::DbArgs;
+use super::paged::{bench_paged, print_paged};
+use super::render_report::{
+    print_tables, FrameFigures, KnobRow, RenderReport, RendererReport, SizeOutcome, SizeRow,
+};
+use super::scene::{bench_scene, SceneSource, SCENE_SIZES};
+use super::stats::{emit, ms_since, open_or_skip, peak_rss_mb, summarize, time_frames, Rounds};
+use crate::cli::compose::{build, build_from};
+use crate::cli::values::parse_size;
+use crate::cli::DbArgs;
 use crate::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
 use crate::error::{Error, Result};
 use crate::pipeline::composer::{reference_image, Composer, Painter};
@@ -21,7 +23,6 @@ use crate::pipeline::lod::parse_memory_budget;
 use crate::render::image::{psnr_report, RgbImage};
 use crate::render::lod::LodPolicy;
 use crate::render::settings::RenderSettings;
-use crate::render::settings::StageTimings;
 use crate::render::Backend;
 use crate::scene::camera::Camera;
 
@@ -120,46 +121,26 @@ struct Case {
     scale: f32,
 }
 
-/// Times `frames` animated renders; returns the per-frame totals and, with
-/// `stages`, the stage medians of a second, profiled pass.
-fn time_frames(
+/// Times animated renders of `case` at `camera` (frame `i` of the motion
+/// for round `i`), as the editor sees them; with `stages_too`, the stage
+/// medians of a second, profiled pass.
+fn time_case(
     painter: &mut Painter,
     composer: &mut Composer,
     camera: &Camera,
     case: &Case,
-    (warmup, iterations): (usize, usize),
+    rounds: Rounds,
     stages_too: bool,
-) -> Result<(Vec<f64>, StageTimings)> {
-    let mut totals = Vec::new();
-    let mut stages: Vec<StageTimings> = Vec::new();
+) -> Result<(Vec<f64>, crate::render::settings::StageTimings)> {
     let scaled = scaled_camera(camera, case.scale);
-    // Frame times as the editor sees them; then the same frames again with the
-    // GPU waiting after each stage, for the stage breakdown.
-    for profiled in [false, true] {
-        if profiled && !stages_too {
-            break;
+    time_frames(painter, rounds, stages_too, |painter, it| {
+        composer.pose(it);
+        let image = painter.render(composer, &scaled, &case.settings)?;
+        if case.scale != 1.0 {
+            let _ = image.resized(camera.width, camera.height);
         }
-        painter.renderer_mut().set_stage_profiling(profiled);
-        for it in 0..warmup + iterations {
-            composer.pose(it);
-            let t = Instant::now();
-            let image = painter.render(composer, &scaled, &case.settings)?;
-            if case.scale != 1.0 {
-                let _ = image.resized(camera.width, camera.height);
-            }
-            let total = t.elapsed().as_secs_f64() * 1e3;
-            if it < warmup {
-                continue;
-            }
-            if profiled {
-                stages.push(painter.renderer_mut().timings());
-            } else {
-                totals.push(total);
-            }
-        }
-    }
-    painter.renderer_mut().set_stage_profiling(false);
-    Ok((totals, median_stages(&stages)))
+        Ok(())
+    })
 }
 
 fn scaled_camera(camera: &Camera, scale: f32) -> Camera {
@@ -193,44 +174,47 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
     if args.iterations == 0 {
         return Err(Error::input("--iterations must be at least 1"));
     }
+    let rounds = Rounds {
+        warmup: args.warmup,
+        timed: args.iterations,
+    };
     let source = match (&args.ply, args.synthetic_scale) {
         (Some(path), _) => Some(SceneSource::File(path)),
         (None, Some(0)) => return Err(Error::input("--synthetic-scale must be at least 1")),
         (None, Some(n)) => Some(SceneSource::Synthetic(n)),
         (None, None) => None,
     };
-    if let Some(source) = source {
-        let sizes = if args.sizes.is_empty() {
-            SCENE_SIZES.to_vec()
-        } else {
-            args.sizes.clone()
-        };
-        if let (Some(budget), Some(path)) = (args.memory_budget, &args.ply) {
-            let doc = bench_paged(
-                path,
-                &sizes,
-                &args.renderers,
-                args.frames.max(1),
-                args.lod,
-                budget,
-            )?;
-            if args.json {
-                println!("{}", serde_json::to_string_pretty(&doc).unwrap_or_default());
-            } else {
-                print_paged(&doc);
-            }
-            return Ok(());
-        }
-        let doc = bench_scene(
-            source,
-            &sizes,
-            &args.renderers,
-            (args.warmup, args.iterations),
-            (!args.no_knobs).then_some(args.knob_size),
-            args.lod,
-        )?;
-        return print(&doc, args.json);
+    let Some(source) = source else {
+        let report = bench_composite(args, rounds)?;
+        emit(&report, args.json, print_tables);
+        return Ok(());
+    };
+    let sizes = if args.sizes.is_empty() {
+        SCENE_SIZES.to_vec()
+    } else {
+        args.sizes.clone()
+    };
+    if let (Some(budget), Some(path)) = (args.memory_budget, &args.ply) {
+        let frames = args.frames.max(1);
+        let report = bench_paged(path, &sizes, &args.renderers, frames, args.lod, budget)?;
+        emit(&report, args.json, print_paged);
+        return Ok(());
     }
+    let report = bench_scene(
+        source,
+        &sizes,
+        &args.renderers,
+        rounds,
+        (!args.no_knobs).then_some(args.knob_size),
+        args.lod,
+    )?;
+    emit(&report, args.json, print_tables);
+    Ok(())
+}
+
+/// The render bench on a composite: the recipe's (or the built-in
+/// benchmark composite's) frames per size and renderer, and the knobs.
+fn bench_composite(args: &RenderBenchArgs, rounds: Rounds) -> Result<RenderReport> {
     let sizes = if args.sizes.is_empty() {
         vec![(160, 120), (320, 240), (640, 480), (1280, 720)]
     } else {
@@ -247,12 +231,12 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
         scale: 1.0,
     };
     let mut references = Vec::new();
-    let load_ms = t.elapsed().as_secs_f64() * 1e3;
+    let load_ms = ms_since(t);
     for &(w, h) in &sizes {
         let camera = orbit.camera(w, h);
         let t = Instant::now();
         let image = reference_image(&composer, &camera, &RenderSettings::default());
-        references.push((camera, image, t.elapsed().as_secs_f64() * 1e3));
+        references.push((camera, image, ms_since(t)));
     }
     let mut renderers = Vec::new();
     let mut skipped = Vec::new();
@@ -263,77 +247,70 @@ pub fn run(args: &RenderBenchArgs) -> Result<()> {
         else {
             continue;
         };
-        let setup_ms = t.elapsed().as_secs_f64() * 1e3;
+        let setup_ms = ms_since(t);
         let t = Instant::now();
         painter.upload(&composer)?;
-        let upload_ms = t.elapsed().as_secs_f64() * 1e3;
+        let gaussian_upload_ms = ms_since(t);
         let mut rows = Vec::new();
         for (camera, reference, reference_ms) in &references {
             let psnr_db = accuracy(&mut painter, &mut composer, camera, &exact, reference)?;
-            let (totals, stages) = time_frames(
-                &mut painter,
-                &mut composer,
-                camera,
-                &exact,
-                (args.warmup, args.iterations),
-                true,
-            )?;
-            let (median, p90) = summarize(totals);
-            rows.push(json!({
-                "width": camera.width, "height": camera.height, "ms_median": median, "ms_p90": p90, "fps": 1e3 / median,
-                "psnr_db": psnr_db, "stages_ms": stages, "reference_ms": reference_ms,
-            }));
+            let (totals, stages_ms) =
+                time_case(&mut painter, &mut composer, camera, &exact, rounds, true)?;
+            let (ms_median, ms_p90) = summarize(totals);
+            rows.push(SizeRow {
+                width: camera.width,
+                height: camera.height,
+                outcome: SizeOutcome::Drawn(FrameFigures {
+                    ms_median,
+                    ms_p90,
+                    fps: 1e3 / ms_median,
+                    psnr_db,
+                    stages_ms,
+                    reference_ms: *reference_ms,
+                }),
+                lod: None,
+            });
         }
         let mut knobs = Vec::new();
         if !args.no_knobs {
-            let (w, h) = args.knob_size;
-            let camera = orbit.camera(w, h);
+            let (width, height) = args.knob_size;
+            let camera = orbit.camera(width, height);
             composer.pose(0);
             let reference = reference_image(&composer, &camera, &RenderSettings::default());
             for (knob, value, case) in knob_cases() {
                 let psnr_db = accuracy(&mut painter, &mut composer, &camera, &case, &reference)?;
-                let (totals, _) = time_frames(
-                    &mut painter,
-                    &mut composer,
-                    &camera,
-                    &case,
-                    (args.warmup, args.iterations),
-                    false,
-                )?;
-                let (median, p90) = summarize(totals);
-                knobs.push(json!({
-                    "knob": knob, "value": value, "width": w, "height": h,
-                    "ms_median": median, "ms_p90": p90, "psnr_db": psnr_db,
-                }));
+                let (totals, _) =
+                    time_case(&mut painter, &mut composer, &camera, &case, rounds, false)?;
+                let (ms_median, ms_p90) = summarize(totals);
+                knobs.push(KnobRow {
+                    knob,
+                    value,
+                    width,
+                    height,
+                    ms_median,
+                    ms_p90,
+                    psnr_db,
+                });
             }
         }
-        renderers.push(json!({
-            "renderer": backend,
-            "device": painter.description(),
-            "setup_ms": setup_ms,
-            "gaussian_upload_ms": upload_ms,
-            "rows": rows,
-            "knobs": knobs,
-        }));
+        renderers.push(RendererReport {
+            renderer: backend,
+            device: painter.description(),
+            setup_ms,
+            gaussian_upload_ms,
+            rows,
+            knobs,
+        });
     }
-    let doc = json!({
-        "bench": "render",
-        "gaussians": composer.composite().gaussians.len(),
-        "load_ms": load_ms,
-        "peak_rss_mb": peak_rss_mb(),
-        "renderers": renderers,
-        "skipped": skipped,
-    });
-    print(&doc, args.json)
-}
-
-fn print(doc: &Value, json: bool) -> Result<()> {
-    if json {
-        println!("{doc}");
-    } else {
-        print_tables(doc);
-    }
-    Ok(())
+    Ok(RenderReport {
+        bench: "render",
+        gaussians: composer.composite().gaussians.len(),
+        load_ms,
+        scene: None,
+        peak_rss_mb: peak_rss_mb(),
+        renderers,
+        skipped,
+    })
 }
 
 /// The knob settings compared at one size: (knob, value, case).
@@ -397,128 +374,4 @@ fn knob_cases() -> Vec<(&'static str, String, Case)> {
         ));
     }
     cases
-}
-
-fn print_tables(doc: &Value) {
-    println!(
-        "render bench: {} Gaussians{}; loaded in {:.0} ms{}, peak memory {}",
-        doc["gaussians"],
-        doc["scene"]
-            .as_str()
-            .map(|s| format!(" ({s})"))
-            .unwrap_or_default(),
-        doc["load_ms"].as_f64().unwrap_or(0.0),
-        doc["load_peak_rss_mb"]
-            .as_f64()
-            .map(|m| format!(" (peak {m:.0} MiB after loading)"))
-            .unwrap_or_default(),
-        doc["peak_rss_mb"]
-            .as_f64()
-            .map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
-    );
-    if let Some(ms) = doc["lod_build_ms"].as_f64() {
-        println!(
-            "level of detail ({}): {} nodes built in {ms:.0} ms",
-            doc["lod"].as_str().unwrap_or(""),
-            doc["lod_nodes"]
-        );
-    }
-    for r in doc["renderers"].as_array().into_iter().flatten() {
-        print_renderer(r);
-        print_lod_rows(r);
-    }
-    print_skipped(doc);
-}
-
-/// The rows' level-of-detail columns, when measured: a moving camera's
-/// frame (cut, gather, upload, render), the cut's PSNR against the full
-/// scene's reference, and what it drew.
-fn print_lod_rows(doc: &Value) {
-    let rows: Vec<&Value> = doc["rows"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|r| r.get("lod_ms_median").is_some())
-        .collect();
-    if rows.is_empty() {
-        return;
-    }
-    println!(
-        "with level of detail:\n{:>10} {:>9} {:>7} {:>9} {:>9} {:>7} {:>7}",
-        "size", "median ms", "FPS", "PSNR dB", "drawn", "levels", "cut ms"
-    );
-    for r in rows {
-        println!(
-            "{:>10} {:>9.2} {:>7.1} {:>9.1} {:>9} {:>7} {:>7.2}",
-            format!("{}x{}", r["width"], r["height"]),
-            r["lod_ms_median"].as_f64().unwrap_or(0.0),
-            r["lod_fps"].as_f64().unwrap_or(0.0),
-            r["lod_psnr_db"].as_f64().unwrap_or(0.0),
-            match &r["lod_drawn"] {
-                Value::String(s) => s.clone(),
-                n => n.to_string(),
-            },
-            match &r["lod_levels"] {
-                Value::Array(l) => format!("{}-{}", l[0], l[1]),
-                _ => "all".into(),
-            },
-            r["lod_cut_ms"].as_f64().unwrap_or(0.0),
-        );
-    }
-}
-
-fn print_renderer(doc: &Value) {
-    println!(
-        "\n{}: set-up {:.0} ms, Gaussian upload {:.1} ms",
-        doc["device"].as_str().unwrap_or(""),
-        doc["setup_ms"].as_f64().unwrap_or(0.0),
-        doc["gaussian_upload_ms"].as_f64().unwrap_or(0.0)
-    );
-    println!(
-        "{:>10} {:>9} {:>9} {:>7} {:>9}  stages (upload/project/sort/raster/readback ms)",
-        "size", "median ms", "p90 ms", "FPS", "PSNR dB"
-    );
-    for r in doc["rows"].as_array().into_iter().flatten() {
-        if let Some(error) = r["error"].as_str() {
-            println!(
-                "{:>10} not drawn: {error}",
-                format!("{}x{}", r["width"], r["height"])
-            );
-            continue;
-        }
-        let s = &r["stages_ms"];
-        let f = |k: &str| s[k].as_f64().unwrap_or(0.0);
-        println!(
-            "{:>10} {:>9.2} {:>9.2} {:>7.1} {:>9.1}  {:.2}/{:.2}/{:.2}/{:.2}/{:.2}",
-            format!("{}x{}", r["width"], r["height"]),
-            r["ms_median"].as_f64().unwrap_or(0.0),
-            r["ms_p90"].as_f64().unwrap_or(0.0),
-            r["fps"].as_f64().unwrap_or(0.0),
-            r["psnr_db"].as_f64().unwrap_or(0.0),
-            f("upload"),
-            f("project"),
-            f("sort"),
-            f("rasterize"),
-            f("readback"),
-        );
-    }
-    if let Some(knobs) = doc["knobs"].as_array().filter(|k| !k.is_empty()) {
-        println!(
-            "speed against error at {}x{}:",
-            knobs[0]["width"], knobs[0]["height"]
-        );
-        println!(
-            "{:<17} {:>7} {:>9} {:>9}",
-            "knob", "value", "median ms", "PSNR dB"
-        );
-        for k in knobs {
-            println!(
-                "{:<17} {:>7} {:>9.2} {:>9.1}",
-                k["knob"].as_str().unwrap_or(""),
-                k["value"].as_str().unwrap_or(""),
-                k["ms_median"].as_f64().unwrap_or(0.0),
-                k["psnr_db"].as_f64().unwrap_or(0.0)
-            );
-        }
-    }
 }

@@ -11,10 +11,11 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use serde_json::json;
+use serde::Serialize;
 
-use super::bench_train::{held_out_targets, train_to_end, BenchDataset};
-use super::render::parse_size;
+use super::stats::emit;
+use super::train::{held_out_targets, train_to_end, BenchDataset};
+use crate::cli::values::parse_size;
 use crate::error::Result;
 use crate::io::avatar::read_flame_params;
 use crate::model::head::{HeadModel, Joint};
@@ -189,32 +190,55 @@ pub fn run(args: &MouthBenchArgs) -> Result<()> {
         if !args.json {
             eprintln!("visage: {name} trained in {train_s:.0} s");
         }
-        rows.push(json!({
-            "head": name,
-            "triangles": head.triangle_count(),
-            "gaussians": trainer.model.len(),
-            "open_psnr_db": psnr(e.whole[1]),
-            "closed_psnr_db": psnr(e.whole[0]),
-            "open_mouth_psnr_db": psnr(e.mouth[1]),
-            "closed_mouth_psnr_db": psnr(e.mouth[0]),
-            "train_s": train_s,
-        }));
+        rows.push(MouthRow {
+            head: name,
+            triangles: head.triangle_count(),
+            gaussians: trainer.model.len(),
+            open_psnr_db: psnr(e.whole[1]),
+            closed_psnr_db: psnr(e.whole[0]),
+            open_mouth_psnr_db: psnr(e.mouth[1]),
+            closed_mouth_psnr_db: psnr(e.mouth[0]),
+            train_s,
+        });
     }
-    let report = json!({
-        "dataset": dataset.root.display().to_string(),
-        "iterations": args.iterations,
-        "held_out_views": targets.len(),
-        "open_views": open_views,
-        "heads": rows,
-    });
-    if args.json {
-        println!("{report}");
-        return Ok(());
-    }
+    let report = MouthReport {
+        dataset: dataset.root.display().to_string(),
+        iterations: args.iterations,
+        held_out_views: targets.len(),
+        open_views,
+        heads: rows,
+    };
+    emit(&report, args.json, print_table);
+    Ok(())
+}
+
+/// The mouth bench's report.
+#[derive(Serialize)]
+struct MouthReport {
+    dataset: String,
+    iterations: usize,
+    held_out_views: usize,
+    open_views: usize,
+    heads: Vec<MouthRow>,
+}
+
+/// One head's figures (PSNR in dB; NaN, written null, where no view counts).
+#[derive(Serialize)]
+struct MouthRow {
+    head: &'static str,
+    triangles: usize,
+    gaussians: usize,
+    open_psnr_db: f64,
+    closed_psnr_db: f64,
+    open_mouth_psnr_db: f64,
+    closed_mouth_psnr_db: f64,
+    train_s: f64,
+}
+
+fn print_table(report: &MouthReport) {
     println!(
-        "{} iterations per head; {} held-out views, {open_views} with the jaw open ≥ {OPEN_MOUTH_DEG}°; PSNR dB over whole views and the mouth's box",
-        args.iterations,
-        targets.len()
+        "{} iterations per head; {} held-out views, {} with the jaw open ≥ {OPEN_MOUTH_DEG}°; PSNR dB over whole views and the mouth's box",
+        report.iterations, report.held_out_views, report.open_views
     );
     println!(
         "  {:<8} {:>9} {:>10} {:>10} {:>12} {:>11} {:>13} {:>8}",
@@ -227,19 +251,17 @@ pub fn run(args: &MouthBenchArgs) -> Result<()> {
         "closed mouth",
         "train s"
     );
-    for r in report["heads"].as_array().into_iter().flatten() {
-        let f = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+    for r in &report.heads {
         println!(
             "  {:<8} {:>9} {:>10} {:>10.2} {:>12.2} {:>11.2} {:>13.2} {:>8.0}",
-            r["head"].as_str().unwrap_or(""),
-            r["triangles"],
-            r["gaussians"],
-            f("open_psnr_db"),
-            f("closed_psnr_db"),
-            f("open_mouth_psnr_db"),
-            f("closed_mouth_psnr_db"),
-            f("train_s")
+            r.head,
+            r.triangles,
+            r.gaussians,
+            r.open_psnr_db,
+            r.closed_psnr_db,
+            r.open_mouth_psnr_db,
+            r.closed_mouth_psnr_db,
+            r.train_s
         );
     }
-    Ok(())
 }

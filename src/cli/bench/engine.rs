@@ -1,14 +1,13 @@
-//! `visage bench`: the thesis benchmark (6.4) of the composition engine, with the
-//! error each measured path trades against.
+//! `visage bench engine`: the thesis benchmark (6.4) of the composition
+//! engine, with the error each measured path trades against.
 
-use std::time::Instant;
-
-use clap::{Args, Subcommand};
+use clap::Args;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde_json::{json, Value};
+use serde::Serialize;
 
-use super::DbArgs;
+use super::stats::{emit, summarize, timed};
+use crate::cli::DbArgs;
 use crate::compose::blend::Blender;
 use crate::compose::engine::{Engine, PosedMesh};
 use crate::compose::recipe::{
@@ -18,36 +17,9 @@ use crate::error::{Error, Result};
 use crate::model::regions::Group;
 use crate::scene::camera::Orbit;
 
-/// Arguments of `visage bench`.
+/// Arguments of `visage bench engine`.
 #[derive(Args, Debug, Clone)]
-pub struct BenchArgs {
-    #[command(subcommand)]
-    what: BenchWhat,
-}
-
-#[derive(Subcommand, Debug, Clone)]
-enum BenchWhat {
-    /// Animate / change shape / change assignment, per number of sources.
-    Engine(EngineBenchArgs),
-    /// Frame time per resolution and stage, and speed against error per knob.
-    Render(super::bench_render::RenderBenchArgs),
-    /// Encode time, bytes and end-to-end FPS per terminal graphics protocol.
-    Terminal(super::bench_terminal::TerminalBenchArgs),
-    /// Training speed, held-out PSNR against time, gradient error.
-    Train(super::bench_train::TrainBenchArgs),
-    /// Hole filling: leak, coverage and PSNR of plain, obscuring, culling, both.
-    Holes(super::bench_holes::HolesBenchArgs),
-    /// Composites against their ground truth: a fixed set of recipes over
-    /// trained (cached) sources, every composite metric per recipe.
-    Composites(super::bench_composites::CompositesBenchArgs),
-    /// The mouth cavity: one capture trained on the built-in head with its
-    /// pocket, with the pocket removed (FLAME-like) and with the generated
-    /// cavity; open- and closed-mouth PSNR over views and the mouth's box.
-    Mouth(super::bench_mouth::MouthBenchArgs),
-}
-
-#[derive(Args, Debug, Clone)]
-struct EngineBenchArgs {
+pub struct EngineBenchArgs {
     #[command(flatten)]
     db: DbArgs,
     /// Source counts to measure, comma-separated.
@@ -62,82 +34,6 @@ struct EngineBenchArgs {
     /// Print one JSON document instead of a table.
     #[arg(long)]
     json: bool,
-}
-
-/// Runs `visage bench`.
-pub fn run(args: &BenchArgs) -> Result<()> {
-    match &args.what {
-        BenchWhat::Engine(a) => engine_bench(a),
-        BenchWhat::Render(a) => super::bench_render::run(a),
-        BenchWhat::Terminal(a) => super::bench_terminal::run(a),
-        BenchWhat::Train(a) => super::bench_train::run(a),
-        BenchWhat::Holes(a) => super::bench_holes::run(a),
-        BenchWhat::Composites(a) => super::bench_composites::run(a),
-        BenchWhat::Mouth(a) => super::bench_mouth::run(a),
-    }
-}
-
-/// Median and 90th percentile of timings in milliseconds.
-/// The median of each stage over profiled frames (zeros when there are none).
-pub fn median_stages(
-    stages: &[crate::render::settings::StageTimings],
-) -> crate::render::settings::StageTimings {
-    use crate::render::settings::StageTimings;
-    if stages.is_empty() {
-        return StageTimings::default();
-    }
-    let median = |f: fn(&StageTimings) -> f64| summarize(stages.iter().map(f).collect()).0;
-    StageTimings {
-        upload: median(|s| s.upload),
-        project: median(|s| s.project),
-        sort: median(|s| s.sort),
-        rasterize: median(|s| s.rasterize),
-        readback: median(|s| s.readback),
-    }
-}
-
-/// A renderer opened for a benchmark, or — when the graphics device is
-/// missing and other renderers were asked for too — `None`, with the reason
-/// added to `skipped` (a machine without a GPU still measures its CPU).
-pub fn open_or_skip<T>(
-    opened: crate::error::Result<T>,
-    backend: crate::render::Backend,
-    asked: usize,
-    skipped: &mut Vec<serde_json::Value>,
-) -> crate::error::Result<Option<T>> {
-    match opened {
-        Ok(t) => Ok(Some(t)),
-        Err(e @ crate::error::Error::Device(_)) if asked > 1 => {
-            eprintln!("visage: skipping the {} renderer: {e}", backend.name());
-            skipped.push(serde_json::json!({ "renderer": backend, "reason": e.to_string() }));
-            Ok(None)
-        }
-        Err(e) => Err(e),
-    }
-}
-
-/// Prints the renderers a benchmark skipped, and why.
-pub fn print_skipped(doc: &serde_json::Value) {
-    for s in doc["skipped"].as_array().into_iter().flatten() {
-        println!(
-            "\n{} renderer skipped: {}",
-            s["renderer"].as_str().unwrap_or("?"),
-            s["reason"].as_str().unwrap_or("")
-        );
-    }
-}
-
-/// Median and 90th percentile of frame times.
-pub fn summarize(mut ms: Vec<f64>) -> (f64, f64) {
-    ms.sort_by(f64::total_cmp);
-    let at = |q: f64| ms[((ms.len() - 1) as f64 * q).round() as usize];
-    (at(0.5), at(0.9))
-}
-
-fn time<T>(f: impl FnOnce() -> T) -> (T, f64) {
-    let t = Instant::now();
-    let out = f();
-    (out, t.elapsed().as_secs_f64() * 1e3)
 }
 
 /// Random convex weights over the first `n` sources (stick breaking).
@@ -186,7 +82,8 @@ fn recipe(
     }
 }
 
-fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
+/// Runs `visage bench engine`.
+pub fn run(args: &EngineBenchArgs) -> Result<()> {
     if args.iterations == 0 {
         return Err(Error::input("--iterations must be at least 1"));
     }
@@ -202,16 +99,16 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
     let motion = db
         .motion_index("talk")
         .or(Some(0).filter(|_| !db.motions.is_empty()));
-    let (blender, factor_ms) = time(|| Blender::new(&db.model));
+    let (blender, factor_ms) = timed(|| Blender::new(&db.model));
     blender?;
-    let (engine, setup_ms) = time(|| Engine::new(db));
+    let (engine, setup_ms) = timed(|| Engine::new(db));
     let engine = engine?;
     let frames = engine
         .database()
         .motions
         .get(motion.unwrap_or(0))
         .map_or(1, |m| m.frames());
-    let mut rows: Vec<Value> = Vec::new();
+    let mut rows: Vec<EngineRow> = Vec::new();
     let mut rng = ChaCha8Rng::seed_from_u64(6_4);
     let iterations = args.warmup + args.iterations;
     let post_on = PostProcess {
@@ -238,23 +135,30 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
             let mut residual = 0.0f64;
             for it in 0..iterations {
                 let frame = it % frames;
-                let ((), t) = time(|| engine.pose(&composite, frame, &mut posed));
+                let ((), t) = timed(|| engine.pose(&composite, frame, &mut posed));
                 residual = residual.max(posed.residual);
                 if it >= args.warmup {
                     ms.push(t);
                 }
             }
             let (median, p90) = summarize(ms);
-            let mut row = json!({"action": "animate", "mode": mode_name(mode), "sources": n, "ms_median": median, "ms_p90": p90, "frames": iterations});
-            if mode == AnimationMode::Fast {
-                let (max_err, mean_err) =
+            let error = if mode == AnimationMode::Fast {
+                let (max, mean) =
                     fast_vs_exact(&engine, &mut composite, frames, &mut posed, &mut exact);
-                row["max_vertex_error_m"] = json!(max_err);
-                row["mean_vertex_error_m"] = json!(mean_err);
+                EngineError::FastVsExact {
+                    max_vertex_error_m: max,
+                    mean_vertex_error_m: mean,
+                }
             } else {
-                row["max_residual"] = json!(residual);
-            }
-            rows.push(row);
+                EngineError::Residual {
+                    max_residual: residual,
+                }
+            };
+            rows.push(EngineRow {
+                mode: Some(mode_name(mode)),
+                frames: Some(iterations),
+                ..EngineRow::new(Action::Animate, n, (median, p90), error)
+            });
         }
         composite.recipe.mode = AnimationMode::Fast;
 
@@ -266,7 +170,7 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
             for g in 0..Group::COUNT {
                 next.shape[g] = stick_breaking(&mut rng, n, total);
             }
-            let ((), t) = time(|| {
+            let ((), t) = timed(|| {
                 engine.update(&mut composite, &next);
                 engine.pose(&composite, it % frames, &mut posed);
             });
@@ -276,7 +180,14 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
             }
         }
         let (median, p90) = summarize(ms);
-        rows.push(json!({"action": "shape", "sources": n, "ms_median": median, "ms_p90": p90, "max_residual": residual}));
+        rows.push(EngineRow::new(
+            Action::Shape,
+            n,
+            (median, p90),
+            EngineError::Residual {
+                max_residual: residual,
+            },
+        ));
 
         // Assignment: a new random source for the Gaussians of every group.
         let posts = [
@@ -296,7 +207,7 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
                 for g in 0..Group::COUNT {
                     next.gaussians[g] = rng.random_range(0..n);
                 }
-                let ((), t) = time(|| {
+                let ((), t) = timed(|| {
                     engine.update(&mut composite, &next);
                 });
                 count = composite.gaussians.len();
@@ -305,11 +216,18 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
                 }
             }
             let (median, p90) = summarize(ms);
-            rows.push(json!({
-                "action": "assign", "sources": n, "ms_median": median, "ms_p90": p90,
-                "post": label,
-                "gaussians": count, "error": 0.0,
-            }));
+            rows.push(EngineRow {
+                post: Some(label),
+                ..EngineRow::new(
+                    Action::Assign,
+                    n,
+                    (median, p90),
+                    EngineError::Exact {
+                        gaussians: count,
+                        error: 0.0,
+                    },
+                )
+            });
         }
     }
     // The factorisation and a bare solve, with its residual: every group blends
@@ -328,29 +246,39 @@ fn engine_bench(args: &EngineBenchArgs) -> Result<()> {
     let mut ms = Vec::new();
     let mut residual = 0.0f64;
     for it in 0..iterations {
-        let ((_, r), t) = time(|| engine.blend_neutral(&solve_recipe));
+        let ((_, r), t) = timed(|| engine.blend_neutral(&solve_recipe));
         residual = residual.max(r);
         if it >= args.warmup {
             ms.push(t);
         }
     }
     let (median, p90) = summarize(ms);
-    rows.push(json!({"action": "solve", "sources": total, "ms_median": median, "ms_p90": p90, "max_residual": residual}));
-    rows.push(json!({"action": "factor", "sources": total, "ms_median": factor_ms, "ms_p90": factor_ms, "vertices": engine.database().model.vertex_count()}));
-    let doc = json!({
-        "bench": "engine",
-        "threads": rayon::current_num_threads(),
-        "database_ms": db_ms.as_secs_f64() * 1e3,
-        "engine_setup_ms": setup_ms,
-        "warmup": args.warmup,
-        "iterations": args.iterations,
-        "rows": rows,
-    });
-    if args.json {
-        println!("{doc}");
-    } else {
-        print_table(&doc);
-    }
+    rows.push(EngineRow::new(
+        Action::Solve,
+        total,
+        (median, p90),
+        EngineError::Residual {
+            max_residual: residual,
+        },
+    ));
+    rows.push(EngineRow::new(
+        Action::Factor,
+        total,
+        (factor_ms, factor_ms),
+        EngineError::Factor {
+            vertices: engine.database().model.vertex_count(),
+        },
+    ));
+    let report = EngineReport {
+        bench: "engine",
+        threads: rayon::current_num_threads(),
+        database_ms: db_ms.as_secs_f64() * 1e3,
+        engine_setup_ms: setup_ms,
+        warmup: args.warmup,
+        iterations: args.iterations,
+        rows,
+    };
+    emit(&report, args.json, print_table);
     Ok(())
 }
 
@@ -385,40 +313,129 @@ fn fast_vs_exact(
     (max, sum / count.max(1) as f64)
 }
 
-fn print_table(doc: &Value) {
+fn print_table(report: &EngineReport) {
     println!(
         "engine bench: {} timed iterations after {} warm-up, {} threads (database {:.0} ms, engine set-up {:.0} ms)",
-        doc["iterations"], doc["warmup"], doc["threads"],
-        doc["database_ms"].as_f64().unwrap_or(0.0),
-        doc["engine_setup_ms"].as_f64().unwrap_or(0.0)
+        report.iterations, report.warmup, report.threads, report.database_ms, report.engine_setup_ms
     );
     println!(
         "{:<8} {:<15} {:>7} {:>10} {:>10}  error",
         "action", "mode/post", "sources", "median ms", "p90 ms"
     );
-    for r in doc["rows"].as_array().into_iter().flatten() {
-        let variant = r["mode"].as_str().or(r["post"].as_str()).unwrap_or("");
-        let error = if let Some(e) = r["max_vertex_error_m"].as_f64() {
-            format!(
-                "fast vs exact: max {:.2e} m, mean {:.2e} m",
-                e,
-                r["mean_vertex_error_m"].as_f64().unwrap_or(0.0)
-            )
-        } else if let Some(e) = r["max_residual"].as_f64() {
-            format!("residual {e:.1e}")
-        } else if let Some(g) = r["gaussians"].as_u64() {
-            format!("exact ({g} Gaussians)")
-        } else {
-            String::new()
+    for r in &report.rows {
+        let error = match r.error {
+            EngineError::FastVsExact {
+                max_vertex_error_m,
+                mean_vertex_error_m,
+            } => format!(
+                "fast vs exact: max {max_vertex_error_m:.2e} m, mean {mean_vertex_error_m:.2e} m"
+            ),
+            EngineError::Residual { max_residual } => format!("residual {max_residual:.1e}"),
+            EngineError::Exact { gaussians, .. } => format!("exact ({gaussians} Gaussians)"),
+            EngineError::Factor { .. } => String::new(),
         };
         println!(
             "{:<8} {:<15} {:>7} {:>10.3} {:>10.3}  {}",
-            r["action"].as_str().unwrap_or(""),
-            variant,
-            r["sources"],
-            r["ms_median"].as_f64().unwrap_or(0.0),
-            r["ms_p90"].as_f64().unwrap_or(0.0),
+            r.action.name(),
+            r.mode.or(r.post).unwrap_or(""),
+            r.sources,
+            r.ms_median,
+            r.ms_p90,
             error
         );
+    }
+}
+
+/// The engine bench's report.
+#[derive(Serialize)]
+struct EngineReport {
+    bench: &'static str,
+    threads: usize,
+    database_ms: f64,
+    engine_setup_ms: f64,
+    warmup: usize,
+    iterations: usize,
+    rows: Vec<EngineRow>,
+}
+
+/// What a row measures.
+#[derive(Clone, Copy, Serialize)]
+#[serde(rename_all = "snake_case")]
+enum Action {
+    /// Posing a frame.
+    Animate,
+    /// New shape weights, re-blended and posed.
+    Shape,
+    /// A new source for every group's Gaussians.
+    Assign,
+    /// One Laplacian solve.
+    Solve,
+    /// The Laplacian's factorisation.
+    Factor,
+}
+
+impl Action {
+    fn name(self) -> &'static str {
+        match self {
+            Action::Animate => "animate",
+            Action::Shape => "shape",
+            Action::Assign => "assign",
+            Action::Solve => "solve",
+            Action::Factor => "factor",
+        }
+    }
+}
+
+/// The error a measured path trades against.
+#[derive(Clone, Copy, Serialize)]
+#[serde(untagged)]
+enum EngineError {
+    /// Fast animation's vertex distance from exact animation, metres.
+    FastVsExact {
+        max_vertex_error_m: f64,
+        mean_vertex_error_m: f64,
+    },
+    /// The largest solver residual.
+    Residual { max_residual: f64 },
+    /// An exact path: the composite's size.
+    Exact { gaussians: usize, error: f64 },
+    /// The factorisation: the model's size.
+    Factor { vertices: usize },
+}
+
+/// One row: an action at a number of sources, its times and its error.
+#[derive(Serialize)]
+struct EngineRow {
+    action: Action,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mode: Option<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    post: Option<&'static str>,
+    sources: usize,
+    ms_median: f64,
+    ms_p90: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    frames: Option<usize>,
+    #[serde(flatten)]
+    error: EngineError,
+}
+
+impl EngineRow {
+    fn new(
+        action: Action,
+        sources: usize,
+        (ms_median, ms_p90): (f64, f64),
+        error: EngineError,
+    ) -> Self {
+        Self {
+            action,
+            mode: None,
+            post: None,
+            sources,
+            ms_median,
+            ms_p90,
+            frames: None,
+            error,
+        }
     }
 }
