@@ -78,12 +78,6 @@ fn one_line(message: &str) -> String {
     crate::text::printable(message).replace('\n', " ")
 }
 
-impl From<String> for Error {
-    fn from(message: String) -> Self {
-        Error::Input(message)
-    }
-}
-
 /// Result with the command-line error type.
 pub type Result<T> = std::result::Result<T, Error>;
 

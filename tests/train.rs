@@ -507,3 +507,28 @@ fn the_progress_rate_after_a_resume_is_this_runs_own() {
     drop(tmux);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A trained avatar that cannot be written is a failed write (exit 4, "cannot
+/// …"), not bad input: the dataset and the arguments were fine.
+#[test]
+fn an_unwritable_output_is_an_io_error_not_bad_input() {
+    let dir = small_capture("unwritable");
+    let o = visage(&[
+        "train",
+        dir.to_str().unwrap(),
+        "-o",
+        "/proc/visage-no-such-dir/avatar",
+        "--iterations",
+        "2",
+        "--size",
+        "16x16",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(4), "{err}");
+    let last = err.trim().lines().last().unwrap_or("");
+    assert!(
+        last.contains("cannot") && last.contains("/proc/visage-no-such-dir"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

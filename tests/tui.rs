@@ -25,7 +25,7 @@ use visage::tui::keymap::Keymap;
 use visage::tui::view::{draw, layout, InfoPanel, Screen, ViewModel};
 
 struct Fixture {
-    bench: Workbench,
+    workbench: Workbench,
     catalog: Catalog,
     swatches: Vec<[u8; 3]>,
 }
@@ -46,7 +46,7 @@ fn fixture() -> &'static Mutex<Fixture> {
         let catalog = Catalog::of(&engine);
         let swatches = source_swatches(&engine);
         Mutex::new(Fixture {
-            bench: Workbench::new(engine, Backend::Cpu).unwrap(),
+            workbench: Workbench::new(engine, Backend::Cpu).unwrap(),
             catalog,
             swatches,
         })
@@ -79,7 +79,7 @@ fn screen_with(
             height: 2 * a.viewport.height as u32,
             exact: true,
         };
-        f.bench.render(&request).unwrap().image
+        f.workbench.render(&request).unwrap().image
     });
     let info = InfoPanel {
         gaussians: 12345,
@@ -359,7 +359,7 @@ fn test_frame() -> RgbImage {
         height: 72,
         exact: true,
     };
-    f.bench.render(&request).unwrap().image
+    f.workbench.render(&request).unwrap().image
 }
 
 /// Splits kitty escapes into (control keys, payload) pairs.

@@ -81,7 +81,7 @@ pub fn run(args: &RandomArgs) -> Result<()> {
     };
     let composites = random_composites(&db, &options)?;
     std::fs::create_dir_all(&args.out).map_err(|e| Error::io("create", &args.out, e))?;
-    let mut bench = if args.render {
+    let mut workbench = if args.render {
         Some(Workbench::new(Engine::new(db)?, args.renderer)?)
     } else {
         None
@@ -90,7 +90,7 @@ pub fn run(args: &RandomArgs) -> Result<()> {
         let path = args.out.join(format!("random-{:03}.toml", i + 1));
         std::fs::write(&path, composite.recipe.to_toml())
             .map_err(|e| Error::io("write", &path, e))?;
-        if let Some(bench) = &mut bench {
+        if let Some(workbench) = &mut workbench {
             let request = FrameRequest {
                 recipe: composite.recipe.clone(),
                 debug: DebugView::default(),
@@ -99,7 +99,7 @@ pub fn run(args: &RandomArgs) -> Result<()> {
                 height: args.size.1,
                 exact: true,
             };
-            bench.snapshot(&request, &path.with_extension("png"))?;
+            workbench.snapshot(&request, &path.with_extension("png"))?;
         }
         println!("{}  {}", path.display(), describe(composite));
     }

@@ -18,9 +18,9 @@ use crate::train::dataset::Dataset;
 use crate::train::hole_metrics::{self, HoleMetrics};
 use crate::train::holes::HoleFilling;
 use crate::train::model::Trainable;
-use crate::train::trainer::{
-    evaluate_view, load_target, timestep_frames, training_arc, TrainOptions, Trainer,
-};
+use crate::train::posing::{timestep_frames, training_arc};
+use crate::train::target::{evaluate_view, load_target};
+use crate::train::trainer::{TrainOptions, Trainer};
 
 /// The FLAME files a dataset or avatar needs (none for the built-in head).
 #[derive(Args, Debug, Clone, Default)]

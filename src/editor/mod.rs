@@ -55,8 +55,8 @@ impl Editor {
     }
 
     /// An editor for what a workbench holds (a database or a scene).
-    pub fn for_bench(bench: &Workbench) -> Self {
-        Self::new(Catalog::of_bench(bench))
+    pub fn for_workbench(workbench: &Workbench) -> Self {
+        Self::new(Catalog::of_workbench(workbench))
     }
 
     /// The current tick.
@@ -109,7 +109,7 @@ pub fn perform(
     effect: &Effect,
     recipe: &Recipe,
     view: &FrameRequest,
-    bench: &mut Workbench,
+    workbench: &mut Workbench,
     place: &dyn Fn(&str) -> PathBuf,
 ) -> Result<Performed> {
     match effect {
@@ -123,7 +123,7 @@ pub fn perform(
         }
         Effect::ExportPly(p) => {
             let path = place(p);
-            let n = bench.export_ply(recipe, &path)?;
+            let n = workbench.export_ply(recipe, &path)?;
             Ok(Performed {
                 message: format!("wrote {n} Gaussians to {}", path.display()),
                 path,
@@ -137,7 +137,7 @@ pub fn perform(
                 height,
                 ..view.clone()
             };
-            let image = bench.snapshot(&sized, &path)?;
+            let image = workbench.snapshot(&sized, &path)?;
             Ok(Performed {
                 message: format!(
                     "wrote {}x{} snapshot {}",

@@ -74,8 +74,8 @@ impl ReplayReport {
 /// Replays a session file. `out` receives snapshots and exports (skipped without it).
 pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
     let session = Session::load(path)?;
-    let mut bench = session.header.subject().open(Backend::Cpu, &|_, _| {})?;
-    let mut editor = Editor::for_bench(&bench);
+    let mut workbench = session.header.subject().open(Backend::Cpu, &|_, _| {})?;
+    let mut editor = Editor::for_workbench(&workbench);
     if let Some(dir) = out {
         std::fs::create_dir_all(dir).map_err(|e| Error::io("create", dir, e))?;
     }
@@ -105,7 +105,7 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
                                 &effect,
                                 &editor.state.recipe,
                                 &view,
-                                &mut bench,
+                                &mut workbench,
                                 &inside(dir),
                             )
                             .map_err(|e| {
@@ -122,7 +122,7 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
                 }
             }
             Action::Expect(Expectation::StateHash(expected)) => {
-                let actual = bench.state_hash(&editor.state.recipe)?;
+                let actual = workbench.state_hash(&editor.state.recipe)?;
                 report.checks.push(CheckResult {
                     line: line.line,
                     tick,
@@ -136,9 +136,9 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
                 path: image,
                 min_psnr,
             }) => {
-                let stored = RgbImage::load_png(&base_dir.join(image))?;
+                let stored = RgbImage::load_png(&base_dir.join(image)).map_err(Error::input)?;
                 let frame =
-                    bench.render(&editor.frame_request(stored.width, stored.height, true))?;
+                    workbench.render(&editor.frame_request(stored.width, stored.height, true))?;
                 let p = psnr_report(&frame.image, &stored).unwrap_or(0.0);
                 report.checks.push(CheckResult {
                     line: line.line,
@@ -152,6 +152,6 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
         }
     }
     report.ticks = editor.tick();
-    report.state_hash = bench.state_hash(&editor.state.recipe)?;
+    report.state_hash = workbench.state_hash(&editor.state.recipe)?;
     Ok(report)
 }

@@ -44,8 +44,8 @@ pub struct SceneSummary {
 
 impl Catalog {
     /// The names a workbench offers: its database's, or its scene's summary.
-    pub fn of_bench(bench: &crate::pipeline::workbench::Workbench) -> Self {
-        match (bench.engine(), bench.scene()) {
+    pub fn of_workbench(workbench: &crate::pipeline::workbench::Workbench) -> Self {
+        match (workbench.engine(), workbench.scene()) {
             (Some(engine), _) => Catalog::of(engine),
             (None, Some(viewed)) => Catalog {
                 scene: Some(SceneSummary {

@@ -22,7 +22,7 @@ use super::model::{Render, Trainable, SH_STRIDE};
 use super::project::TrainCamera;
 use super::raster::Rasterizer;
 use super::sitter::Sitter;
-use super::trainer::load_target;
+use super::target::load_target;
 use crate::avatar::database::Database;
 use crate::avatar::synthetic::look_index;
 use crate::compose::engine::{Composite, Engine, PosedMesh};

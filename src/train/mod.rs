@@ -1,7 +1,7 @@
 //! Making source avatars: a GaussianAvatars-style trainer. This layer holds
 //! the differentiable renderer — dual-number geometry ([`dual`], [`project`]),
-//! a tile rasteriser with its backward pass ([`raster`] on the CPU,
-//! [`raster_gpu`] on wgpu) and the parameter
+//! a tile rasteriser with its backward pass ([`raster`]: `cpu` in f64,
+//! `gpu` on wgpu) and the parameter
 //! bookkeeping that joins them ([`model`]). It sits above `render` because it
 //! shares the renderers' numerics (projection constants, SH basis) and is
 //! checked against them.
@@ -15,8 +15,9 @@ pub mod hole_metrics;
 pub mod holes;
 pub mod loss;
 pub mod model;
+pub mod posing;
 pub mod project;
 pub mod raster;
-pub mod raster_gpu;
 pub mod sitter;
+pub mod target;
 pub mod trainer;

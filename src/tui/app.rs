@@ -47,7 +47,7 @@ const THUMBNAIL_MIN_ROWS: u16 = 30;
 /// Runs the editor until the user quits or a signal arrives.
 pub fn run_editor(options: EditOptions) -> Result<()> {
     let Launched {
-        bench,
+        workbench,
         editor,
         recorder,
         auto_journal,
@@ -57,8 +57,8 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
         keymap,
         graphics,
     } = launch(&options)?;
-    let swatches = bench.engine().map(source_swatches).unwrap_or_default();
-    let renderer_name = bench.renderer_description();
+    let swatches = workbench.engine().map(source_swatches).unwrap_or_default();
+    let renderer_name = workbench.renderer_description();
     let history = History::load(state_dir().map(|d| d.join("history")));
     let help_rows = help_rows(&keymap, editor.catalog.scene.is_some());
 
@@ -72,7 +72,7 @@ pub fn run_editor(options: EditOptions) -> Result<()> {
         keymap,
         graphics,
         renderer_name,
-        worker: RenderWorker::spawn(bench),
+        worker: RenderWorker::spawn(workbench),
         picture: Picture::default(),
         status,
         prompt: None,

@@ -43,7 +43,7 @@ pub struct EditOptions {
 /// What a live session starts with.
 pub struct Launched {
     /// The subject, opened.
-    pub bench: Workbench,
+    pub workbench: Workbench,
     /// The editor, with the journal or resumed session replayed into it.
     pub editor: Editor,
     /// The journal it records into.
@@ -86,8 +86,8 @@ pub fn launch(options: &EditOptions) -> Result<Launched> {
         Subject::Scene(_) => Keymap::load_viewer(options.keymap.as_deref())?,
     };
     eprintln!("visage: opening {}…", subject.describe());
-    let bench = open_with_progress(&subject, options.renderer)?;
-    let subject = resolved_subject(subject, &bench);
+    let workbench = open_with_progress(&subject, options.renderer)?;
+    let subject = resolved_subject(subject, &workbench);
     let graphics = detect(options.graphics);
     let size = crossterm::terminal::size().unwrap_or((120, 40));
     let header = SessionHeader::for_subject(&subject, size, graphics.protocol);
@@ -129,7 +129,7 @@ pub fn launch(options: &EditOptions) -> Result<Launched> {
             )
         }
     };
-    let mut editor = Editor::for_bench(&bench);
+    let mut editor = Editor::for_workbench(&workbench);
     let mut unsaved = 0;
     let mut render_size = header.render;
     if let Some(session) = &replayed {
@@ -148,7 +148,7 @@ pub fn launch(options: &EditOptions) -> Result<Launched> {
         );
     }
     Ok(Launched {
-        bench,
+        workbench,
         editor,
         recorder,
         auto_journal: auto,
@@ -188,8 +188,8 @@ fn offer_recovery(folder: &JournalFolder, subject: &Subject) -> Option<(PathBuf,
 
 /// The subject as opened: a scene's up axis as detected, so the journal
 /// replays with the same camera.
-fn resolved_subject(subject: Subject, bench: &Workbench) -> Subject {
-    match (subject, bench.scene()) {
+fn resolved_subject(subject: Subject, workbench: &Workbench) -> Subject {
+    match (subject, workbench.scene()) {
         (Subject::Scene(spec), Some(viewed)) => Subject::Scene(SceneSpec {
             up: Some(viewed.home.up),
             ..spec
@@ -212,7 +212,7 @@ fn open_with_progress(subject: &Subject, renderer: Backend) -> Result<Workbench>
         bar.set_length(all);
         bar.set_position(done);
     };
-    let bench = subject.open(renderer, &progress);
+    let workbench = subject.open(renderer, &progress);
     bar.finish_and_clear();
-    bench
+    workbench
 }

@@ -78,7 +78,7 @@ struct Showing {
     id: u32,
     position: usize,
     recipe: Recipe,
-    bench: usize,
+    workbench: usize,
     since: Instant,
     yaw: f32,
     pitch: f32,
@@ -111,13 +111,13 @@ pub fn run_participant(options: RunOptions) -> Result<String> {
             path.display()
         ));
     }
-    let mut benches: Vec<(DatabaseSpec, Workbench)> = Vec::new();
+    let mut workbenches: Vec<(DatabaseSpec, Workbench)> = Vec::new();
     for c in &study.study.categories {
         let spec = c.database.clone();
-        if benches.iter().all(|(s, _)| *s != spec) {
+        if workbenches.iter().all(|(s, _)| *s != spec) {
             eprintln!("visage: opening the {} database…", spec.db);
             let (db, _) = spec.load()?;
-            benches.push((spec.clone(), Workbench::new(Engine::new(db)?, renderer)?));
+            workbenches.push((spec.clone(), Workbench::new(Engine::new(db)?, renderer)?));
         }
     }
     let graphics = detect(graphics);
@@ -126,7 +126,7 @@ pub fn run_participant(options: RunOptions) -> Result<String> {
     let mut session = Session {
         study: &study,
         graphics,
-        benches,
+        workbenches,
         total,
         done: total - todo.len(),
     };
@@ -167,7 +167,7 @@ enum Ended {
 struct Session<'a> {
     study: &'a StudyFolder,
     graphics: TerminalGraphics,
-    benches: Vec<(DatabaseSpec, Workbench)>,
+    workbenches: Vec<(DatabaseSpec, Workbench)>,
     total: usize,
     done: usize,
 }
@@ -288,8 +288,8 @@ impl Session<'_> {
             .ok_or_else(|| Error::input(format!("the study has no avatar {id}")))?;
         let recipe = self.study.recipe(avatar)?;
         let spec = self.study.category(avatar).database.clone();
-        let bench = self
-            .benches
+        let workbench = self
+            .workbenches
             .iter()
             .position(|(s, _)| *s == spec)
             .expect("every category's database was opened");
@@ -297,7 +297,7 @@ impl Session<'_> {
             id,
             position: self.done + 1,
             recipe,
-            bench,
+            workbench,
             since: Instant::now(),
             yaw: 0.0,
             pitch: 0.0,
@@ -379,7 +379,10 @@ impl Session<'_> {
             height: full.1.max(8),
             exact: true,
         };
-        Ok(self.benches[showing.bench].1.render(&request)?.image)
+        Ok(self.workbenches[showing.workbench]
+            .1
+            .render(&request)?
+            .image)
     }
 }
 

@@ -88,12 +88,12 @@ pub struct RenderWorker {
 
 impl RenderWorker {
     /// Starts the worker on a workbench.
-    pub fn spawn(bench: Workbench) -> Self {
+    pub fn spawn(workbench: Workbench) -> Self {
         let mailbox = Arc::new((Mutex::new(Mailbox::default()), Condvar::new()));
         let (tx, replies) = channel();
         let handle = {
             let mailbox = Arc::clone(&mailbox);
-            std::thread::spawn(move || work(bench, &mailbox, &tx))
+            std::thread::spawn(move || work(workbench, &mailbox, &tx))
         };
         Self {
             mailbox,
@@ -138,7 +138,7 @@ enum Job {
     Task(Task),
 }
 
-fn work(mut bench: Workbench, mailbox: &(Mutex<Mailbox>, Condvar), replies: &Sender<Reply>) {
+fn work(mut workbench: Workbench, mailbox: &(Mutex<Mailbox>, Condvar), replies: &Sender<Reply>) {
     loop {
         let job = {
             let (lock, cv) = mailbox;
@@ -157,8 +157,8 @@ fn work(mut bench: Workbench, mailbox: &(Mutex<Mailbox>, Condvar), replies: &Sen
             }
         };
         let reply = match job {
-            Job::Frame(f) => draw(&mut bench, f),
-            Job::Task(task) => run_task(&mut bench, task),
+            Job::Frame(f) => draw(&mut workbench, f),
+            Job::Task(task) => run_task(&mut workbench, task),
         };
         if replies.send(reply).is_err() {
             return;
@@ -166,8 +166,8 @@ fn work(mut bench: Workbench, mailbox: &(Mutex<Mailbox>, Condvar), replies: &Sen
     }
 }
 
-fn draw(bench: &mut Workbench, job: FrameJob) -> Reply {
-    match bench.render(&job.request) {
+fn draw(workbench: &mut Workbench, job: FrameJob) -> Reply {
+    match workbench.render(&job.request) {
         Ok(result) => {
             let t = Instant::now();
             let encoded = job.target.encode(&result.image).unwrap_or_default();
@@ -184,11 +184,11 @@ fn draw(bench: &mut Workbench, job: FrameJob) -> Reply {
     }
 }
 
-fn run_task(bench: &mut Workbench, task: Task) -> Reply {
+fn run_task(workbench: &mut Workbench, task: Task) -> Reply {
     match task {
         Task::Effect(effect, asked) => {
             let (recipe, view) = *asked;
-            match perform(&effect, &recipe, &view, bench, &|p| PathBuf::from(p)) {
+            match perform(&effect, &recipe, &view, workbench, &|p| PathBuf::from(p)) {
                 Ok(done) => Reply::Done {
                     message: done.message,
                     saved_recipe: matches!(effect, Effect::SaveRecipe(_)),
@@ -199,14 +199,14 @@ fn run_task(bench: &mut Workbench, task: Task) -> Reply {
                 },
             }
         }
-        Task::Pivot(view) => match bench.centre_depth(&view) {
+        Task::Pivot(view) => match workbench.centre_depth(&view) {
             Ok(depth) => Reply::Pivot(view.recipe.camera, depth),
             Err(e) => Reply::Failed(format!("cannot find the depth at the centre: {e}")),
         },
         Task::Thumbnails(requests) => {
             let mut out = Vec::new();
             for (request, target) in requests {
-                match bench.render(&request) {
+                match workbench.render(&request) {
                     Ok(frame) => {
                         let encoded = target.encode(&frame.image).unwrap_or_default();
                         out.push((frame.image, encoded));

@@ -22,9 +22,9 @@ use crate::train::hole_metrics::{
 use crate::train::holes::HoleFilling;
 use crate::train::holes::Obscurer;
 use crate::train::model::{Render, Trainable};
+use crate::train::posing::training_arc;
 use crate::train::project::TrainCamera;
 use crate::train::raster::Rasterizer;
-use crate::train::trainer::training_arc;
 
 /// Arguments of `visage bench holes`.
 #[derive(Args, Debug, Clone)]

@@ -26,7 +26,7 @@ use crate::train::composite_eval::OPEN_MOUTH_DEG;
 use crate::train::holes::HoleFilling;
 use crate::train::model::Trainable;
 use crate::train::project::TrainCamera;
-use crate::train::trainer::{evaluate_view, Target};
+use crate::train::target::{evaluate_view, Target};
 
 /// Arguments of `visage bench mouth`.
 #[derive(Args, Debug, Clone)]

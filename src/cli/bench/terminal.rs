@@ -76,17 +76,17 @@ fn encode_frame(
                     let area = f.area();
                     draw_halfblocks(f.buffer_mut(), area, image)
                 })
-                .map_err(|e| Error::input(e.to_string()))?;
+                .map_err(|e| Error::terminal(e.to_string()))?;
             halfblocks.1.take()
         }
         Protocol::Kitty => encode_kitty(image, cells, KittyTransport::Zlib)
-            .map_err(|e| Error::input(e.to_string()))?,
-        Protocol::Iterm2 => encode_iterm2(image, cells)?,
+            .map_err(|e| Error::terminal(e.to_string()))?,
+        Protocol::Iterm2 => encode_iterm2(image, cells).map_err(Error::terminal)?,
         Protocol::Sixel => {
             if (image.width, image.height) != full {
-                encode_sixel(&image.resized(full.0, full.1))?
+                encode_sixel(&image.resized(full.0, full.1)).map_err(Error::terminal)?
             } else {
-                encode_sixel(image)?
+                encode_sixel(image).map_err(Error::terminal)?
             }
         }
     })
@@ -126,7 +126,7 @@ pub fn run(args: &TerminalBenchArgs) -> Result<()> {
         };
         let collector = Collector::default();
         let terminal = Terminal::with_options(CrosstermBackend::new(collector.clone()), options)
-            .map_err(|e| Error::input(e.to_string()))?;
+            .map_err(|e| Error::terminal(e.to_string()))?;
         let mut halfblocks = (terminal, collector);
         for protocol in PROTOCOLS {
             let full = match protocol {

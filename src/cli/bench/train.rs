@@ -17,9 +17,9 @@ use crate::render::Backend;
 use crate::train::capture::{capture, CaptureOptions};
 use crate::train::dataset::Dataset;
 use crate::train::model::gradient_check;
-use crate::train::trainer::{
-    evaluate_view, load_target, timestep_frames, Target, TrainOptions, Trainer,
-};
+use crate::train::posing::timestep_frames;
+use crate::train::target::{evaluate_view, load_target, Target};
+use crate::train::trainer::{TrainOptions, Trainer};
 use std::collections::BTreeMap;
 
 /// Arguments of `visage bench train`.

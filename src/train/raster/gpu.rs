@@ -1,5 +1,5 @@
 //! The training rasteriser on wgpu: the forward and backward passes of
-//! [`super::raster`] as two kernels (`shaders/train_forward.wgsl`,
+//! [`super::cpu`] as two kernels (`shaders/train_forward.wgsl`,
 //! `shaders/train_backward.wgsl`) in f32. Binning stays on the host (the same
 //! tile lists as the CPU pass); the backward writes one gradient slot per list
 //! entry, summed by the workgroup in a fixed order, and the host adds a
@@ -8,7 +8,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::raster::{bin, Backdrop, Rasterized, Splat, SplatGrad, TILE};
+use super::splat::{bin, Backdrop, Rasterized, Splat, SplatGrad, TILE};
 use crate::error::{Error, Result};
 use crate::render::gpu::constants::SPLAT_GRAD_FLOATS;
 use crate::render::gpu::device::{
@@ -185,7 +185,7 @@ impl GpuRaster {
     }
 
     /// Draws the splats over `backdrop` (the CPU pass's
-    /// [`super::raster::forward`], in f32).
+    /// [`super::cpu::forward`], in f32).
     pub fn forward(
         &mut self,
         splats: &[Splat],
@@ -235,7 +235,7 @@ impl GpuRaster {
     }
 
     /// ∂loss/∂ every splat, given ∂loss/∂ the image (the CPU pass's
-    /// [`super::raster::backward`], in f32, summed on the host in f64).
+    /// [`super::cpu::backward`], in f32, summed on the host in f64).
     pub fn backward(
         &mut self,
         splats: &[Splat],
@@ -294,7 +294,7 @@ impl GpuRaster {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::raster::{backward, forward};
+    use crate::train::raster::cpu::{backward, forward};
     use rand::{Rng, SeedableRng};
 
     /// Splats over several tiles and partial edge tiles: elongated and round,
@@ -382,7 +382,7 @@ mod tests {
 
     /// A layer at depth 2.5 over the left half, coloured per pixel.
     fn layered(size: [u32; 2]) -> Backdrop {
-        let mut b = crate::train::raster::test_layered_backdrop(size);
+        let mut b = crate::train::raster::splat::test_layered_backdrop(size);
         for stop in b.stop.iter_mut().filter(|s| s.is_finite()) {
             *stop = 2.5;
         }
