@@ -1,23 +1,11 @@
-//! visage: compose photo-realistic, animatable Gaussian head avatars from a
-//! database of existing ones, in the terminal.
-//!
-//! Architecture (docs/architecture.md; data flows one way, imports only point
-//! down): `text`, `error` → `model`, `avatar`, `scene`, `io` (data and formats)
-//! → `compose` (the method) → `render` → `pipeline` (recipe → image) →
-//! `editor` (commands, state, sessions, replay) → the front ends `tui` and
-//! `cli`. `tests/architecture.rs` checks the order.
+//! visage: compose photo-realistic, animatable Gaussian head avatars in the
+//! terminal. This crate holds the front ends — the interactive terminal
+//! runtime (`tui`) and the command line (`cli`) — over the workspace's layers
+//! (`crates/`), which it re-exports so `visage::model`, `visage::render`, …
+//! name every layer from one place.
 
-pub mod avatar;
+pub use visage_editor::*;
+pub use visage_train::*;
+
 pub mod cli;
-pub mod compose;
-pub mod editor;
-pub mod error;
-pub mod io;
-pub mod model;
-pub mod pipeline;
-pub mod render;
-pub mod scene;
-pub mod study;
-pub mod text;
-pub mod train;
 pub mod tui;

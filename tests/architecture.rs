@@ -24,9 +24,14 @@ fn rust_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
     }
 }
 
-/// The top-level module a source file belongs to (None for lib.rs / main.rs).
+/// The top-level module a source file belongs to (None for a crate's lib.rs
+/// or main.rs): the first component after the crate's `src/`.
 fn module_of(path: &Path) -> Option<String> {
-    let rel = path.strip_prefix("src").unwrap();
+    let rel: std::path::PathBuf = path
+        .components()
+        .skip_while(|c| c.as_os_str() != "src")
+        .skip(1)
+        .collect();
     let first = rel
         .components()
         .next()?
@@ -54,6 +59,9 @@ fn crate_paths(text: &str) -> Vec<String> {
 fn imports_only_point_down_and_front_end_crates_stay_in_front() {
     let mut files = Vec::new();
     rust_files(Path::new("src"), &mut files);
+    for krate in std::fs::read_dir("crates").unwrap() {
+        rust_files(&krate.unwrap().path().join("src"), &mut files);
+    }
     let rank = |m: &str| LAYERS.iter().position(|l| *l == m);
     let mut problems = Vec::new();
     for file in &files {

@@ -17,7 +17,6 @@ use super::stats::emit;
 use super::train::{held_out_targets, train_to_end, BenchDataset};
 use crate::cli::values::parse_size;
 use crate::error::Result;
-use crate::io::avatar::read_flame_params;
 use crate::model::head::{HeadModel, Joint};
 use crate::model::open_mouth::{open_rim, region_vertices, with_mouth_cavity};
 use crate::model::regions::{Group, Region};
@@ -25,6 +24,7 @@ use crate::render::Backend;
 use crate::train::composite_eval::OPEN_MOUTH_DEG;
 use crate::train::holes::HoleFilling;
 use crate::train::model::Trainable;
+use crate::train::posing::{posed_vertices, timestep_params};
 use crate::train::project::TrainCamera;
 use crate::train::target::{evaluate_view, Target};
 
@@ -122,11 +122,10 @@ fn view_mouths(
     targets
         .iter()
         .map(|t| {
-            let path = &dataset.flame_params[&t.view.timestep];
-            let params = read_flame_params(path, "dataset", head)?;
-            let (expression, pose) = params.motion.frame(0);
+            let params = timestep_params(dataset, head, t.view.timestep)?;
+            let (_, pose) = params.motion.frame(0);
             let jaw = (pose.joints[Joint::Jaw as usize].length() as f64).to_degrees();
-            let posed = head.forward(&params.shape, Some(&params.static_offset), expression, pose);
+            let posed = posed_vertices(&params, head);
             Ok(ViewMouth {
                 open: jaw >= OPEN_MOUTH_DEG,
                 bounds: mouth_box(head, &posed, &t.camera),

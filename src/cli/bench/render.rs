@@ -12,7 +12,7 @@ use super::render_report::{
     print_tables, FrameFigures, KnobRow, RenderReport, RendererReport, SizeOutcome, SizeRow,
 };
 use super::scene::{bench_scene, SceneSource, SCENE_SIZES};
-use super::stats::{emit, ms_since, open_or_skip, peak_rss_mb, summarize, time_frames, Rounds};
+use super::stats::{emit, ms_since, open_and_upload, peak_rss_mb, summarize, time_frames, Rounds};
 use crate::cli::compose::{build, build_from};
 use crate::cli::values::parse_size;
 use crate::cli::DbArgs;
@@ -241,16 +241,13 @@ fn bench_composite(args: &RenderBenchArgs, rounds: Rounds) -> Result<RenderRepor
     let mut renderers = Vec::new();
     let mut skipped = Vec::new();
     for &backend in &args.renderers {
-        let t = Instant::now();
-        let opened = Painter::open(backend);
-        let Some(mut painter) = open_or_skip(opened, backend, args.renderers.len(), &mut skipped)?
+        let asked = args.renderers.len();
+        let upload = |painter: &mut Painter| painter.upload(&composer);
+        let Some(opened) = open_and_upload(backend, asked, &mut skipped, Painter::open, upload)?
         else {
             continue;
         };
-        let setup_ms = ms_since(t);
-        let t = Instant::now();
-        painter.upload(&composer)?;
-        let gaussian_upload_ms = ms_since(t);
+        let mut painter = opened.renderer;
         let mut rows = Vec::new();
         for (camera, reference, reference_ms) in &references {
             let psnr_db = accuracy(&mut painter, &mut composer, camera, &exact, reference)?;
@@ -296,8 +293,8 @@ fn bench_composite(args: &RenderBenchArgs, rounds: Rounds) -> Result<RenderRepor
         renderers.push(RendererReport {
             renderer: backend,
             device: painter.description(),
-            setup_ms,
-            gaussian_upload_ms,
+            setup_ms: opened.setup_ms,
+            gaussian_upload_ms: opened.upload_ms,
             rows,
             knobs,
         });

@@ -8,7 +8,7 @@ use super::render_report::{
     Drawn, FrameFigures, KnobRow, LodColumns, RenderReport, RendererReport, SceneFacts,
     SizeOutcome, SizeRow,
 };
-use super::stats::{ms_since, open_or_skip, peak_rss_mb, summarize, time_frames, Rounds};
+use super::stats::{ms_since, open_and_upload, peak_rss_mb, summarize, time_frames, Rounds};
 use crate::error::{Error, Result};
 use crate::pipeline::lod::LodScene;
 use crate::render::image::{psnr_report, RgbImage};
@@ -125,16 +125,13 @@ pub fn bench_scene(
     let mut reports = Vec::new();
     let mut skipped = Vec::new();
     for &backend in renderers {
-        let t = Instant::now();
-        let opened = SplatRenderer::open(backend);
-        let Some(mut renderer) = open_or_skip(opened, backend, renderers.len(), &mut skipped)?
-        else {
+        let asked = renderers.len();
+        let upload = |renderer: &mut SplatRenderer| renderer.set_world_scene(&scene);
+        let open = SplatRenderer::open;
+        let Some(opened) = open_and_upload(backend, asked, &mut skipped, open, upload)? else {
             continue;
         };
-        let setup_ms = ms_since(t);
-        let t = Instant::now();
-        renderer.set_world_scene(&scene)?;
-        let gaussian_upload_ms = ms_since(t);
+        let mut renderer = opened.renderer;
         let mut rows = Vec::new();
         for (camera, reference, reference_ms) in &references {
             let mut row = SizeRow {
@@ -172,8 +169,8 @@ pub fn bench_scene(
         reports.push(RendererReport {
             renderer: backend,
             device: renderer.description(),
-            setup_ms,
-            gaussian_upload_ms,
+            setup_ms: opened.setup_ms,
+            gaussian_upload_ms: opened.upload_ms,
             rows,
             knobs,
         });

@@ -155,6 +155,40 @@ pub fn open_or_skip<T>(
     }
 }
 
+/// A renderer opened and given its Gaussians for a benchmark, with the
+/// milliseconds each took.
+pub struct Opened<T> {
+    /// The renderer.
+    pub renderer: T,
+    /// Milliseconds to open it.
+    pub setup_ms: f64,
+    /// Milliseconds to upload the Gaussians.
+    pub upload_ms: f64,
+}
+
+/// Opens `backend` with `open` and loads it with `upload`, timing both; a
+/// missing device is skipped as [`open_or_skip`] says.
+pub fn open_and_upload<T>(
+    backend: Backend,
+    asked: usize,
+    skipped: &mut Vec<Skipped>,
+    open: impl FnOnce(Backend) -> Result<T>,
+    upload: impl FnOnce(&mut T) -> Result<()>,
+) -> Result<Option<Opened<T>>> {
+    let t = Instant::now();
+    let Some(mut renderer) = open_or_skip(open(backend), backend, asked, skipped)? else {
+        return Ok(None);
+    };
+    let setup_ms = ms_since(t);
+    let t = Instant::now();
+    upload(&mut renderer)?;
+    Ok(Some(Opened {
+        renderer,
+        setup_ms,
+        upload_ms: ms_since(t),
+    }))
+}
+
 /// Prints the renderers a benchmark skipped, and why.
 pub fn print_skipped(skipped: &[Skipped]) {
     for s in skipped {

@@ -103,6 +103,15 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     std::fs::write(path, bytes).map_err(|e| FileError::access("write", path, e))
 }
 
+/// A file of the repository's `tests/data/` (the fixtures made by other
+/// tools), for unit tests whatever crate folder they run in.
+#[cfg(test)]
+pub fn test_data(relative: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/data")
+        .join(relative)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -144,7 +144,7 @@ impl LodTree {
 }
 
 /// A drawn node's opacity for one camera (see [`LodTree::gather`]).
-pub(crate) struct DrawnOpacity {
+pub struct DrawnOpacity {
     view: glam::Mat4,
     focal: f64,
     near: f64,

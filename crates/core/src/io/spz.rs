@@ -422,7 +422,7 @@ mod tests {
     use super::*;
 
     fn data(name: &str) -> std::path::PathBuf {
-        Path::new("tests/data/splat").join(name)
+        crate::io::test_data("splat").join(name)
     }
 
     /// The same Gaussians within f32 rounding of the decoders' arithmetic

@@ -1197,7 +1197,7 @@ mod tests {
     #[test]
     fn reads_pickles_written_by_real_numpy_and_scipy() {
         for protocol in [2, 4, 5] {
-            let path = std::path::PathBuf::from(format!("tests/data/real-protocol{protocol}.pkl"));
+            let path = crate::io::test_data(&format!("real-protocol{protocol}.pkl"));
             let v = read(&path).unwrap_or_else(|e| panic!("protocol {protocol}: {e}"));
             let t = v.get("v_template").unwrap().as_array().unwrap();
             assert_eq!(t.shape, vec![4, 3]);
@@ -1297,10 +1297,7 @@ mod tests {
     /// (tests/data/chumpy/make_chumpy_flame.py): Ch state holds `set()`.
     #[test]
     fn reads_pickles_written_by_real_chumpy() {
-        let v = read(std::path::Path::new(
-            "tests/data/chumpy/generic_model_p0.pkl",
-        ))
-        .unwrap();
+        let v = read(&crate::io::test_data("chumpy/generic_model_p0.pkl")).unwrap();
         for key in ["shapedirs", "posedirs", "J", "weights"] {
             let Some(Value::Object {
                 class,
@@ -1320,10 +1317,7 @@ mod tests {
             vec![60, 3, 4]
         );
         assert_eq!(v.get("bs_style"), Some(&Value::Str("lbs".into())));
-        let masks = read(std::path::Path::new(
-            "tests/data/chumpy/generic_masks_p0.pkl",
-        ))
-        .unwrap();
+        let masks = read(&crate::io::test_data("chumpy/generic_masks_p0.pkl")).unwrap();
         let ring = masks
             .get("lip_outside_ring_lower")
             .unwrap()
@@ -1339,12 +1333,12 @@ mod tests {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(42);
         let files = [
-            "tests/data/real-protocol2.pkl",
-            "tests/data/real-protocol5.pkl",
-            "tests/data/chumpy/generic_masks_p0.pkl",
+            "real-protocol2.pkl",
+            "real-protocol5.pkl",
+            "chumpy/generic_masks_p0.pkl",
         ];
         for file in files {
-            let original = std::fs::read(file).unwrap();
+            let original = std::fs::read(crate::io::test_data(file)).unwrap();
             for _ in 0..400 {
                 let mut bytes = original.clone();
                 match rng.random_range(0..3) {

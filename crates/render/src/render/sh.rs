@@ -28,6 +28,7 @@ pub const C3: [f64; 7] = [
 /// Defines an SH basis function for one number type (f64 for the reference,
 /// f32 for the CPU renderer, the trainer's dual numbers): the same
 /// polynomials, written once. `$constant` turns an f64 constant into the type.
+#[macro_export]
 macro_rules! sh_basis {
     ($(#[doc = $doc:expr])* $name:ident, $t:ty, $constant:expr) => {
         $(#[doc = $doc])*
@@ -69,7 +70,7 @@ macro_rules! sh_basis {
         }
     };
 }
-pub(crate) use sh_basis;
+pub use crate::sh_basis;
 
 sh_basis!(
     /// The SH basis functions for direction `d` (unit), up to `degree`.

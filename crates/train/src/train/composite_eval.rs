@@ -19,6 +19,7 @@ use super::hole_metrics::lab;
 use super::holes::Obscurer;
 use super::loss::ssim_map;
 use super::model::{Render, Trainable, SH_STRIDE};
+use super::posing::{posed_vertices, timestep_params};
 use super::project::TrainCamera;
 use super::raster::Rasterizer;
 use super::sitter::Sitter;
@@ -30,7 +31,6 @@ use crate::compose::recipe::{
     AnimationMode, ColourCorrection, PostProcess, Recipe, ResolvedRecipe, Smoothing,
 };
 use crate::error::{Error, Result};
-use crate::io::avatar::read_flame_params;
 use crate::model::head::{HeadModel, Joint, Pose};
 use crate::model::regions::{Group, Region};
 use crate::render::image::RgbImage;
@@ -336,15 +336,9 @@ fn timesteps(
         if out.contains_key(&view.timestep) {
             continue;
         }
-        let path = dataset.flame_params.get(&view.timestep).ok_or_else(|| {
-            Error::input(format!(
-                "timestep {} has no FLAME parameters",
-                view.timestep
-            ))
-        })?;
-        let params = read_flame_params(path, "dataset", model)?;
+        let params = timestep_params(dataset, model, view.timestep)?;
+        let truth = posed_vertices(&params, model);
         let (expression, pose) = params.motion.frame(0);
-        let truth = model.forward(&params.shape, Some(&params.static_offset), expression, pose);
         out.insert(
             view.timestep,
             Timestep {

@@ -216,7 +216,7 @@ mod tests {
     /// SH-degree-3 output; other files fall back.
     #[test]
     fn fast_path_matches_the_general_reader() {
-        let ring = Path::new("tests/data/splat/ring.ply");
+        let ring = &crate::io::test_data("splat/ring.ply");
         let fast = read_fast(ring, &|_, _| {})
             .unwrap()
             .expect("plyfile's float32 PLY takes the fast path");

@@ -28,11 +28,7 @@ pub fn training_arc(
         .map(|v| v.timestep)
         .min()
         .ok_or_else(|| Error::input(format!("{} has no training views", dataset.root.display())))?;
-    let path = dataset
-        .flame_params
-        .get(&first)
-        .ok_or_else(|| Error::input(format!("timestep {first} has no FLAME parameters")))?;
-    let posed = posed_vertices(&read_flame_params(path, "dataset", head)?, head);
+    let posed = posed_vertices(&timestep_params(dataset, head, first)?, head);
     let cameras = dataset
         .train
         .iter()
@@ -84,8 +80,21 @@ pub fn camera_extent(views: &[View]) -> f64 {
         .max(1e-3)
 }
 
+/// One timestep's FLAME parameters, read from the dataset.
+pub fn timestep_params(
+    dataset: &Dataset,
+    head: &HeadModel,
+    timestep: usize,
+) -> Result<FlameParams> {
+    let path = dataset
+        .flame_params
+        .get(&timestep)
+        .ok_or_else(|| Error::input(format!("timestep {timestep} has no FLAME parameters")))?;
+    Ok(read_flame_params(path, "dataset", head)?)
+}
+
 /// The posed vertices of one timestep's FLAME parameters.
-fn posed_vertices(params: &FlameParams, head: &HeadModel) -> Vec<Vec3> {
+pub fn posed_vertices(params: &FlameParams, head: &HeadModel) -> Vec<Vec3> {
     let (expression, pose) = params.motion.frame(0);
     head.forward(&params.shape, Some(&params.static_offset), expression, pose)
 }
@@ -106,13 +115,7 @@ pub fn timestep_frames(
         if frames.contains_key(&view.timestep) {
             continue;
         }
-        let path = dataset.flame_params.get(&view.timestep).ok_or_else(|| {
-            Error::input(format!(
-                "timestep {} has no FLAME parameters",
-                view.timestep
-            ))
-        })?;
-        let params = read_flame_params(path, "dataset", head)?;
+        let params = timestep_params(dataset, head, view.timestep)?;
         frames.insert(view.timestep, pose(&params, head));
     }
     Ok(frames)

@@ -369,7 +369,7 @@ mod tests {
     #[test]
     fn reads_what_splat_transform_writes() {
         for (name, degree) in [("ring", 0u8), ("ring3", 3)] {
-            let dir = std::path::Path::new("tests/data/splat");
+            let dir = crate::io::test_data("splat");
             let original =
                 crate::io::ply::read_splat_ply(&dir.join(format!("{name}.ply"))).unwrap();
             let bytes = std::fs::read(dir.join(format!("{name}.compressed.ply"))).unwrap();
@@ -423,7 +423,7 @@ mod tests {
     /// tool's decoding of visage's ring3.visage.compressed.ply).
     #[test]
     fn splat_transform_reads_what_visage_writes() {
-        let dir = std::path::Path::new("tests/data/splat");
+        let dir = crate::io::test_data("splat");
         let ours = std::fs::read(dir.join("ring3.visage.compressed.ply")).unwrap();
         let original = crate::io::ply::read_splat_ply(&dir.join("ring3.ply")).unwrap();
         assert_eq!(
@@ -465,7 +465,7 @@ mod tests {
 
     #[test]
     fn broken_compressed_files_are_named() {
-        let bytes = std::fs::read("tests/data/splat/ring.compressed.ply").unwrap();
+        let bytes = std::fs::read(crate::io::test_data("splat/ring.compressed.ply")).unwrap();
         let text = String::from_utf8_lossy(&bytes[..600]).to_string();
         let lying = text.replacen("element chunk 1", "element chunk 2", 1);
         let mut broken = lying.into_bytes();

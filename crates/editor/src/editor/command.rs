@@ -964,7 +964,9 @@ mod tests {
     /// everything listed is a command.
     #[test]
     fn the_readme_lists_every_command() {
-        let readme = std::fs::read_to_string("README.md").unwrap();
+        let readme =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../README.md"))
+                .unwrap();
         let section = readme
             .split("### Commands")
             .nth(1)

@@ -177,8 +177,8 @@ mod tests {
     /// within one unit of ply2splat's (it rounds where ply2splat truncates).
     #[test]
     fn reads_and_writes_splat_like_ply2splat() {
-        let ply = crate::io::ply::read_splat_ply(Path::new("tests/data/splat/ring.ply")).unwrap();
-        let theirs = std::fs::read("tests/data/splat/ring.splat").unwrap();
+        let ply = crate::io::ply::read_splat_ply(&crate::io::test_data("splat/ring.ply")).unwrap();
+        let theirs = std::fs::read(crate::io::test_data("splat/ring.splat")).unwrap();
         let splat = parse_splat(&theirs).unwrap();
         assert_eq!((splat.len(), splat.sh_degree), (200, 0));
         for i in 0..ply.len() {

@@ -18,7 +18,7 @@ use crate::error::Result;
 
 /// What both renderers check before a frame: something is uploaded, there
 /// are frames to place it on; returns the uploaded data and the image size.
-pub(crate) fn frame_inputs<'a, T>(
+pub fn frame_inputs<'a, T>(
     uploaded: Option<&'a T>,
     frames: &[TriangleFrame],
     camera: &crate::scene::camera::Camera,
