@@ -309,10 +309,16 @@ fn builtin_composites_export_and_reload_on_the_builtin_head() {
 /// flame_param.npz) on a file and returns its JSON summary (under
 /// [`common::python`]).
 fn gaussian_avatars_reads(npz: &Path) -> serde_json::Value {
+    let out = python_script("tests/data/check_flame_param.py", &[npz]);
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Runs a numpy script of tests/data (under [`common::python`]); it must succeed.
+fn python_script(script: &str, args: &[&Path]) -> std::process::Output {
     let python = common::python();
     let out = Command::new(&python)
-        .arg("tests/data/check_flame_param.py")
-        .arg(npz)
+        .arg(script)
+        .args(args)
         .output()
         .unwrap_or_else(|e| panic!("{python}: {e} (bash .ci/setup installs python3-numpy)"));
     assert!(
@@ -320,7 +326,7 @@ fn gaussian_avatars_reads(npz: &Path) -> serde_json::Value {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    serde_json::from_slice(&out.stdout).unwrap()
+    out
 }
 
 /// Damages a copy of an avatar folder.
@@ -466,13 +472,13 @@ fn hostile_and_broken_files_fail_cleanly() {
                 for (name, a) in &arrays {
                     let mut data: Vec<f32> = a.data.iter().map(|&x| x as f32).collect();
                     if name == "dynamic_offset" {
-                        data[7] = 1e-3;
+                        data[7] = f32::NAN;
                     }
                     encoded.push((name.as_str(), write_npy(&a.shape, NpyData::F32(&data))));
                 }
                 write_npz(&path, &encoded, true).unwrap();
             }),
-            "'dynamic_offset' is not zero",
+            "'dynamic_offset' has NaN or infinite values",
         ),
     ];
     for (name, break_it, needle) in cases {
@@ -616,6 +622,7 @@ fn one_avatar_db(name: &str, model: &visage::model::head::HeadModel) -> PathBuf 
     let frames = [FrameParams {
         expression: vec![0.0; 100],
         pose: visage::model::head::Pose::REST,
+        offset: Vec::new(),
     }];
     write_avatar(
         &root.join("solo"),
@@ -845,4 +852,133 @@ fn open_mouthed_flame_models_get_a_cavity_that_files_never_see() {
         info["model"]["mouth_cavity"]["triangles"],
         head.triangle_count() - cavity.first_triangle
     );
+}
+
+/// Runs tests/data/dynamic_offset.py (numpy's own np.load / np.savez).
+fn dynamic_offset_py(args: &[&Path]) -> std::process::Output {
+    python_script("tests/data/dynamic_offset.py", args)
+}
+
+/// A tracked sequence with per-frame offsets (`dynamic_offset` (T, V, 3)
+/// not zero, written by numpy as VHAP's exporter writes it) loads; each
+/// frame's offsets are added to the unposed mesh before skinning (at a
+/// frame at rest the posed mesh moves by exactly the offsets), the source's
+/// motion carries them to a composite, and an export writes them back bit
+/// for bit.
+#[test]
+fn per_frame_offsets_written_by_numpy_load_pose_and_export() {
+    use visage::compose::engine::{Engine, PosedMesh};
+    use visage::compose::recipe::Recipe;
+    let f = fixtures();
+    let first = std::fs::read_dir(&f.avatars)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .min()
+        .unwrap();
+    let db = temp("tracked-db");
+    let avatar = db.join("tracked");
+    std::fs::create_dir_all(&avatar).unwrap();
+    std::fs::copy(
+        first.join("point_cloud.ply"),
+        avatar.join("point_cloud.ply"),
+    )
+    .unwrap();
+    let npz = avatar.join("flame_param.npz");
+    dynamic_offset_py(&[Path::new("write"), &first.join("flame_param.npz"), &npz]);
+
+    let mut args = vec!["info".to_string(), "--json".into()];
+    args.extend(db_args(f).into_iter().skip(2));
+    args.extend(["--db".into(), db.display().to_string()]);
+    ok_json(args);
+
+    let loaded =
+        visage::io::folder::load_folder(&db, Some((f.model.as_path(), f.masks.as_path()))).unwrap();
+    let motion = loaded.motions[loaded.motion_index("tracked").unwrap()].clone();
+    assert_eq!(motion.offsets.len(), motion.frames());
+    let model = loaded.model.clone();
+    let file_vertices = model.file_vertex_count();
+    // The pattern the script wrote, at frame 1.
+    let expected = |i: usize| {
+        let (t, i) = (1.0f64, i as f64);
+        glam::Vec3::new(
+            (1e-3 * (0.7 * t + 0.013 * i).sin()) as f32,
+            (5e-4 * (0.3 * t - 0.021 * i).cos()) as f32,
+            (2e-4 * (t + 1.0)) as f32,
+        )
+    };
+    for i in [0, 1, 777, file_vertices - 1] {
+        assert!((motion.offsets[1][i] - expected(i)).abs().max_element() < 1e-9);
+    }
+
+    // Frame 1 is at rest: the offsets move the posed mesh by themselves.
+    let neutral = loaded.sources[0].neutral(&model);
+    let (expression, pose) = motion.frame(1);
+    let (mut plain, mut offset) = (Vec::new(), Vec::new());
+    model.pose(&neutral, expression, pose, &mut plain);
+    model.pose_offset(
+        &neutral,
+        expression,
+        pose,
+        motion.frame_offset(1),
+        &mut offset,
+    );
+    for i in 0..file_vertices {
+        let moved = offset[i] - plain[i];
+        assert!(
+            (moved - expected(i)).abs().max_element() < 1e-6,
+            "vertex {i}: {moved}"
+        );
+    }
+
+    // A composite driven by the tracked motion poses with them.
+    let engine = Engine::new(loaded).unwrap();
+    let mut recipe = Recipe::unedited("tracked");
+    recipe.animation.motion = "tracked".into();
+    let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
+    let mut posed = PosedMesh::default();
+    engine.pose(&composite, 1, &mut posed);
+    let mut without = PosedMesh::default();
+    engine.pose_with(
+        &composite,
+        expression,
+        pose,
+        composite.recipe.mode,
+        &mut without,
+    );
+    let moved = posed.vertices[777] - without.vertices[777];
+    assert!(
+        (moved - expected(777)).abs().max_element() < 1e-6,
+        "{moved}"
+    );
+
+    // Exported as a GaussianAvatars folder, the offsets come back as written.
+    let r = temp("tracked.toml");
+    std::fs::write(
+        &r,
+        "base = \"tracked\"\n[animation]\nmotion = \"tracked\"\n",
+    )
+    .unwrap();
+    let out = temp("tracked-export");
+    let mut args = vec![
+        "export".to_string(),
+        "--recipe".into(),
+        r.display().to_string(),
+        "--format".into(),
+        "gaussian-avatars".into(),
+        "-o".into(),
+        out.display().to_string(),
+    ];
+    args.extend(db_args(f).into_iter().skip(2));
+    args.extend(["--db".into(), db.display().to_string()]);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let exported = out.join("flame_param.npz");
+    gaussian_avatars_reads(&exported);
+    let compared = dynamic_offset_py(&[Path::new("compare"), &npz, &exported]);
+    let summary: serde_json::Value = serde_json::from_slice(&compared.stdout).unwrap();
+    assert_eq!(
+        summary["vertices"].as_u64().unwrap() as usize,
+        file_vertices
+    );
+    assert!(summary["largest"].as_f64().unwrap() > 1e-4);
 }

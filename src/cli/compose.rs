@@ -116,7 +116,12 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
             let frames: Vec<FrameParams> = (0..count)
                 .map(|k| {
                     let (expression, pose) = engine.frame_parameters(&c.recipe, k);
-                    FrameParams { expression, pose }
+                    let offset = engine.frame_offset(&c.recipe, k);
+                    FrameParams {
+                        expression,
+                        pose,
+                        offset: offset.unwrap_or_default().to_vec(),
+                    }
                 })
                 .collect();
             let model = &engine.database().model;

@@ -304,10 +304,20 @@ impl Engine {
         (expression, pose)
     }
 
+    /// The vertex offsets of the recipe's frame (its motion's
+    /// `dynamic_offset`), when the motion has them.
+    pub fn frame_offset(&self, recipe: &ResolvedRecipe, frame: usize) -> Option<&[Vec3]> {
+        recipe
+            .motion
+            .and_then(|m| self.db.motions[m].frame_offset(frame))
+    }
+
     /// Poses the composite at `frame` of its motion, in the recipe's animation mode.
     pub fn pose(&self, composite: &Composite, frame: usize, out: &mut PosedMesh) {
         let (expression, pose) = self.frame_parameters(&composite.recipe, frame);
-        self.pose_with(composite, &expression, &pose, composite.recipe.mode, out);
+        let offset = self.frame_offset(&composite.recipe, frame);
+        let mode = composite.recipe.mode;
+        self.pose_offset_with(composite, &expression, &pose, offset, mode, out);
     }
 
     /// Poses the composite with explicit parameters and mode.
@@ -319,10 +329,25 @@ impl Engine {
         mode: AnimationMode,
         out: &mut PosedMesh,
     ) {
+        self.pose_offset_with(composite, expression, pose, None, mode, out);
+    }
+
+    /// [`Engine::pose_with`] with a frame's vertex offsets (a motion's
+    /// `dynamic_offset`), added to each unposed mesh with the expression.
+    pub fn pose_offset_with(
+        &self,
+        composite: &Composite,
+        expression: &[f32],
+        pose: &Pose,
+        offset: Option<&[Vec3]>,
+        mode: AnimationMode,
+        out: &mut PosedMesh,
+    ) {
         let model = &self.db.model;
         match mode {
             AnimationMode::Fast => {
-                model.pose(&composite.neutral, expression, pose, &mut out.vertices);
+                let neutral = &composite.neutral;
+                model.pose_offset(neutral, expression, pose, offset, &mut out.vertices);
                 out.residual = composite.residual;
             }
             AnimationMode::Exact => {
@@ -332,7 +357,7 @@ impl Engine {
                     .iter()
                     .map(|&f| {
                         let mut v = Vec::new();
-                        model.pose(&self.neutrals[f], expression, pose, &mut v);
+                        model.pose_offset(&self.neutrals[f], expression, pose, offset, &mut v);
                         (f, v)
                     })
                     .collect();

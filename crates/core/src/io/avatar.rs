@@ -231,9 +231,10 @@ pub fn read_flame_params(
         .into());
     }
     let v = model.file_vertex_count();
-    if let Some(d) = arrays.get("dynamic_offset") {
-        check_dynamic_offset(d, frames, v).map_err(label)?;
-    }
+    let offsets = match arrays.get("dynamic_offset") {
+        Some(d) => read_dynamic_offset(d, frames, v, model.mouth_cavity.as_ref()).map_err(label)?,
+        None => Vec::new(),
+    };
     let static_offset = match arrays.get("static_offset") {
         None => vec![DVec3::ZERO; v],
         Some(a) => {
@@ -287,6 +288,7 @@ pub fn read_flame_params(
         fps: 25.0,
         expression: expression.collect(),
         poses,
+        offsets,
     };
     if motion.frames() == 0 {
         return Err(label("'expr' has no frames".into()).into());
@@ -298,12 +300,18 @@ pub fn read_flame_params(
     })
 }
 
-/// Accepts a `dynamic_offset` of shape (T, V, 3) (V with or without the teeth)
-/// that is zero, as every GaussianAvatars run leaves it (its optimisation is
-/// off in GaussianAvatars' training); per-frame offsets that are not zero
-/// would change the avatar's shape frame by frame, which visage does not
-/// animate, so they are refused rather than silently dropped.
-fn check_dynamic_offset(a: &NdArray, frames: usize, vertices: usize) -> Result<(), String> {
+/// Reads a `dynamic_offset` of shape (T, V, 3) or (1, V, 3) (one row for
+/// every frame; V with or without the teeth) as per-frame vertex offsets
+/// for a model of `model_vertices`: none when it is all zero (as every
+/// GaussianAvatars run and VHAP's default tracking leave it), otherwise one
+/// row per frame, the teeth padded with zeros and a mouth cavity following
+/// its anchors as it does for the static offset.
+fn read_dynamic_offset(
+    a: &NdArray,
+    frames: usize,
+    vertices: usize,
+    cavity: Option<&crate::model::cavity::MouthCavity>,
+) -> Result<Vec<Vec<Vec3>>, String> {
     let n = a.shape.get(1).copied().unwrap_or(0);
     let fits = a.shape.len() == 3
         && a.shape[2] == 3
@@ -315,14 +323,29 @@ fn check_dynamic_offset(a: &NdArray, frames: usize, vertices: usize) -> Result<(
             a.shape
         ));
     }
-    match a.data.iter().position(|x| *x != 0.0) {
-        None => Ok(()),
-        Some(i) => Err(format!(
-            "'dynamic_offset' is not zero (frame {}, vertex {}): per-frame offsets are not supported",
+    if let Some(i) = a.data.iter().position(|x| !x.is_finite()) {
+        return Err(format!(
+            "'dynamic_offset' has NaN or infinite values (frame {}, vertex {})",
             i / (3 * n),
             i / 3 % n
-        )),
+        ));
     }
+    if a.data.iter().all(|&x| x == 0.0) {
+        return Ok(Vec::new());
+    }
+    let rows = a.data.chunks(3 * n).map(|row| {
+        let mut offsets: Vec<Vec3> = row
+            .chunks(3)
+            .map(|c| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32))
+            .collect();
+        offsets.resize(vertices, Vec3::ZERO);
+        if let Some(c) = cavity {
+            c.extend_field(&mut offsets);
+        }
+        offsets
+    });
+    let rows: Vec<Vec<Vec3>> = rows.collect();
+    Ok((0..frames).map(|t| rows[t % rows.len()].clone()).collect())
 }
 
 /// One frame of the parameters GaussianAvatars stores.
@@ -331,6 +354,8 @@ pub struct FrameParams {
     pub expression: Vec<f32>,
     /// Joint poses and translation.
     pub pose: Pose,
+    /// The frame's vertex offsets (`dynamic_offset`; empty: zero).
+    pub offset: Vec<Vec3>,
 }
 
 /// What an avatar folder stores besides its Gaussians.
@@ -429,7 +454,8 @@ pub fn write_avatar(
 
 /// Writes FLAME parameters as GaussianAvatars stores them: shape (300),
 /// expr (T, 100), rotation / neck_pose / jaw_pose / translation (T, 3),
-/// eyes_pose (T, 6), static_offset (1, V, 3), dynamic_offset (T, V, 3) zero.
+/// eyes_pose (T, 6), static_offset (1, V, 3), dynamic_offset (T, V, 3)
+/// (each frame's offsets for the file's V vertices, zero where it has none).
 pub fn write_flame_params(path: &Path, params: &AvatarParams) -> super::Result<()> {
     let frames = params.frames;
     let t = frames.len().max(1);
@@ -463,7 +489,12 @@ pub fn write_flame_params(path: &Path, params: &AvatarParams) -> super::Result<(
     let v = params.static_offset.len();
     // GaussianAvatars' loader indexes dynamic_offset[[t]] for every frame t;
     // it is zero in every avatar it trains (deflate makes it small on disk).
-    let dynamic_offset = vec![0.0f32; t * v * 3];
+    let mut dynamic_offset = vec![0.0f32; t * v * 3];
+    for (row, f) in dynamic_offset.chunks_mut(v.max(1) * 3).zip(frames) {
+        for (out, o) in row.chunks_mut(3).zip(&f.offset) {
+            out.copy_from_slice(&o.to_array());
+        }
+    }
     let mut shape = vec![0.0f32; SHAPE_PARAMS];
     for (s, x) in shape.iter_mut().zip(params.shape) {
         *s = *x;
@@ -498,6 +529,37 @@ pub fn write_flame_params(path: &Path, params: &AvatarParams) -> super::Result<(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn offsets(shape: [usize; 3], value: impl Fn(usize) -> f64) -> NdArray {
+        NdArray {
+            shape: shape.to_vec(),
+            dtype: crate::io::pickle::Dtype::F32,
+            data: (0..shape.iter().product()).map(value).collect(),
+        }
+    }
+
+    /// Per-frame offsets: zero is none, one row serves every frame, rows
+    /// without the teeth are padded, and bad shapes and NaN are refused.
+    #[test]
+    fn dynamic_offsets_read_per_frame() {
+        let teeth = super::super::flame::TEETH_VERTICES;
+        let v = teeth + 4;
+        let none = read_dynamic_offset(&offsets([3, v, 3], |_| 0.0), 3, v, None).unwrap();
+        assert!(none.is_empty());
+        let one = read_dynamic_offset(&offsets([1, v, 3], |i| i as f64), 3, v, None).unwrap();
+        assert_eq!(one.len(), 3);
+        assert!(one.iter().all(|row| row == &one[0]));
+        assert_eq!(one[0][1], Vec3::new(3.0, 4.0, 5.0));
+        let short = read_dynamic_offset(&offsets([2, 4, 3], |i| i as f64), 2, v, None).unwrap();
+        assert_eq!(short[1].len(), v);
+        assert_eq!(short[1][0], Vec3::new(12.0, 13.0, 14.0));
+        assert_eq!(short[1][v - 1], Vec3::ZERO);
+        let e = read_dynamic_offset(&offsets([2, v, 3], |_| 1.0), 3, v, None).unwrap_err();
+        assert!(e.contains("expected (3,"), "{e}");
+        let nan = offsets([2, v, 3], |i| if i == 3 * v + 4 { f64::NAN } else { 0.0 });
+        let e = read_dynamic_offset(&nan, 2, v, None).unwrap_err();
+        assert!(e.contains("NaN") && e.contains("frame 1, vertex 1"), "{e}");
+    }
 
     /// One f32 step of `x`.
     fn step(x: f32) -> f32 {

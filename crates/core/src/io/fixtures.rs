@@ -354,6 +354,7 @@ pub fn write_fixtures_with(
                 FrameParams {
                     expression: e.to_vec(),
                     pose: *p,
+                    offset: Vec::new(),
                 }
             })
             .collect();

@@ -213,9 +213,27 @@ impl HeadModel {
     /// Animates a neutral mesh: adds the expression, regresses joints, applies pose
     /// correctives and skins. `out` is resized to the vertex count.
     pub fn pose(&self, neutral: &[Vec3], expression: &[f32], pose: &Pose, out: &mut Vec<Vec3>) {
+        self.pose_offset(neutral, expression, pose, None, out);
+    }
+
+    /// [`HeadModel::pose`] with a frame's vertex offsets (a motion's
+    /// `dynamic_offset`) added to the unposed mesh with the expression, so
+    /// the joints are regressed from it and it is skinned with it, as VHAP's
+    /// FLAME adds them (docs/method.md §9.4).
+    pub fn pose_offset(
+        &self,
+        neutral: &[Vec3],
+        expression: &[f32],
+        pose: &Pose,
+        offset: Option<&[Vec3]>,
+        out: &mut Vec<Vec3>,
+    ) {
         out.clear();
         out.extend_from_slice(neutral);
         self.expression_basis.accumulate(expression, out);
+        for (v, d) in out.iter_mut().zip(offset.unwrap_or_default()) {
+            *v += *d;
+        }
         let joints = self.joints(out);
         let rotations = joint_rotations(pose);
         if let Some(correctives) = &self.pose_correctives {

@@ -20,6 +20,11 @@ pub struct Motion {
     pub expression: Vec<Vec<f32>>,
     /// Joint poses per frame.
     pub poses: Vec<Pose>,
+    /// Per-frame vertex offsets, added to the unposed mesh with the
+    /// expression, before skinning (VHAP's `dynamic_offset`, what FLAME's
+    /// parameters could not fit in a tracked frame): one row per frame, or
+    /// none at all.
+    pub offsets: Vec<Vec<Vec3>>,
 }
 
 impl Motion {
@@ -34,6 +39,13 @@ impl Motion {
         (&self.expression[i], &self.poses[i])
     }
 
+    /// The vertex offsets of a frame, when the motion has them; the
+    /// sequence loops as in [`Motion::frame`].
+    pub fn frame_offset(&self, index: usize) -> Option<&[Vec3]> {
+        let rows = self.offsets.len();
+        (rows > 0).then(|| self.offsets[index % rows].as_slice())
+    }
+
     /// A one-frame motion at rest.
     pub fn rest(expression_count: usize) -> Motion {
         Motion {
@@ -41,6 +53,7 @@ impl Motion {
             fps: 25.0,
             expression: vec![vec![0.0; expression_count]],
             poses: vec![Pose::REST],
+            offsets: Vec::new(),
         }
     }
 }
@@ -174,6 +187,7 @@ pub fn builtin_motion(name: &str, expression_names: &[String], variation: u64) -
         fps: 25.0,
         expression,
         poses,
+        offsets: Vec::new(),
     })
 }
 

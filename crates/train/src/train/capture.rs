@@ -345,7 +345,10 @@ pub fn capture_sitter(
     let mut done = 0u64;
     for (t, &frame) in timesteps.iter().enumerate() {
         let (expression, pose) = motion.frame(frame);
-        let posed = model.forward(&sitter.shape, Some(&sitter.static_offset), expression, pose);
+        let offset = motion.frame_offset(frame);
+        let neutral = model.neutral(&sitter.shape, Some(&sitter.static_offset));
+        let mut posed = Vec::with_capacity(neutral.len());
+        model.pose_offset(&neutral, expression, pose, offset, &mut posed);
         let flame_path = format!("flame_param/{t:05}.npz");
         write_flame_params(
             &out.join(&flame_path),
@@ -355,6 +358,7 @@ pub fn capture_sitter(
                 frames: &[FrameParams {
                     expression: expression.to_vec(),
                     pose: *pose,
+                    offset: offset.unwrap_or_default().to_vec(),
                 }],
             },
         )?;

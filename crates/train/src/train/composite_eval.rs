@@ -323,6 +323,8 @@ fn steps(recipe: &Recipe) -> Vec<(&'static str, Recipe)> {
 struct Timestep {
     expression: Vec<f32>,
     pose: Pose,
+    /// The timestep's vertex offsets (`dynamic_offset`; empty: none).
+    offset: Vec<Vec3>,
     truth: Vec<Vec3>,
 }
 
@@ -344,6 +346,7 @@ fn timesteps(
             Timestep {
                 expression: expression.to_vec(),
                 pose: *pose,
+                offset: params.motion.frame_offset(0).unwrap_or_default().to_vec(),
                 truth,
             },
         );
@@ -449,13 +452,9 @@ fn rgb(image: &[f64], p: usize) -> DVec3 {
 /// The composite posed at a timestep, as the composer animates it.
 fn posed(engine: &Engine, composite: &Composite, t: &Timestep) -> PosedMesh {
     let mut out = PosedMesh::default();
-    engine.pose_with(
-        composite,
-        &t.expression,
-        &t.pose,
-        AnimationMode::Fast,
-        &mut out,
-    );
+    let offset = (!t.offset.is_empty()).then_some(t.offset.as_slice());
+    let mode = AnimationMode::Fast;
+    engine.pose_offset_with(composite, &t.expression, &t.pose, offset, mode, &mut out);
     out
 }
 

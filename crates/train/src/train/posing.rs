@@ -59,6 +59,7 @@ pub fn pose_timesteps(
         flame_frames.push(FrameParams {
             expression: expression.to_vec(),
             pose: *pose,
+            offset: params.motion.frame_offset(0).unwrap_or_default().to_vec(),
         });
         identity.get_or_insert((params.shape.clone(), params.static_offset.clone()));
     }
@@ -96,7 +97,11 @@ pub fn timestep_params(
 /// The posed vertices of one timestep's FLAME parameters.
 pub fn posed_vertices(params: &FlameParams, head: &HeadModel) -> Vec<Vec3> {
     let (expression, pose) = params.motion.frame(0);
-    head.forward(&params.shape, Some(&params.static_offset), expression, pose)
+    let neutral = head.neutral(&params.shape, Some(&params.static_offset));
+    let mut posed = Vec::with_capacity(neutral.len());
+    let offset = params.motion.frame_offset(0);
+    head.pose_offset(&neutral, expression, pose, offset, &mut posed);
+    posed
 }
 
 /// The triangle frames of one timestep's FLAME parameters.
