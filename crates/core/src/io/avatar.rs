@@ -542,7 +542,7 @@ mod tests {
     /// without the teeth are padded, and bad shapes and NaN are refused.
     #[test]
     fn dynamic_offsets_read_per_frame() {
-        let teeth = super::super::flame::TEETH_VERTICES;
+        let teeth = crate::io::flame::TEETH_VERTICES;
         let v = teeth + 4;
         let none = read_dynamic_offset(&offsets([3, v, 3], |_| 0.0), 3, v, None).unwrap();
         assert!(none.is_empty());
