@@ -345,7 +345,11 @@ fn read_dynamic_offset(
         offsets
     });
     let rows: Vec<Vec<Vec3>> = rows.collect();
-    Ok((0..frames).map(|t| rows[t % rows.len()].clone()).collect())
+    if rows.len() == frames {
+        return Ok(rows);
+    }
+    // One row for every frame.
+    Ok(vec![rows[0].clone(); frames])
 }
 
 /// One frame of the parameters GaussianAvatars stores.

@@ -343,10 +343,10 @@ pub fn capture_sitter(
     let total = (test_from * (cameras.len() + 1)
         + (options.frames - test_from) * test_cameras.len()) as u64;
     let mut done = 0u64;
+    let neutral = model.neutral(&sitter.shape, Some(&sitter.static_offset));
     for (t, &frame) in timesteps.iter().enumerate() {
         let (expression, pose) = motion.frame(frame);
         let offset = motion.frame_offset(frame);
-        let neutral = model.neutral(&sitter.shape, Some(&sitter.static_offset));
         let mut posed = Vec::with_capacity(neutral.len());
         model.pose_offset(&neutral, expression, pose, offset, &mut posed);
         let flame_path = format!("flame_param/{t:05}.npz");
