@@ -51,12 +51,26 @@ pub struct CaptureArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Folder to write the dataset into.
-    #[arg(short, long, value_name = "DIR")]
-    output: PathBuf,
+    #[arg(short, long, value_name = "DIR", required_unless_present = "manifest")]
+    output: Option<PathBuf>,
+    /// Capture the datasets of a manifest's subjects that name a built-in
+    /// person (`[subject.capture]`) instead, skipping those already there.
+    #[arg(long, value_name = "TOML", conflicts_with_all = [
+        "output", "recipe", "source", "size", "cameras", "frames", "motion", "ring", "seed",
+    ])]
+    manifest: Option<PathBuf>,
+    #[command(flatten)]
+    shard: super::farm::ShardArgs,
 }
 
 /// Runs `visage capture`.
 pub fn run(args: &CaptureArgs) -> Result<()> {
+    if let Some(manifest) = &args.manifest {
+        return super::farm::capture_manifest(manifest, &args.shard);
+    }
+    let Some(output) = &args.output else {
+        return Err(crate::error::Error::input("give -o DIR, or --manifest"));
+    };
     let start = Instant::now();
     let spec = DatabaseSpec {
         seed: args.seed,
@@ -116,7 +130,7 @@ pub fn run(args: &CaptureArgs) -> Result<()> {
             ring: args.ring,
         },
         &sitter,
-        &args.output,
+        output,
         &|done, all| {
             bar.set_length(all);
             bar.set_position(done);
@@ -131,7 +145,7 @@ pub fn run(args: &CaptureArgs) -> Result<()> {
             None => args.source.clone(),
         },
         summary.timesteps,
-        args.output.display(),
+        output.display(),
         start.elapsed().as_secs_f64()
     );
     Ok(())

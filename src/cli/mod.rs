@@ -7,9 +7,11 @@ mod capture;
 mod clean;
 mod compose;
 mod convert;
+mod database;
 mod db;
 mod edit;
 mod eval_composite;
+mod farm;
 mod info;
 mod lod;
 mod random;
@@ -65,6 +67,8 @@ enum Command {
     Train(train::TrainArgs),
     /// PSNR / SSIM of an avatar on a dataset's held-out views.
     Eval(train::EvalArgs),
+    /// Check and index a database folder; follow a manifest's training across shards.
+    Db(database::DbCommandArgs),
     /// Random composites by the thesis's rules, written as recipes.
     Random(random::RandomArgs),
     /// The perceptual study: build a study folder, run participants, analyse.
@@ -107,6 +111,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Capture(args)) => capture::run(&args),
         Some(Command::Train(args)) => train::run_train(&args),
         Some(Command::Eval(args)) => train::run_eval(&args),
+        Some(Command::Db(args)) => database::run(&args),
         Some(Command::Fixtures(args)) => run_fixtures(&args),
         Some(Command::Edit(args)) => edit::run_edit(&args),
         Some(Command::Replay(args)) => edit::run_replay(&args),

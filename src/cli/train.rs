@@ -9,12 +9,13 @@ use clap::Args;
 use crate::tui::terminal::{signal_name, StopSignal};
 use serde_json::json;
 
+use super::farm::ShardArgs;
 use super::values::parse_size;
 use crate::error::{Error, Result};
 use crate::model::head::HeadModel;
 use crate::render::image::RgbImage;
 use crate::render::Backend;
-use crate::train::dataset::Dataset;
+use crate::train::dataset::{head_model, Dataset};
 use crate::train::hole_metrics::{self, HoleMetrics};
 use crate::train::holes::HoleFilling;
 use crate::train::model::Trainable;
@@ -38,16 +39,8 @@ impl HeadArgs {
     /// was captured from it (or nothing was given).
     fn load(&self, dataset: Option<&Dataset>) -> Result<HeadModel> {
         match (&self.flame, &self.masks) {
-            (Some(f), Some(m)) => Ok(crate::io::flame::load_flame(f, m)?),
-            (None, None) => {
-                if let Some(d) = dataset.filter(|d| d.builtin_source.is_none()) {
-                    return Err(Error::input(format!(
-                        "{} was not captured from the built-in head: give --flame and --masks",
-                        d.root.display()
-                    )));
-                }
-                Ok(crate::model::builtin::build_head())
-            }
+            (Some(f), Some(m)) => head_model(dataset, Some((f, m))),
+            (None, None) => head_model(dataset, None),
             _ => Err(Error::input("--flame and --masks go together")),
         }
     }
@@ -57,12 +50,23 @@ impl HeadArgs {
 #[derive(Args, Debug, Clone)]
 pub struct TrainArgs {
     /// Dataset folder (transforms_{train,val,test}.json, images, FLAME parameters).
-    dataset: PathBuf,
+    #[arg(required_unless_present = "manifest")]
+    dataset: Option<PathBuf>,
     #[command(flatten)]
     head: HeadArgs,
     /// Avatar folder to write (point_cloud.ply + flame_param.npz).
-    #[arg(short, long, value_name = "DIR")]
-    output: PathBuf,
+    #[arg(short, long, value_name = "DIR", required_unless_present = "manifest")]
+    output: Option<PathBuf>,
+    /// Train the subjects of a manifest (TOML) into its database folder
+    /// instead: finished ones are skipped, interrupted ones resume (README
+    /// "Building a database on a cluster").
+    #[arg(long, value_name = "TOML", conflicts_with_all = [
+        "dataset", "output", "flame", "masks", "iterations", "seed", "size", "white_background",
+        "checkpoint_every", "resume", "renderer", "obscuring", "no_interior_layer", "cull_backfaces",
+    ])]
+    manifest: Option<PathBuf>,
+    #[command(flatten)]
+    shard: ShardArgs,
     /// Iterations (one training view each).
     #[arg(long, default_value_t = 3000)]
     iterations: usize,
@@ -127,14 +131,20 @@ impl HoleArgs {
 
 /// Runs `visage train`.
 pub fn run_train(args: &TrainArgs) -> Result<()> {
+    if let Some(manifest) = &args.manifest {
+        return super::farm::train_manifest(manifest, &args.shard);
+    }
+    let (Some(dataset), Some(output)) = (&args.dataset, &args.output) else {
+        return Err(Error::input("give a dataset and -o DIR, or --manifest"));
+    };
     // Ctrl-C, SIGTERM or a hang-up stops at the end of an iteration with a
     // checkpoint, then exits 128 + the signal as shells expect (installed
     // first, so a signal while loading is no crash either).
     let stop = StopSignal::install()?;
-    let dataset = Dataset::load(&args.dataset)?;
+    let dataset = Dataset::load(dataset)?;
     let head = args.head.load(Some(&dataset))?;
     // Fail on an unwritable output before training, not after.
-    std::fs::create_dir_all(&args.output).map_err(|e| Error::io("create", &args.output, e))?;
+    std::fs::create_dir_all(output).map_err(|e| Error::io("create", output, e))?;
     let background = if args.white_background {
         [1.0; 3]
     } else {
@@ -154,15 +164,9 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
         None => Trainer::new(&dataset, head, options)?,
     };
     let iterations = trainer.iterations();
-    let checkpoint = args.output.join("checkpoint.npz");
+    let checkpoint = output.join("checkpoint.npz");
     let first = trainer.iteration();
-    let bar = indicatif::ProgressBar::new(iterations as u64).with_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} [{bar:25}] {pos}/{len} {per_sec} {msg} ({eta} left)",
-        )
-        .expect("the template is valid")
-        .progress_chars("=> "),
-    );
+    let bar = training_bar(iterations, "");
     bar.set_position(first as u64);
     // The rate and the time left count only this run's iterations, not the
     // ones a resumed checkpoint brought.
@@ -172,14 +176,14 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
         if let Some(signal) = stop.received() {
             bar.finish_and_clear();
             trainer.save_checkpoint(&checkpoint)?;
-            trainer.export(&args.output)?;
+            trainer.export(output)?;
             return Err(StopSignal::stopped(
                 signal,
                 format!(
                     "stopped by {} at iteration {} of {iterations}; the avatar so far is in {}; continue with --resume {}",
                     signal_name(signal),
                     trainer.iteration(),
-                    args.output.display(),
+                    output.display(),
                     checkpoint.display()
                 ),
             ));
@@ -201,16 +205,29 @@ pub fn run_train(args: &TrainArgs) -> Result<()> {
         bar.set_position(r.iteration as u64);
     }
     bar.finish_and_clear();
-    trainer.export(&args.output)?;
+    trainer.export(output)?;
     eprintln!(
         "visage: trained {} Gaussians in {:.1} s ({:.1} it/s, training PSNR {:.2} dB); wrote {}",
         trainer.model.len(),
         start.elapsed().as_secs_f64(),
         (iterations - first) as f64 / start.elapsed().as_secs_f64(),
         smoothed.map_or(0.0, |s| s.1),
-        args.output.display()
+        output.display()
     );
     Ok(())
+}
+
+/// The progress bar of a training run (`prefix`: the subject, if any).
+pub(super) fn training_bar(iterations: usize, prefix: &str) -> indicatif::ProgressBar {
+    indicatif::ProgressBar::new(iterations as u64)
+        .with_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} {prefix}[{bar:25}] {pos}/{len} {per_sec} {msg} ({eta} left)",
+            )
+            .expect("the template is valid")
+            .progress_chars("=> "),
+        )
+        .with_prefix(prefix.to_string())
 }
 
 /// Arguments of `visage eval`.

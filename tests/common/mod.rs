@@ -69,3 +69,50 @@ pub fn small_capture(tag: &str, name: &str, size: u32, cameras: u32, frames: u32
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     dir
 }
+
+/// The built-in people the manifest tests train, one subject each.
+pub const MANIFEST_PEOPLE: [&str; 6] = ["ada", "bram", "cleo", "dries", "elif", "femi"];
+
+/// Writes `dir/manifest.toml`: the first `count` of [`MANIFEST_PEOPLE`] as
+/// subjects captured at 48² (3 cameras, 2 timesteps) into `dir/captures/`
+/// and trained for `iterations` at 32² on the CPU (checkpoint every
+/// `checkpoint_every`) into `dir/<output>/`, seeds 1, 2, ….
+pub fn tiny_manifest(
+    dir: &std::path::Path,
+    output: &str,
+    count: usize,
+    iterations: usize,
+    checkpoint_every: usize,
+) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let mut text = format!(
+        "output = \"{output}\"\n[defaults]\niterations = {iterations}\nsize = \"32x32\"\n\
+         checkpoint_every = {checkpoint_every}\nrenderer = \"cpu\"\n"
+    );
+    for (i, person) in MANIFEST_PEOPLE.iter().take(count).enumerate() {
+        text += &format!(
+            "\n[[subject]]\nid = \"{person}\"\ndataset = \"captures/{person}\"\nseed = {}\n\
+             [subject.capture]\nsource = \"{person}\"\nsize = \"48x48\"\ncameras = 3\nframes = 2\n",
+            i + 1
+        );
+    }
+    let path = dir.join(format!("{output}.toml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// The files of a trained avatar that must match byte for byte between runs.
+pub const AVATAR_FILES: [&str; 4] = [
+    "point_cloud.ply",
+    "flame_param.npz",
+    "training.json",
+    "subject.json",
+];
+
+/// Whether two avatar folders hold the same bytes.
+pub fn same_avatar(a: &std::path::Path, b: &std::path::Path) -> bool {
+    AVATAR_FILES.iter().all(|f| {
+        std::fs::read(a.join(f)).ok().is_some()
+            && std::fs::read(a.join(f)).ok() == std::fs::read(b.join(f)).ok()
+    })
+}

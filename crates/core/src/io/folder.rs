@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::avatar::read_avatar;
 use super::flame::load_flame;
@@ -41,30 +41,127 @@ pub fn read_config() -> super::Result<Config> {
     toml::from_str(&text).map_err(|e| format!("{}: {}", path.display(), e.message().trim()).into())
 }
 
-/// Avatar folders in `dir` (sorted by name), or `dir` itself when it is one.
+/// The index `visage db index` writes into a database folder: the avatars
+/// that passed `db check`, which the editor and `study build` then load
+/// (and nothing else in the folder: half-trained work, failed subjects).
+pub const INDEX_FILE: &str = "index.json";
+
+/// What `index.json` holds.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DbIndex {
+    /// `visage-db-index 1`.
+    pub format: String,
+    /// The avatars, in name order.
+    pub avatars: Vec<IndexedAvatar>,
+}
+
+/// One avatar of an index.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct IndexedAvatar {
+    /// Its name (the folder's).
+    pub name: String,
+    /// Gaussians when indexed.
+    pub gaussians: usize,
+    /// Iterations trained, when recorded.
+    pub iterations: Option<usize>,
+    /// Held-out PSNR in dB, when recorded.
+    pub psnr_db: Option<f64>,
+}
+
+/// The index format this version writes and reads.
+pub const INDEX_FORMAT: &str = "visage-db-index 1";
+
+impl DbIndex {
+    /// Reads `dir/index.json`, if there is one.
+    pub fn read(dir: &Path) -> super::Result<Option<DbIndex>> {
+        let path = dir.join(INDEX_FILE);
+        let text = match std::fs::read_to_string(&path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(super::FileError::access("read", &path, e)),
+        };
+        let index: DbIndex = serde_json::from_str(&text)
+            .map_err(|e| format!("{} is not a visage index: {e}", path.display()))?;
+        if index.format != INDEX_FORMAT {
+            return Err(format!(
+                "{} is a '{}', not a '{INDEX_FORMAT}': index the folder again with this visage",
+                path.display(),
+                crate::text::printable(&index.format)
+            )
+            .into());
+        }
+        Ok(Some(index))
+    }
+
+    /// Writes `dir/index.json` by rename, so a loader never reads half.
+    pub fn write(&self, dir: &Path) -> super::Result<()> {
+        let path = dir.join(INDEX_FILE);
+        let partial = dir.join(format!("{INDEX_FILE}.partial-{}", std::process::id()));
+        let text = serde_json::to_string_pretty(self).expect("indexes serialise") + "\n";
+        std::fs::write(&partial, text)
+            .map_err(|e| super::FileError::access("write", &partial, e))?;
+        std::fs::rename(&partial, &path).map_err(|e| super::FileError::access("write", &path, e))
+    }
+}
+
+/// Whether `dir` holds a GaussianAvatars avatar.
+pub fn is_avatar_folder(dir: &Path) -> bool {
+    dir.join("point_cloud.ply").is_file() && dir.join("flame_param.npz").is_file()
+}
+
+/// The folder name as a display name.
+fn name_of(p: &Path) -> String {
+    crate::text::printable(
+        &p.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "avatar".into()),
+    )
+}
+
+/// Every avatar folder directly in `dir` (sorted by name), ignoring hidden
+/// folders (a database's `.work` areas) and any index.
+pub fn scan_avatar_folders(dir: &Path) -> super::Result<Vec<(String, PathBuf)>> {
+    let mut out: Vec<(String, PathBuf)> = std::fs::read_dir(dir)
+        .map_err(|e| super::FileError::access("list", dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| !name_of(p).starts_with('.') && is_avatar_folder(p))
+        .map(|p| (name_of(&p), p))
+        .collect();
+    out.sort();
+    Ok(out)
+}
+
+/// Avatar folders in `dir`: those its index lists when it has one, else
+/// every avatar folder in it (sorted by name), or `dir` itself when it is one.
 pub fn avatar_folders(dir: &Path) -> super::Result<Vec<(String, PathBuf)>> {
     if !dir.is_dir() {
         return Err(format!("database folder {} does not exist", dir.display()).into());
     }
-    let is_avatar =
-        |p: &Path| p.join("point_cloud.ply").is_file() && p.join("flame_param.npz").is_file();
-    let name_of = |p: &Path| {
-        crate::text::printable(
-            &p.file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "avatar".into()),
-        )
-    };
-    if is_avatar(dir) {
+    if is_avatar_folder(dir) {
         return Ok(vec![(name_of(dir), dir.to_path_buf())]);
     }
-    let mut out: Vec<(String, PathBuf)> = std::fs::read_dir(dir)
-        .map_err(|e| super::FileError::access("list", dir, e))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| is_avatar(p))
-        .map(|p| (name_of(&p), p))
-        .collect();
-    out.sort();
+    let out = match DbIndex::read(dir)? {
+        Some(index) => index
+            .avatars
+            .iter()
+            .map(|a| {
+                let path = dir.join(&a.name);
+                if a.name.contains(['/', '\\']) || a.name.starts_with('.') || !is_avatar_folder(&path) {
+                    return Err(format!(
+                        "{} lists '{}', which is not an avatar folder there: run visage db index {} again",
+                        dir.join(INDEX_FILE).display(),
+                        crate::text::printable(&a.name),
+                        dir.display()
+                    )
+                    .into());
+                }
+                Ok((crate::text::printable(&a.name), path))
+            })
+            .collect::<super::Result<Vec<_>>>()?,
+        None => scan_avatar_folders(dir)?,
+    };
     if out.is_empty() {
         return Err(format!(
             "{} holds no GaussianAvatars avatars (folders with point_cloud.ply and flame_param.npz)",

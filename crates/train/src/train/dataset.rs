@@ -14,6 +14,7 @@ use serde_json::Value;
 
 use super::project::TrainCamera;
 use crate::error::{Error, Result};
+use crate::model::head::HeadModel;
 
 /// One image of a split.
 #[derive(Clone, Debug, PartialEq)]
@@ -113,6 +114,32 @@ impl Dataset {
             builtin_source,
             composite,
         })
+    }
+}
+
+/// The head model a dataset trains on: the user's FLAME (model and masks
+/// pickles) or, without one, the built-in head, which only a dataset
+/// `visage capture` made from it may use.
+pub fn head_model(dataset: Option<&Dataset>, flame: Option<(&Path, &Path)>) -> Result<HeadModel> {
+    if let Some((model, masks)) = flame {
+        return Ok(crate::io::flame::load_flame(model, masks)?);
+    }
+    if let Some(d) = dataset {
+        d.check_builtin_head()?;
+    }
+    Ok(crate::model::builtin::build_head())
+}
+
+impl Dataset {
+    /// Refuses the built-in head for a dataset not captured from it.
+    pub fn check_builtin_head(&self) -> Result<()> {
+        if self.builtin_source.is_none() {
+            return Err(Error::input(format!(
+                "{} was not captured from the built-in head: give --flame and --masks",
+                self.root.display()
+            )));
+        }
+        Ok(())
     }
 }
 

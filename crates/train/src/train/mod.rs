@@ -11,6 +11,7 @@ pub mod capture;
 pub mod composite_eval;
 pub mod dataset;
 pub mod dual;
+pub mod farm;
 pub mod hole_metrics;
 pub mod holes;
 pub mod loss;
