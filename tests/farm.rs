@@ -35,6 +35,22 @@ fn run_shard(manifest: &Path, shard: &str) -> Output {
     ])
 }
 
+/// `visage train --manifest M --shard S` started in the background.
+fn spawn_shard(manifest: &Path, shard: &str, stderr: Stdio) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_visage"))
+        .env("NODEVICE_SELECT", "1")
+        .args([
+            "train",
+            "--manifest",
+            manifest.to_str().unwrap(),
+            "--shard",
+            shard,
+        ])
+        .stderr(stderr)
+        .spawn()
+        .unwrap()
+}
+
 fn status_json(manifest: &Path) -> serde_json::Value {
     let o = visage(&["db", "status", manifest.to_str().unwrap(), "--json"]);
     serde_json::from_slice(&o.stdout).expect("db status prints JSON")
@@ -84,18 +100,7 @@ fn a_killed_subject_resumes_to_the_bytes_of_a_plain_run() {
         "1",
     ]));
     // Shard 0 of 2 is ada alone: kill -9 it once a checkpoint is written.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_visage"))
-        .env("NODEVICE_SELECT", "1")
-        .args([
-            "train",
-            "--manifest",
-            manifest.to_str().unwrap(),
-            "--shard",
-            "0/2",
-        ])
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_shard(&manifest, "0/2", Stdio::null());
     let progress = dir.join("db/.work/ada/progress");
     let start = Instant::now();
     loop {
@@ -148,20 +153,7 @@ fn a_killed_subject_resumes_to_the_bytes_of_a_plain_run() {
 fn two_processes_given_one_shard_train_each_subject_once() {
     let dir = fresh("double");
     let manifest = captured(&dir, 3, 60, 20);
-    let spawn = || {
-        Command::new(env!("CARGO_BIN_EXE_visage"))
-            .env("NODEVICE_SELECT", "1")
-            .args([
-                "train",
-                "--manifest",
-                manifest.to_str().unwrap(),
-                "--shard",
-                "0/1",
-            ])
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap()
-    };
+    let spawn = || spawn_shard(&manifest, "0/1", Stdio::piped());
     let (a, b) = (spawn(), spawn());
     let logs: String = [a, b]
         .into_iter()
