@@ -115,9 +115,17 @@ fn a_cancelled_array_task_resumes_and_every_subject_is_trained_once() {
     let dir = temp_path("slurm", "array");
     std::fs::remove_dir_all(&dir).ok();
     std::fs::create_dir_all(dir.join("logs")).unwrap();
-    let manifest = tiny_manifest(&dir, "db", 6, 100, 10);
+    // ada, the subject cancelled, trains longest, so the cancellation lands
+    // long before it could finish.
+    let longer_ada = |path: PathBuf| {
+        let text = std::fs::read_to_string(&path).unwrap();
+        let text = text.replacen("seed = 1\n", "seed = 1\niterations = 300\n", 1);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let manifest = longer_ada(tiny_manifest(&dir, "db", 6, 100, 10));
     // The reference: the same subjects in one process.
-    let reference = tiny_manifest(&dir, "reference", 6, 100, 10);
+    let reference = longer_ada(tiny_manifest(&dir, "reference", 6, 100, 10));
     let m = reference.to_str().unwrap();
     for command in ["capture", "train"] {
         let o = visage(&[command, "--manifest", m]);

@@ -91,6 +91,7 @@ enum Found {
     Ok(AvatarCheck),
     Bad { reason: String },
     Missing,
+    Outdated,
     Failed { reason: String },
     Running { by: String },
 }
@@ -122,19 +123,33 @@ fn check(args: &CheckArgs, write_index: bool) -> Result<()> {
             dir.display()
         )));
     }
-    let head = head(args)?;
-    let mut rows: Vec<Row> = scan_avatar_folders(&dir)?
-        .into_iter()
-        .map(|(name, path)| Row {
-            found: match check_avatar(&path, &head) {
-                Ok(c) => Found::Ok(c),
-                Err(reason) => Found::Bad { reason },
-            },
-            name,
-        })
-        .collect();
+    let default_head = head(args)?;
+    // A manifest's subject is checked on its own FLAME files.
+    let mut heads: Vec<((PathBuf, PathBuf), HeadModel)> = Vec::new();
+    let mut rows = Vec::new();
+    for (name, path) in scan_avatar_folders(&dir)? {
+        let files = manifest
+            .as_ref()
+            .and_then(|m| m.subject(&name))
+            .and_then(|s| s.head_files.clone());
+        let head = match files {
+            None => &default_head,
+            Some(files) => {
+                if !heads.iter().any(|(k, _)| *k == files) {
+                    let model = head_model(None, Some((&files.0, &files.1)))?;
+                    heads.push((files.clone(), model));
+                }
+                &heads.iter().find(|(k, _)| *k == files).expect("loaded").1
+            }
+        };
+        let found = match check_avatar(&path, head) {
+            Ok(c) => Found::Ok(c),
+            Err(reason) => Found::Bad { reason },
+        };
+        rows.push(Row { name, found });
+    }
     if let Some(m) = &manifest {
-        rows.extend(manifest_rows(m, &dir, &rows)?);
+        manifest_rows(m, &dir, &mut rows)?;
     }
     let problems = rows
         .iter()
@@ -177,30 +192,34 @@ fn check(args: &CheckArgs, write_index: bool) -> Result<()> {
     Ok(())
 }
 
-/// The manifest's subjects that have no good avatar in the folder.
-fn manifest_rows(manifest: &Manifest, dir: &Path, rows: &[Row]) -> Result<Vec<Row>> {
-    let present = |id: &str| rows.iter().any(|r| r.name == id);
-    let mut out = Vec::new();
-    for status in manifest_status(
-        &Manifest {
-            output: dir.to_path_buf(),
-            ..manifest.clone()
-        },
-        None,
-    )? {
+/// The manifest's view of the folder: subjects missing, running or failed
+/// are added, avatars trained with options it no longer asks for marked.
+fn manifest_rows(manifest: &Manifest, dir: &Path, rows: &mut Vec<Row>) -> Result<()> {
+    let here = Manifest {
+        output: dir.to_path_buf(),
+        ..manifest.clone()
+    };
+    for status in manifest_status(&here, None)? {
         let found = match status.state {
             State::Done { .. } => continue,
             State::Running { by, .. } => Found::Running { by },
             State::Failed { reason } => Found::Failed { reason },
-            _ if present(&status.id) => continue, // reported by the scan
-            _ => Found::Missing,
+            State::Outdated => Found::Outdated,
+            State::Interrupted { .. } | State::NotStarted => Found::Missing,
         };
-        out.push(Row {
-            name: status.id,
-            found,
-        });
+        match rows.iter_mut().find(|r| r.name == status.id) {
+            // A folder that does not load stays reported as bad.
+            Some(row) if matches!(row.found, Found::Bad { .. }) => {}
+            // Present but not the manifest's finished subject.
+            Some(row) if matches!(found, Found::Missing) => row.found = Found::Outdated,
+            Some(row) => row.found = found,
+            None => rows.push(Row {
+                name: status.id,
+                found,
+            }),
+        }
     }
-    Ok(out)
+    Ok(())
 }
 
 fn print_rows(rows: &[Row]) {
@@ -219,6 +238,10 @@ fn print_rows(rows: &[Row]) {
             ),
             Found::Bad { reason } => println!("{:<24} {:>32}  bad: {reason}", r.name, ""),
             Found::Missing => println!("{:<24} {:>32}  missing", r.name, ""),
+            Found::Outdated => println!(
+                "{:<24} {:>32}  outdated: trained with options the manifest no longer asks for",
+                r.name, ""
+            ),
             Found::Failed { reason } => println!("{:<24} {:>32}  failed: {reason}", r.name, ""),
             Found::Running { by } => println!("{:<24} {:>32}  running ({by})", r.name, ""),
         }

@@ -80,6 +80,16 @@ pub fn train_manifest(path: &Path, args: &ShardArgs) -> Result<()> {
     );
     let mut failed = Vec::new();
     for subject in mine {
+        if let Some(signal) = stop.received() {
+            return Err(StopSignal::stopped(
+                signal,
+                format!(
+                    "stopped by {} before subject {}; run the same command again to continue",
+                    signal_name(signal),
+                    subject.id
+                ),
+            ));
+        }
         let start = Instant::now();
         let (dataset, head) = open_subject(subject, &mut heads)?;
         let bar = training_bar(subject.options.iterations, &format!("{} ", subject.id));

@@ -99,15 +99,51 @@ impl DbFolder {
         self.work(id).join("failed")
     }
 
-    /// Where the avatar is written before it is renamed into place.
+    /// Where this process writes the avatar before renaming it into place.
     pub fn staging(&self, id: &str) -> PathBuf {
-        self.work(id).join("avatar.partial")
+        self.work(id)
+            .join(format!("avatar.partial-{}", std::process::id()))
+    }
+
+    /// Where an outdated avatar waits while its replacement moves in, where
+    /// the two cannot be swapped in one step.
+    fn replaced(&self, id: &str) -> PathBuf {
+        self.work(id).join("replaced")
     }
 
     /// Creates the subject's work area.
     pub fn prepare(&self, id: &str) -> Result<()> {
         let work = self.work(id);
         std::fs::create_dir_all(&work).map_err(|e| Error::io("create", &work, e))
+    }
+
+    /// Removes what runs that died left in the work area: staged avatars
+    /// and the note of a failure (the subject's lock held).
+    pub fn clear_leftovers(&self, id: &str) -> Result<()> {
+        let work = self.work(id);
+        let entries = std::fs::read_dir(&work).map_err(|e| Error::io("list", &work, e))?;
+        for entry in entries.filter_map(|e| e.ok()) {
+            if entry
+                .file_name()
+                .to_string_lossy()
+                .starts_with("avatar.partial")
+            {
+                let path = entry.path();
+                std::fs::remove_dir_all(&path).map_err(|e| Error::io("remove", &path, e))?;
+            }
+        }
+        let _ = std::fs::remove_file(self.failure(id));
+        Ok(())
+    }
+
+    /// Puts back an avatar a crashed publish left moved aside (the subject's
+    /// lock held): it is outdated, and will be replaced by a whole one.
+    pub fn recover(&self, id: &str) -> Result<()> {
+        let (aside, target) = (self.replaced(id), self.avatar(id));
+        if aside.exists() && !target.exists() {
+            std::fs::rename(&aside, &target).map_err(|e| Error::io("restore", &target, e))?;
+        }
+        Ok(())
     }
 
     /// The record of a finished avatar, if it has a readable one.
@@ -151,18 +187,24 @@ impl DbFolder {
     }
 
     /// Moves the staged avatar into place: one rename when the subject has
-    /// no avatar yet; an outdated one is moved aside first and then removed.
+    /// no avatar yet, one atomic swap (`renameat2(RENAME_EXCHANGE)`) when an
+    /// outdated one is there. Where the file system cannot swap (NFS), the
+    /// old one is moved aside first; [`DbFolder::recover`] undoes a crash
+    /// between the two renames.
     pub fn publish(&self, id: &str) -> Result<()> {
         let staged = self.staging(id);
         let target = self.avatar(id);
-        if target.exists() {
-            let aside = self.work(id).join("replaced");
+        if !target.exists() {
+            std::fs::rename(&staged, &target).map_err(|e| Error::io("rename into", &target, e))?;
+        } else if exchange(&staged, &target) {
+            // The outdated avatar is where the staged one was.
+            std::fs::remove_dir_all(&staged).map_err(|e| Error::io("remove", &staged, e))?;
+        } else {
+            let aside = self.replaced(id);
             let _ = std::fs::remove_dir_all(&aside);
             std::fs::rename(&target, &aside).map_err(|e| Error::io("move aside", &target, e))?;
             std::fs::rename(&staged, &target).map_err(|e| Error::io("rename into", &target, e))?;
             std::fs::remove_dir_all(&aside).map_err(|e| Error::io("remove", &aside, e))?;
-        } else {
-            std::fs::rename(&staged, &target).map_err(|e| Error::io("rename into", &target, e))?;
         }
         // The run is over: its checkpoint and notes go (the lock file stays,
         // as another process may be waiting on it).
@@ -174,6 +216,37 @@ impl DbFolder {
             let _ = std::fs::remove_file(path);
         }
         Ok(())
+    }
+}
+
+/// Swaps two folders in one step where the system can (Linux's
+/// `renameat2(RENAME_EXCHANGE)`); false where it cannot.
+fn exchange(a: &Path, b: &Path) -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        let (Ok(a), Ok(b)) = (
+            std::ffi::CString::new(a.as_os_str().as_bytes()),
+            std::ffi::CString::new(b.as_os_str().as_bytes()),
+        ) else {
+            return false;
+        };
+        // SAFETY: two NUL-terminated paths, relative to the working folder.
+        let r = unsafe {
+            libc::renameat2(
+                libc::AT_FDCWD,
+                a.as_ptr(),
+                libc::AT_FDCWD,
+                b.as_ptr(),
+                libc::RENAME_EXCHANGE,
+            )
+        };
+        r == 0
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = (a, b);
+        false
     }
 }
 

@@ -1,12 +1,15 @@
-//! One trainer per subject, across processes and machines: a POSIX record
-//! lock (`fcntl`) on the subject's lock file. The system drops it when the
-//! process ends however it ends (kill -9 included), so no stale lock outlives
-//! a job, and it works on NFS, where cluster home folders live. `db status`
-//! asks whether a lock is held without taking it (`F_GETLK`), so looking
-//! never makes a starting shard think the subject is taken.
+//! One trainer per subject, across processes and machines: a record lock
+//! (`fcntl`) on the subject's lock file. The system drops it when the process
+//! ends however it ends (kill -9 included), so no stale lock outlives a job,
+//! and record locks are what NFS implements (cluster file systems need their
+//! locking on: docs/scale-out.md). `db status` asks whether a lock is held
+//! without taking it (`F_GETLK`), so looking never makes a starting shard
+//! think the subject is taken.
 //!
-//! POSIX locks belong to the process and fall when it closes any handle on
-//! the file: nothing else in a process opens a lock file.
+//! On Linux the locks are open-file-description locks (`F_OFD_SETLK`): they
+//! belong to the open file, not the process, so no other handle on the same
+//! file anywhere in the process can release them by being closed, as it
+//! would a classic POSIX lock.
 
 use std::fs::{File, OpenOptions};
 use std::io::Write;
@@ -22,7 +25,17 @@ pub struct SubjectLock {
     path: PathBuf,
 }
 
-/// The whole-file write lock request.
+/// Lock commands: open-file-description locks where there are some.
+#[cfg(target_os = "linux")]
+const SET_LOCK: libc::c_int = libc::F_OFD_SETLK;
+#[cfg(target_os = "linux")]
+const GET_LOCK: libc::c_int = libc::F_OFD_GETLK;
+#[cfg(not(target_os = "linux"))]
+const SET_LOCK: libc::c_int = libc::F_SETLK;
+#[cfg(not(target_os = "linux"))]
+const GET_LOCK: libc::c_int = libc::F_GETLK;
+
+/// The whole-file write lock request (`l_pid` 0, as OFD locks require).
 fn whole_file(kind: libc::c_short) -> libc::flock {
     // SAFETY: flock is plain data; all-zero is a valid value.
     let mut lock: libc::flock = unsafe { std::mem::zeroed() };
@@ -50,7 +63,7 @@ impl SubjectLock {
         let file = open(path)?;
         let request = whole_file(libc::F_WRLCK as libc::c_short);
         // SAFETY: a valid descriptor and a pointer to a live flock.
-        let r = unsafe { libc::fcntl(file.as_raw_fd(), libc::F_SETLK, &request) };
+        let r = unsafe { libc::fcntl(file.as_raw_fd(), SET_LOCK, &request) };
         if r == -1 {
             let e = std::io::Error::last_os_error();
             return match e.raw_os_error() {
@@ -78,8 +91,8 @@ impl SubjectLock {
     }
 }
 
-/// Who holds the lock at `path`, if anyone does (another process: a
-/// process's own locks never conflict with it). Takes nothing.
+/// Who holds the lock at `path`, if anyone does (another open file: the
+/// caller's own locks never conflict with it). Takes nothing.
 pub fn holder(path: &Path) -> Result<Option<String>> {
     let file = match File::open(path) {
         Ok(f) => f,
@@ -89,7 +102,7 @@ pub fn holder(path: &Path) -> Result<Option<String>> {
     let mut probe = whole_file(libc::F_WRLCK as libc::c_short);
     // SAFETY: a valid descriptor and a pointer to a live flock. F_GETLK on
     // a read-only handle is allowed for any lock type.
-    let r = unsafe { libc::fcntl(file.as_raw_fd(), libc::F_GETLK, &mut probe) };
+    let r = unsafe { libc::fcntl(file.as_raw_fd(), GET_LOCK, &mut probe) };
     if r == -1 {
         return Err(Error::io(
             "query the lock on",
@@ -103,7 +116,7 @@ pub fn holder(path: &Path) -> Result<Option<String>> {
     let text = std::fs::read_to_string(path).unwrap_or_default();
     let line = text.lines().next().unwrap_or("").trim();
     Ok(Some(if line.is_empty() {
-        format!("process {}", probe.l_pid)
+        "another process".to_string()
     } else {
         crate::text::printable(line)
     }))
@@ -125,4 +138,29 @@ pub fn this_process() -> String {
         s += &format!(" pod {pod}");
     }
     s
+}
+
+#[cfg(all(test, target_os = "linux"))]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_held_lock_is_seen_and_refused_and_dropping_it_frees_it() {
+        let path = std::env::temp_dir().join(format!("visage-lock-{}", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(holder(&path).unwrap(), None, "no file, no holder");
+        let lock = SubjectLock::try_acquire(&path, "host test pid 1")
+            .unwrap()
+            .unwrap();
+        // Open-file-description locks conflict within one process too.
+        assert_eq!(holder(&path).unwrap().as_deref(), Some("host test pid 1"));
+        assert!(SubjectLock::try_acquire(&path, "second").unwrap().is_none());
+        // Opening and closing the file elsewhere does not drop the lock.
+        drop(std::fs::File::open(&path).unwrap());
+        assert!(holder(&path).unwrap().is_some());
+        drop(lock);
+        assert_eq!(holder(&path).unwrap(), None);
+        assert!(SubjectLock::try_acquire(&path, "third").unwrap().is_some());
+        let _ = std::fs::remove_file(&path);
+    }
 }

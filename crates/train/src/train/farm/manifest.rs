@@ -146,9 +146,11 @@ pub struct SubjectOptions {
     pub interior_layer: bool,
     /// Back-face culling threshold.
     pub cull_backfaces: Option<f64>,
-    /// FLAME model pickle (None: the built-in head).
+    /// FLAME model pickle as the manifest writes it (None: the built-in
+    /// head). As written, so the fingerprint does not depend on how the
+    /// manifest's path was typed; [`Subject::head_files`] resolves it.
     pub flame: Option<PathBuf>,
-    /// FLAME masks pickle.
+    /// FLAME masks pickle, as written.
     pub masks: Option<PathBuf>,
 }
 
@@ -195,6 +197,9 @@ pub struct Subject {
     pub options: SubjectOptions,
     /// Write a checkpoint every this many iterations.
     pub checkpoint_every: usize,
+    /// The FLAME model and masks files, resolved against the manifest's
+    /// folder (None: the built-in head).
+    pub head_files: Option<(PathBuf, PathBuf)>,
 }
 
 /// A manifest of subjects and the database folder they train into.
@@ -234,8 +239,13 @@ impl Manifest {
                 return Err(bad(format!("subject '{}' is listed twice", table.id)));
             }
             let merged = table.options.or(&file.defaults);
-            let options = resolve(merged.clone(), base)
-                .map_err(|w| bad(format!("subject '{}': {w}", table.id)))?;
+            let options =
+                resolve(merged.clone()).map_err(|w| bad(format!("subject '{}': {w}", table.id)))?;
+            let head_files = options
+                .flame
+                .as_ref()
+                .zip(options.masks.as_ref())
+                .map(|(f, m)| (base.join(f), base.join(m)));
             if let Some(capture) = &table.capture {
                 crate::text::parse_image_size(&capture.size)
                     .map_err(|w| bad(format!("subject '{}': capture size: {w}", table.id)))?;
@@ -247,6 +257,7 @@ impl Manifest {
                 capture: table.capture,
                 options,
                 checkpoint_every: merged.checkpoint_every.unwrap_or(DEFAULT_CHECKPOINT_EVERY),
+                head_files,
             });
         }
         Ok(Manifest {
@@ -268,6 +279,11 @@ fn check_id(id: &str) -> std::result::Result<(), String> {
     let plain = id
         .chars()
         .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
+    if id.eq_ignore_ascii_case(crate::io::folder::INDEX_FILE) {
+        return Err(format!(
+            "subject id '{id}' is the name of the database's index"
+        ));
+    }
     if id.is_empty() || !plain || id.starts_with('.') || id.len() > 128 {
         return Err(format!(
             "subject id '{}' is not a plain folder name (letters, digits, - _ .)",
@@ -278,7 +294,7 @@ fn check_id(id: &str) -> std::result::Result<(), String> {
 }
 
 /// A subject's options with `visage train`'s defaults filled in.
-fn resolve(t: OptionTable, base: &Path) -> std::result::Result<SubjectOptions, String> {
+fn resolve(t: OptionTable) -> std::result::Result<SubjectOptions, String> {
     let size = match &t.size {
         Some(s) => {
             let (w, h) = crate::text::parse_image_size(s)?;
@@ -312,8 +328,8 @@ fn resolve(t: OptionTable, base: &Path) -> std::result::Result<SubjectOptions, S
         obscuring,
         interior_layer: t.interior_layer.unwrap_or(true) && !obscuring,
         cull_backfaces: t.cull_backfaces,
-        flame: t.flame.map(|p| base.join(p)),
-        masks: t.masks.map(|p| base.join(p)),
+        flame: t.flame,
+        masks: t.masks,
     })
 }
 
@@ -390,6 +406,10 @@ obscuring = true
             (
                 TWO.replace("id = \"b\"", "id = \"x/y\""),
                 "plain folder name",
+            ),
+            (
+                TWO.replace("id = \"b\"", "id = \"index.json\""),
+                "the database's index",
             ),
             (
                 TWO.replace("seed = 9", "seed = 9\nrenderer = \"tpu\""),

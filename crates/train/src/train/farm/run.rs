@@ -113,10 +113,15 @@ pub fn train_subject(
         let who = holder(&folder.lock(id))?.unwrap_or_else(|| "another process".into());
         return Ok(Outcome::Busy(who));
     };
+    folder.recover(id)?;
     // Checked under the lock: a shard that finished it a moment ago has
     // published by now.
     if folder.finished(subject, Some(&head)) {
         return Ok(Outcome::Finished);
+    }
+    folder.clear_leftovers(id)?;
+    if (hooks.stop)() {
+        return Ok(Outcome::Stopped { iteration: 0 });
     }
     let (mut trainer, resumed_at, restarted) = match start(folder, subject, dataset, head) {
         Ok(started) => started,
@@ -130,9 +135,12 @@ pub fn train_subject(
         checkpointed: resumed_at.unwrap_or(0),
     };
     folder.write_progress(id, progress)?;
+    let first = trainer.iteration();
     while trainer.iteration() < total {
         if (hooks.stop)() {
-            save(folder, id, &mut trainer, &mut progress)?;
+            if trainer.iteration() > first {
+                save(folder, id, &mut trainer, &mut progress)?;
+            }
             return Ok(Outcome::Stopped {
                 iteration: trainer.iteration(),
             });
@@ -149,7 +157,15 @@ pub fn train_subject(
             folder.write_progress(id, progress)?;
         }
     }
-    let val_psnr_db = validation_psnr(&trainer, dataset, subject)?;
+    // A rerun after a failure below resumes here rather than training again.
+    if subject.checkpoint_every > 0 && total % subject.checkpoint_every != 0 {
+        save(folder, id, &mut trainer, &mut progress)?;
+    }
+    let val_psnr_db = match validation_psnr(&trainer, dataset, subject) {
+        Ok(p) => p,
+        Err(e @ Error::Io(_)) => return Err(e),
+        Err(e) => return fail(folder, id, &format!("validation: {e}")),
+    };
     let record = SubjectRecord {
         id: id.to_string(),
         fingerprint: subject.options.fingerprint(),
@@ -222,7 +238,6 @@ fn start(
         &folder.checkpoint_fingerprint(id),
         fingerprint_line(o).as_bytes(),
     )?;
-    let _ = std::fs::remove_file(folder.failure(id));
     Ok((Trainer::new(dataset, head, options)?, None, restarted))
 }
 

@@ -61,7 +61,26 @@ impl Shard {
             }
         };
         let (index, task_count, source) = if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
-            (id, number("SLURM_ARRAY_TASK_COUNT")?, "SLURM_ARRAY_TASK_ID")
+            // The task count is the shard count only for an array 0..N-1 in
+            // steps of 1: `--array=1-4`, `--array=0-14:2` or one task
+            // resubmitted alone (`--array=2`, "task 2 of 1") need --shards.
+            let (min, max, step, tasks) = (
+                number("SLURM_ARRAY_TASK_MIN")?,
+                number("SLURM_ARRAY_TASK_MAX")?,
+                number("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1),
+                number("SLURM_ARRAY_TASK_COUNT")?,
+            );
+            let whole =
+                min == Some(0) && step == 1 && tasks.is_some() && max.map(|m| m + 1) == tasks;
+            if !whole && count.is_none() {
+                return Err(Error::input(format!(
+                    "this Slurm array is not 0-(N-1) in steps of 1 (task {id} of tasks {}-{} step {step}): \
+                     pass --shards N, or submit --array=0-(N-1)",
+                    min.map_or("?".into(), |m| m.to_string()),
+                    max.map_or("?".into(), |m| m.to_string()),
+                )));
+            }
+            (id, tasks, "SLURM_ARRAY_TASK_ID")
         } else if let Some(id) = number("JOB_COMPLETION_INDEX")? {
             (id, None, "JOB_COMPLETION_INDEX")
         } else {
@@ -135,6 +154,9 @@ mod tests {
     fn the_shard_comes_from_slurm_or_kubernetes() {
         let slurm = env(&[
             ("SLURM_ARRAY_TASK_ID", "3"),
+            ("SLURM_ARRAY_TASK_MIN", "0"),
+            ("SLURM_ARRAY_TASK_MAX", "3"),
+            ("SLURM_ARRAY_TASK_STEP", "1"),
             ("SLURM_ARRAY_TASK_COUNT", "4"),
         ]);
         assert_eq!(
@@ -149,20 +171,50 @@ mod tests {
         let e = Shard::from_env(&k8s, None).unwrap_err();
         assert!(e.to_string().contains("--shards"), "{e}");
         assert_eq!(Shard::from_env(&env(&[]), None).unwrap(), Shard::ALL);
-        // One task of a four-task array resubmitted alone (--array=2) says it
-        // is task 2 of 1: refused, not read as "the whole manifest".
+        let junk = env(&[("SLURM_ARRAY_TASK_ID", "x")]);
+        assert!(Shard::from_env(&junk, None).is_err());
+    }
+
+    #[test]
+    fn arrays_not_numbered_from_zero_in_steps_of_one_need_the_shard_count() {
+        // One task of a four-task array resubmitted alone (--array=2): Slurm
+        // says task 2 of 1. Refused, not read as "the whole manifest".
         let alone = env(&[
             ("SLURM_ARRAY_TASK_ID", "2"),
+            ("SLURM_ARRAY_TASK_MIN", "2"),
+            ("SLURM_ARRAY_TASK_MAX", "2"),
             ("SLURM_ARRAY_TASK_COUNT", "1"),
         ]);
         let e = Shard::from_env(&alone, None).unwrap_err();
         assert_eq!(e.exit_code(), 2);
-        assert!(e.to_string().contains("--array=0-0"), "{e}");
+        assert!(e.to_string().contains("--shards N"), "{e}");
         assert_eq!(
             Shard::from_env(&alone, Some(4)).unwrap(),
             Shard { index: 2, count: 4 }
         );
-        let junk = env(&[("SLURM_ARRAY_TASK_ID", "x")]);
-        assert!(Shard::from_env(&junk, None).is_err());
+        // --array=1-4 would never run shard 0; --array=0-14:2 would skip the
+        // odd shards: both refused without --shards.
+        for (min, max, step, count, id) in [("1", "4", "1", "4", "1"), ("0", "14", "2", "8", "2")] {
+            let array = [
+                ("SLURM_ARRAY_TASK_ID", id),
+                ("SLURM_ARRAY_TASK_MIN", min),
+                ("SLURM_ARRAY_TASK_MAX", max),
+                ("SLURM_ARRAY_TASK_STEP", step),
+                ("SLURM_ARRAY_TASK_COUNT", count),
+            ];
+            let lookup = move |k: &str| {
+                array
+                    .iter()
+                    .find(|(n, _)| *n == k)
+                    .map(|(_, v)| v.to_string())
+            };
+            assert!(
+                Shard::from_env(&lookup, None).is_err(),
+                "{min}-{max}:{step}"
+            );
+        }
+        // An index past the given count is refused too.
+        let e = Shard::from_env(&alone, Some(2)).unwrap_err();
+        assert!(e.to_string().contains("SLURM_ARRAY_TASK_ID 2"), "{e}");
     }
 }
