@@ -385,3 +385,55 @@ fn a_subject_trained_with_other_options_is_outdated_and_replaced() {
     );
     assert_eq!(state_of(&status_json(&manifest), "ada"), "done");
 }
+
+/// A subject on the user's FLAME files (`flame`/`masks` in the manifest,
+/// relative to it) trains, and is the same finished subject whichever way
+/// the manifest's own path is typed; `db check --manifest` checks it on its
+/// FLAME files.
+#[test]
+fn subjects_on_flame_files_train_and_stay_finished_under_any_manifest_path() {
+    let dir = fresh("flame");
+    let manifest = captured(&dir, 1, 10, 5);
+    for split in ["train", "val", "test"] {
+        let path = dir.join(format!("captures/ada/transforms_{split}.json"));
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::write(
+            &path,
+            text.replace("visage_builtin_head", "captured_elsewhere"),
+        )
+        .unwrap();
+    }
+    ok(&visage(&[
+        "fixtures",
+        dir.join("fixtures").to_str().unwrap(),
+        "--source-count",
+        "1",
+        "--gaussians-per-avatar",
+        "500",
+    ]));
+    // Without FLAME files the dataset is refused before anything trains.
+    let o = run_shard(&manifest, "0/1");
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--flame and --masks"));
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let text = text.replace(
+        "renderer = \"cpu\"\n",
+        "renderer = \"cpu\"\nflame = \"fixtures/flame/model.pkl\"\nmasks = \"fixtures/flame/masks.pkl\"\n",
+    );
+    std::fs::write(&manifest, text).unwrap();
+    ok(&run_shard(&manifest, "0/1"));
+    // The same manifest reached through another path: still finished.
+    let other = dir
+        .join("..")
+        .join(dir.file_name().unwrap())
+        .join("db.toml");
+    let err = ok(&run_shard(&other, "0/1"));
+    assert!(err.contains("ada: finished already"), "{err}");
+    assert_eq!(state_of(&status_json(&other), "ada"), "done");
+    ok(&visage(&[
+        "db",
+        "check",
+        "--manifest",
+        manifest.to_str().unwrap(),
+    ]));
+}

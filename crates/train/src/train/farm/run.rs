@@ -89,12 +89,9 @@ pub fn open_subject(subject: &Subject, heads: &mut Heads) -> Result<(Dataset, He
         other => other,
     };
     let dataset = Dataset::load(&subject.dataset).map_err(in_subject)?;
-    let files = subject
-        .options
-        .flame
-        .clone()
-        .zip(subject.options.masks.clone());
-    let head = heads.get(&dataset, files).map_err(in_subject)?;
+    let head = heads
+        .get(&dataset, subject.head_files.clone())
+        .map_err(in_subject)?;
     Ok((dataset, head))
 }
 
