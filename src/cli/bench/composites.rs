@@ -21,7 +21,6 @@ use crate::render::Backend;
 use crate::train::capture::{capture, capture_sitter, CaptureOptions};
 use crate::train::composite_eval::{evaluate_composite, CompositeReport, EvalOptions};
 use crate::train::dataset::Dataset;
-use crate::train::holes::HoleFilling;
 use crate::train::sitter::{Seams, Sitter, Tone};
 use crate::train::trainer::{TrainOptions, Trainer};
 
@@ -184,18 +183,7 @@ fn trained_source(
     let mut trainer = Trainer::new(
         &dataset,
         crate::model::builtin::build_head(),
-        TrainOptions {
-            iterations: args.iterations,
-            seed: 1,
-            size: None,
-            background: [0.0; 3],
-            renderer: args.renderer,
-            // As `visage train` trains by default: with the interior layer
-            // behind the surface, so a region is opaque on its own and does
-            // not lean on the Gaussians behind it (which a composite may take
-            // from another source).
-            holes: HoleFilling::RECOMMENDED,
-        },
+        TrainOptions::recommended(args.iterations, 1, args.renderer),
     )?;
     eprintln!("visage: training {name} ({} iterations)…", args.iterations);
     while trainer.iteration() < trainer.iterations() {

@@ -168,14 +168,7 @@ fn run_one(
     let mut trainer = Trainer::new(
         dataset,
         crate::model::builtin::build_head(),
-        TrainOptions {
-            iterations: args.iterations,
-            seed: 1,
-            size: None,
-            background: [0.0; 3],
-            renderer,
-            holes: crate::train::holes::HoleFilling::RECOMMENDED,
-        },
+        TrainOptions::recommended(args.iterations, 1, renderer),
     )?;
     let agreement = gradient_check::agreement_with_cpu(renderer)?;
     let mut curve = Vec::new();

@@ -58,6 +58,23 @@ pub struct TrainOptions {
     pub holes: HoleFilling,
 }
 
+impl TrainOptions {
+    /// What `visage train` does by default: images as stored, over black,
+    /// with the interior layer behind the surface (so a region is opaque on
+    /// its own and does not lean on the Gaussians behind it, which a
+    /// composite may take from another source).
+    pub fn recommended(iterations: usize, seed: u64, renderer: Backend) -> Self {
+        Self {
+            iterations,
+            seed,
+            size: None,
+            background: [0.0; 3],
+            renderer,
+            holes: HoleFilling::RECOMMENDED,
+        }
+    }
+}
+
 /// One step's figures, for the progress bar and the curve.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct StepReport {
