@@ -36,6 +36,15 @@ fn usage_errors_name_the_argument_and_the_values_allowed() {
         ],
     );
     fails(&["render"], &["--output"]);
+    // A typo gets the nearest command or option, as clap's tip would say.
+    fails(
+        &["db", "statsu", "m.toml"],
+        &["'statsu'", "did you mean 'status'?"],
+    );
+    fails(
+        &["train", "--manifst", "m.toml"],
+        &["did you mean '--manifest'?"],
+    );
     fails(
         &["bench", "render", "--renderers", "tpu"],
         &["'tpu'", "auto, gpu or cpu"],

@@ -281,6 +281,10 @@ fn db_check_index_and_status_report_the_folder() {
     ok(&run_shard(&manifest, "0/3"));
     ok(&run_shard(&manifest, "1/3"));
     let db = dir.join("db");
+    // A folder with no avatars in it is no database.
+    let o = visage(&["db", "check", dir.join("captures").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("holds no avatar folders"));
     let o = visage(&["db", "check", db.to_str().unwrap()]);
     let out = String::from_utf8_lossy(&o.stdout);
     ok(&o);

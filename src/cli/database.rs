@@ -151,6 +151,12 @@ fn check(args: &CheckArgs, write_index: bool) -> Result<()> {
     if let Some(m) = &manifest {
         manifest_rows(m, &dir, &mut rows)?;
     }
+    if rows.is_empty() {
+        return Err(Error::CheckFailed(format!(
+            "{} holds no avatar folders (point_cloud.ply and flame_param.npz)",
+            dir.display()
+        )));
+    }
     let problems = rows
         .iter()
         .filter(|r| !matches!(r.found, Found::Ok(_)))

@@ -182,6 +182,16 @@ fn usage_error(e: clap::Error, moved: Option<&str>) -> ExitCode {
     if message.is_empty() {
         message = "invalid arguments".into();
     }
+    // A typo's nearest command or option, as clap's own tip would say.
+    for kind in [ContextKind::SuggestedSubcommand, ContextKind::SuggestedArg] {
+        match e.get(kind) {
+            Some(ContextValue::String(s)) => message.push_str(&format!(" (did you mean '{s}'?)")),
+            Some(ContextValue::Strings(s)) if !s.is_empty() => {
+                message.push_str(&format!(" (did you mean '{}'?)", s.join("' or '")))
+            }
+            _ => {}
+        }
+    }
     if let Some(ContextValue::Strings(valid)) = e.get(ContextKind::ValidValue) {
         if !message.contains("possible values") && !valid.is_empty() {
             message.push_str(&format!(" (one of: {})", valid.join(", ")));

@@ -337,10 +337,14 @@ fn resolve(t: OptionTable) -> std::result::Result<SubjectOptions, String> {
 mod tests {
     use super::*;
 
+    /// Reads `text` as a manifest from a file of its own (tests run in
+    /// parallel: two writing one name would read each other's half file).
     fn load(text: &str) -> Result<Manifest> {
+        static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let dir = std::env::temp_dir().join(format!("visage-manifest-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join(format!("{}.toml", blake3::hash(text.as_bytes()).to_hex()));
+        let path = dir.join(format!("{n}.toml"));
         std::fs::write(&path, text).unwrap();
         Manifest::load(&path)
     }
