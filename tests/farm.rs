@@ -441,3 +441,34 @@ fn subjects_on_flame_files_train_and_stay_finished_under_any_manifest_path() {
         manifest.to_str().unwrap(),
     ]));
 }
+
+/// A capture killed midway leaves its half-written folder; the next capture
+/// on the same machine removes it once its process is gone, and leaves
+/// another machine's (whose writer it cannot see) alone.
+#[test]
+fn half_written_captures_of_dead_processes_are_removed() {
+    let dir = fresh("partials");
+    let manifest = tiny_manifest(&dir, "db", 1, 10, 5);
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .unwrap()
+        .trim()
+        .replace(['/', '-'], "_");
+    let mut gone = Command::new("true").spawn().unwrap();
+    let dead_pid = gone.id();
+    gone.wait().unwrap();
+    std::fs::create_dir_all(dir.join("captures")).unwrap();
+    let dead = dir.join(format!("captures/ada.partial-{host}-{dead_pid}"));
+    let elsewhere = dir.join("captures/ada.partial-othermachine-12");
+    for d in [&dead, &elsewhere] {
+        std::fs::create_dir_all(d).unwrap();
+        std::fs::write(d.join("transforms_train.json"), "{").unwrap();
+    }
+    ok(&visage(&[
+        "capture",
+        "--manifest",
+        manifest.to_str().unwrap(),
+    ]));
+    assert!(!dead.exists(), "the dead process's half capture is gone");
+    assert!(elsewhere.exists(), "another machine's is left alone");
+    assert!(dir.join("captures/ada/transforms_train.json").exists());
+}

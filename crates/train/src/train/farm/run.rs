@@ -313,7 +313,9 @@ pub fn capture_subject(
             ))
         })?;
     let (w, h) = crate::text::parse_image_size(&spec.size).map_err(Error::input)?;
-    let partial = sibling(target, &format!("partial-{}", std::process::id()));
+    let host = this_host();
+    remove_dead_partials(target, &host);
+    let partial = sibling(target, &format!("partial-{host}-{}", std::process::id()));
     if partial.exists() {
         std::fs::remove_dir_all(&partial).map_err(|e| Error::io("remove", &partial, e))?;
     }
@@ -339,6 +341,43 @@ pub fn capture_subject(
             Ok(Captured::Present)
         }
         Err(e) => Err(Error::io("rename into", target, e)),
+    }
+}
+
+/// This machine's name, for the names of half-written captures.
+fn this_host() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|h| h.trim().replace(['/', '-'], "_"))
+        .unwrap_or_else(|_| "host".into())
+}
+
+/// Removes half-written captures of `target` that processes of this host
+/// which are gone left behind (killed mid-capture). Other hosts' are kept:
+/// whether their writer lives cannot be told from here.
+fn remove_dead_partials(target: &Path, host: &str) {
+    let (Some(parent), Some(name)) = (target.parent(), target.file_name()) else {
+        return;
+    };
+    let prefix = format!("{}.partial-{host}-", name.to_string_lossy());
+    let Ok(entries) = std::fs::read_dir(if parent.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        parent
+    }) else {
+        return;
+    };
+    for entry in entries.filter_map(|e| e.ok()) {
+        let file = entry.file_name().to_string_lossy().into_owned();
+        let Some(pid) = file
+            .strip_prefix(&prefix)
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let alive = Path::new(&format!("/proc/{pid}")).exists();
+        if !alive && pid != std::process::id() {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
     }
 }
 
