@@ -398,15 +398,7 @@ fn a_subject_trained_with_other_options_is_outdated_and_replaced() {
 fn subjects_on_flame_files_train_and_stay_finished_under_any_manifest_path() {
     let dir = fresh("flame");
     let manifest = captured(&dir, 1, 10, 5);
-    for split in ["train", "val", "test"] {
-        let path = dir.join(format!("captures/ada/transforms_{split}.json"));
-        let text = std::fs::read_to_string(&path).unwrap();
-        std::fs::write(
-            &path,
-            text.replace("visage_builtin_head", "captured_elsewhere"),
-        )
-        .unwrap();
-    }
+    common::mark_captured_elsewhere(&dir.join("captures/ada"));
     ok(&visage(&[
         "fixtures",
         dir.join("fixtures").to_str().unwrap(),

@@ -406,15 +406,7 @@ fn bench_train_reports_speed_quality_and_gradient_error() {
 #[test]
 fn datasets_on_flame_files_train_with_flame_and_masks() {
     let dir = small_capture("flame");
-    for split in ["train", "val", "test"] {
-        let path = dir.join(format!("transforms_{split}.json"));
-        let text = std::fs::read_to_string(&path).unwrap();
-        std::fs::write(
-            &path,
-            text.replace("visage_builtin_head", "captured_elsewhere"),
-        )
-        .unwrap();
-    }
+    common::mark_captured_elsewhere(&dir);
     let fixtures = temp_path("train", "fixtures");
     std::fs::remove_dir_all(&fixtures).ok();
     let o = visage(&[

@@ -8,10 +8,9 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::io::folder::{scan_avatar_folders, DbIndex, IndexedAvatar, INDEX_FORMAT};
-use crate::model::head::HeadModel;
-use crate::train::dataset::head_model;
 use crate::train::farm::folder::{check_avatar, AvatarCheck, Progress};
 use crate::train::farm::manifest::Manifest;
+use crate::train::farm::run::Heads;
 use crate::train::farm::status::{manifest_status, State};
 
 /// Arguments of `visage db`.
@@ -96,14 +95,16 @@ enum Found {
     Running { by: String },
 }
 
-/// The head the folder's avatars are checked on.
-fn head(args: &CheckArgs) -> Result<HeadModel> {
+/// The FLAME files the folder's avatars are checked on: the arguments', else
+/// the config file's, else none (the built-in head).
+fn default_head_files(args: &CheckArgs) -> Result<Option<(PathBuf, PathBuf)>> {
     let config = crate::io::folder::read_config()?;
-    let flame = args.flame.clone().or(config.flame);
-    let masks = args.masks.clone().or(config.masks);
-    match (&flame, &masks) {
-        (Some(f), Some(m)) => head_model(None, Some((f, m))),
-        (None, None) => head_model(None, None),
+    match (
+        args.flame.clone().or(config.flame),
+        args.masks.clone().or(config.masks),
+    ) {
+        (Some(f), Some(m)) => Ok(Some((f, m))),
+        (None, None) => Ok(None),
         _ => Err(Error::input(
             "--flame and --masks go together (or set both in the config file)",
         )),
@@ -123,25 +124,17 @@ fn check(args: &CheckArgs, write_index: bool) -> Result<()> {
             dir.display()
         )));
     }
-    let default_head = head(args)?;
+    let default_files = default_head_files(args)?;
     // A manifest's subject is checked on its own FLAME files.
-    let mut heads: Vec<((PathBuf, PathBuf), HeadModel)> = Vec::new();
+    let mut heads = Heads::default();
     let mut rows = Vec::new();
     for (name, path) in scan_avatar_folders(&dir)? {
         let files = manifest
             .as_ref()
             .and_then(|m| m.subject(&name))
-            .and_then(|s| s.head_files.clone());
-        let head = match files {
-            None => &default_head,
-            Some(files) => {
-                if !heads.iter().any(|(k, _)| *k == files) {
-                    let model = head_model(None, Some((&files.0, &files.1)))?;
-                    heads.push((files.clone(), model));
-                }
-                &heads.iter().find(|(k, _)| *k == files).expect("loaded").1
-            }
-        };
+            .and_then(|s| s.head_files.clone())
+            .or_else(|| default_files.clone());
+        let head = heads.get(None, files)?;
         let found = match check_avatar(&path, head) {
             Ok(c) => Found::Ok(c),
             Err(reason) => Found::Bad { reason },

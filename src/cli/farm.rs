@@ -65,6 +65,9 @@ pub fn train_manifest(path: &Path, args: &ShardArgs) -> Result<()> {
     let manifest = Manifest::load(path)?;
     let shard = args.shard()?;
     let mine = shard_subjects(&manifest, shard);
+    // Every dataset is checked before anything is touched, then opened
+    // again when its turn comes: a dataset is only its file lists, and the
+    // FLAME models are cached, so holding nothing between costs little.
     let mut heads = Heads::default();
     for subject in &mine {
         open_subject(subject, &mut heads)?;

@@ -70,6 +70,20 @@ pub fn small_capture(tag: &str, name: &str, size: u32, cameras: u32, frames: u32
     dir
 }
 
+/// Marks a capture as made elsewhere (not from the built-in head), so
+/// training it needs FLAME files as a real dataset does.
+pub fn mark_captured_elsewhere(dataset: &std::path::Path) {
+    for split in ["train", "val", "test"] {
+        let path = dataset.join(format!("transforms_{split}.json"));
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::write(
+            &path,
+            text.replace("visage_builtin_head", "captured_elsewhere"),
+        )
+        .unwrap();
+    }
+}
+
 /// The built-in people the manifest tests train, one subject each.
 pub const MANIFEST_PEOPLE: [&str; 6] = ["ada", "bram", "cleo", "dries", "elif", "femi"];
 

@@ -157,16 +157,21 @@ impl DbFolder {
     /// Gaussians as recorded. Without `head` it trusts the record (for
     /// `db status`, which must stay cheap while jobs run).
     pub fn finished(&self, subject: &Subject, head: Option<&HeadModel>) -> bool {
-        let Some(record) = self.record(&subject.id) else {
-            return false;
-        };
-        let current = record.fingerprint == subject.options.fingerprint()
-            && record.iterations == subject.options.iterations;
-        current
-            && head.is_none_or(|h| {
+        self.current_record(subject).is_some_and(|record| {
+            head.is_none_or(|h| {
                 check_avatar(&self.avatar(&subject.id), h)
                     .is_ok_and(|c| c.gaussians == record.gaussians)
             })
+        })
+    }
+
+    /// The record of `subject`'s avatar when it was trained as the manifest
+    /// asks now (same options fingerprint and iterations).
+    pub fn current_record(&self, subject: &Subject) -> Option<SubjectRecord> {
+        self.record(&subject.id).filter(|r| {
+            r.fingerprint == subject.options.fingerprint()
+                && r.iterations == subject.options.iterations
+        })
     }
 
     /// The progress line of a subject's current or last run.

@@ -122,12 +122,17 @@ pub fn holder(path: &Path) -> Result<Option<String>> {
     }))
 }
 
+/// This machine's name ("?" where the system does not say).
+pub fn host_name() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|h| h.trim().to_string())
+        .unwrap_or_else(|_| "?".into())
+}
+
 /// Who is training here, for the lock file: host, process and, under a
 /// scheduler, the job.
 pub fn this_process() -> String {
-    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .map(|h| h.trim().to_string())
-        .unwrap_or_else(|_| "?".into());
+    let host = host_name();
     let var = |k: &str| std::env::var(k).ok().filter(|v| !v.is_empty());
     let mut s = format!("host {host} pid {}", std::process::id());
     if let (Some(job), Some(task)) = (var("SLURM_ARRAY_JOB_ID"), var("SLURM_ARRAY_TASK_ID")) {

@@ -9,7 +9,7 @@ use super::folder::{
     fingerprint_line, read_fingerprint, write_atomically, DbFolder, Progress, SubjectRecord,
     SUBJECT_RECORD,
 };
-use super::lock::{holder, this_process, SubjectLock};
+use super::lock::{holder, host_name, this_process, SubjectLock};
 use super::manifest::{CaptureSpec, Subject};
 use crate::avatar::database::Database;
 use crate::error::{Error, Result};
@@ -64,20 +64,27 @@ pub struct Heads {
 }
 
 impl Heads {
-    /// The head model for these FLAME files.
-    fn get(&mut self, dataset: &Dataset, files: Option<(PathBuf, PathBuf)>) -> Result<HeadModel> {
-        // The built-in head is only for datasets captured from it: asked
-        // every time, as the dataset decides.
-        let flame = files.as_ref().map(|(f, m)| (f.as_path(), m.as_path()));
-        if flame.is_none() {
-            dataset.check_builtin_head()?;
+    /// The head model for these FLAME files; with no files, the built-in
+    /// head, which a `dataset` given must have been captured from (asked
+    /// every time: the dataset decides, not the cache).
+    pub fn get(
+        &mut self,
+        dataset: Option<&Dataset>,
+        files: Option<(PathBuf, PathBuf)>,
+    ) -> Result<&HeadModel> {
+        if let (None, Some(d)) = (&files, dataset) {
+            d.check_builtin_head()?;
         }
-        if let Some((_, head)) = self.loaded.iter().find(|(k, _)| *k == files) {
-            return Ok(head.clone());
-        }
-        let head = head_model(Some(dataset), flame)?;
-        self.loaded.push((files, head.clone()));
-        Ok(head)
+        let at = match self.loaded.iter().position(|(k, _)| *k == files) {
+            Some(at) => at,
+            None => {
+                let flame = files.as_ref().map(|(f, m)| (f.as_path(), m.as_path()));
+                let head = head_model(None, flame)?;
+                self.loaded.push((files, head));
+                self.loaded.len() - 1
+            }
+        };
+        Ok(&self.loaded[at].1)
     }
 }
 
@@ -90,8 +97,9 @@ pub fn open_subject(subject: &Subject, heads: &mut Heads) -> Result<(Dataset, He
     };
     let dataset = Dataset::load(&subject.dataset).map_err(in_subject)?;
     let head = heads
-        .get(&dataset, subject.head_files.clone())
-        .map_err(in_subject)?;
+        .get(Some(&dataset), subject.head_files.clone())
+        .map_err(in_subject)?
+        .clone();
     Ok((dataset, head))
 }
 
@@ -344,11 +352,10 @@ pub fn capture_subject(
     }
 }
 
-/// This machine's name, for the names of half-written captures.
+/// This machine's name as it goes into the names of half-written captures
+/// (no `-`, which separates it from the process id there).
 fn this_host() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .map(|h| h.trim().replace(['/', '-'], "_"))
-        .unwrap_or_else(|_| "host".into())
+    host_name().replace(['/', '-', '?'], "_")
 }
 
 /// Removes half-written captures of `target` that processes of this host

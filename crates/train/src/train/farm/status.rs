@@ -91,8 +91,7 @@ fn subject_state(folder: &DbFolder, subject: &Subject) -> Result<State> {
     if let Some(by) = holder(&folder.lock(id))? {
         return Ok(State::Running { by, progress });
     }
-    if folder.finished(subject, None) {
-        let record = folder.record(id).expect("a finished subject has a record");
+    if let Some(record) = folder.current_record(subject) {
         return Ok(State::Done {
             gaussians: record.gaussians,
             val_psnr_db: record.val_psnr_db,
