@@ -448,7 +448,9 @@ fn convert_to_and_from_spz_reports_the_error() {
 }
 
 /// `bench render` on scenes: a synthetic one made deterministically and a
-/// file, with load time and peak memory beside the usual rows.
+/// file, with load time and peak memory beside the usual rows. Each size's
+/// exact row and the knobs draw every Gaussian even after the level of
+/// detail drew a cut at the size before (they once drew the last cut).
 #[test]
 fn bench_render_measures_scenes() {
     let out = visage(&[
@@ -463,7 +465,9 @@ fn bench_render_measures_scenes() {
         "--warmup",
         "0",
         "--sizes",
-        "120x80",
+        "120x80,160x120",
+        "--lod",
+        "3k",
         "--knob-size",
         "96x64",
         "--json",
@@ -493,7 +497,12 @@ fn bench_render_measures_scenes() {
         (row["width"].as_u64(), row["height"].as_u64()),
         (Some(120), Some(80))
     );
-    assert!(row["psnr_db"].as_f64().unwrap() >= 40.0, "{row}");
+    for row in doc["renderers"][0]["rows"].as_array().unwrap() {
+        let exact = row["psnr_db"].as_f64().unwrap();
+        let cut = row["lod_psnr_db"].as_f64().unwrap();
+        assert!(exact >= 60.0 && cut < exact, "{row}");
+        assert!(row["lod_drawn"].as_u64().unwrap() <= 3000, "{row}");
+    }
     assert!(
         row["ms_median"].as_f64().unwrap() > 0.0 && row["stages_ms"]["project"].as_f64().is_some()
     );

@@ -12,8 +12,8 @@
 @group(0) @binding(3) var<storage, read_write> world: array<vec4<f32>>;
 
 @compute @workgroup_size(GROUP)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = element_index(id, groups);
     if (i >= camera.counts.x) {
         return;
     }

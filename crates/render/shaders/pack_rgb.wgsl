@@ -7,7 +7,7 @@
 
 @compute @workgroup_size(GROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let word = id.x + id.y * groups.x * GROUP;
+    let word = element_index(id, groups);
     let bytes = camera.size.x * camera.size.y * 3u;
     if (4u * word >= bytes) {
         return;

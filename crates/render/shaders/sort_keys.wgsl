@@ -8,8 +8,8 @@
 @group(0) @binding(3) var<storage, read_write> sort_values: array<u32>;
 
 @compute @workgroup_size(GROUP)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = element_index(id, groups);
     if (i >= params.count) {
         return;
     }

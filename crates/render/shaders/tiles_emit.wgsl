@@ -9,8 +9,8 @@
 @group(0) @binding(5) var<storage, read_write> tile_values: array<u32>;
 
 @compute @workgroup_size(GROUP)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let s = id.x;
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let s = element_index(id, groups);
     if (s >= params.count) {
         return;
     }

@@ -6,8 +6,8 @@
 @group(0) @binding(2) var<storage, read_write> ranges: array<vec2<u32>>;
 
 @compute @workgroup_size(GROUP)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let p = id.x;
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let p = element_index(id, groups);
     if (p >= params.count) {
         return;
     }

@@ -45,9 +45,11 @@ fn time_scene(
 
 /// One row's level-of-detail columns: the cut's PSNR against the full
 /// scene's reference, what it drew, and the frame time of a moving camera
-/// (cut, gather, upload and render every frame).
+/// (cut, gather, upload and render every frame). The renderer holds `full`
+/// again afterwards, so the next size's exact row draws every Gaussian.
 fn lod_columns(
     renderer: &mut SplatRenderer,
+    full: &SplatScene,
     hierarchy: &mut LodScene,
     camera: &Camera,
     reference: &RgbImage,
@@ -68,6 +70,8 @@ fn lod_columns(
         }
     }
     let (median, p90) = summarize(totals);
+    renderer.set_world_scene(full)?;
+    hierarchy.forget();
     Ok(LodColumns {
         lod_ms_median: median,
         lod_ms_p90: p90,
@@ -140,15 +144,23 @@ pub fn bench_scene(
                 outcome: size_outcome(&mut renderer, camera, reference, *reference_ms, rounds)?,
                 lod: None,
             };
-            if let (Some(hierarchy), SizeOutcome::Drawn(frame)) = (hierarchy.as_mut(), &row.outcome)
-            {
+            // A cut is measured even where the exact path could not draw
+            // (a scene past the GPU's sort limit is what the cut is for).
+            if let Some(hierarchy) = hierarchy.as_mut() {
                 let pixels = (camera.width * camera.height) as usize;
-                row.lod = Some(match lod.resolve(scene.len(), pixels) {
-                    LodPolicy::Off => LodColumns::exact(frame),
-                    policy => {
-                        lod_columns(&mut renderer, hierarchy, camera, reference, policy, rounds)?
-                    }
-                });
+                row.lod = match (lod.resolve(scene.len(), pixels), &row.outcome) {
+                    (LodPolicy::Off, SizeOutcome::Drawn(frame)) => Some(LodColumns::exact(frame)),
+                    (LodPolicy::Off, SizeOutcome::Refused { .. }) => None,
+                    (policy, _) => Some(lod_columns(
+                        &mut renderer,
+                        &scene,
+                        hierarchy,
+                        camera,
+                        reference,
+                        policy,
+                        rounds,
+                    )?),
+                };
             }
             rows.push(row);
         }

@@ -13,8 +13,8 @@
 //! Every kernel is its own dispatch (no workgroup waits for another), so it runs
 //! on any driver, lavapipe included.
 
-use super::constants::{DIGITS, GROUP, SORT_BLOCK as BLOCK};
-use super::device::{read_buffer, Growable, MAX_GROUPS};
+use super::constants::{DIGITS, SORT_BLOCK as BLOCK};
+use super::device::{element_grid, read_buffer, Growable, MAX_GROUPS};
 use super::kernels::{
     RadixHistogram, RadixScatter, ScanApply, ScanReduce, ScanSums, SortKeys, TilesCount, TilesEmit,
     TilesRanges,
@@ -106,6 +106,9 @@ pub(super) struct GpuBinning {
     pub ranges: Growable,
     /// Which of `tiles.values` holds the sorted entries after [`GpuBinning::bin`].
     result: usize,
+    /// Workgroups in one row of a per-element kernel's grid ([`MAX_GROUPS`];
+    /// tests lower it to run the multi-row layout on small scenes).
+    pub grid_columns: u32,
 }
 
 impl GpuBinning {
@@ -132,6 +135,7 @@ impl GpuBinning {
                 mapped_at_creation: false,
             }),
             slots: Vec::new(),
+            grid_columns: MAX_GROUPS,
             depth: KeyValues::new(device, "depth sort"),
             tiles: KeyValues::new(device, "tile entries"),
             entries: Growable::new(device, "tile entry counts", storage),
@@ -198,7 +202,7 @@ impl GpuBinning {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             let k = &self.kernels;
             let d = &self.depth;
-            let groups = (count.div_ceil(GROUP), 1);
+            let groups = element_grid(count, self.grid_columns);
             k.sort_keys.dispatch(
                 device,
                 &mut pass,
@@ -260,7 +264,7 @@ impl GpuBinning {
                     &self.entries.buffer,
                     &t.keys[0].buffer,
                     &t.values[0].buffer,
-                    (count.div_ceil(GROUP), 1),
+                    element_grid(count, self.grid_columns),
                 );
                 let sorted = self.encode_radix(device, &mut pass, &tile_sort, &self.tiles);
                 k.tiles_ranges.dispatch(
@@ -269,7 +273,7 @@ impl GpuBinning {
                     self.uniform(per_entry),
                     &t.keys[sorted].buffer,
                     &self.ranges.buffer,
-                    (entries.div_ceil(GROUP), 1),
+                    element_grid(entries, self.grid_columns),
                 );
             }
             self.result = tile_sort.result;
@@ -419,11 +423,14 @@ struct RadixPlan {
     result: usize,
 }
 
+/// The radix and scan kernels give each workgroup one block of [`BLOCK`]
+/// elements along one dispatch dimension, so one sort holds at most
+/// [`MAX_GROUPS`] blocks (67 million elements).
 fn check_groups(count: u32, what: &str) -> Result<()> {
-    if count.div_ceil(GROUP) > MAX_GROUPS {
-        return Err(Error::input(format!(
-            "{count} {what} are more than the GPU renderer handles in one frame ({})",
-            MAX_GROUPS * GROUP
+    if count.div_ceil(BLOCK) > MAX_GROUPS {
+        return Err(Error::device(format!(
+            "{count} {what} are more than the GPU renderer sorts in one frame ({}); try --lod auto or --renderer cpu",
+            MAX_GROUPS * BLOCK
         )));
     }
     Ok(())

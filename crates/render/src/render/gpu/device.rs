@@ -4,7 +4,7 @@
 
 use bytemuck::Pod;
 
-use super::constants::wgsl_header;
+use super::constants::{wgsl_header, GROUP};
 use crate::error::{Error, Result};
 
 /// An opened wgpu device with what its users need to know about it.
@@ -90,8 +90,20 @@ pub fn describe_adapter(adapter: &wgpu::AdapterInfo) -> String {
     )
 }
 
-/// Most workgroups in one dispatch dimension (wgpu's downlevel limit).
+/// Most workgroups in one dispatch dimension (wgpu's downlevel limit, and
+/// what NVIDIA's Vulkan driver allows in y and z).
 pub const MAX_GROUPS: u32 = 65_535;
+
+/// The workgroup grid of a per-element kernel over `count` elements
+/// ([`GROUP`] each): one row while it fits in `columns` (at most
+/// [`MAX_GROUPS`]), else rows of `columns` workgroups (the kernels'
+/// `element_index` flattens them), so 20 million Gaussians (78,125
+/// workgroups) dispatch like 20 thousand.
+pub fn element_grid(count: u32, columns: u32) -> (u32, u32) {
+    let groups = count.div_ceil(GROUP).max(1);
+    let columns = groups.min(columns.clamp(1, MAX_GROUPS));
+    (columns, groups.div_ceil(columns))
+}
 
 /// shaders/common.wgsl: the structs and helpers every kernel includes.
 const COMMON: &str = include_str!("../../../shaders/common.wgsl");

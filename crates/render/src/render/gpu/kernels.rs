@@ -132,6 +132,9 @@ kernels! {
     TilesRanges = "tiles_ranges" { tiles: read, ranges: write }
     /// Blends each 16×16 tile front to back.
     Rasterize = "rasterize" { projected: read, ranges: read, list: read, image: write, cut_short: write }
+    /// `rasterize` for hardware GPUs: each tile's Gaussians read in batches
+    /// into workgroup memory (the same image, bit for bit).
+    RasterizeBatched = "rasterize_batched" { projected: read, ranges: read, list: read, image: write, cut_short: write }
     /// Packs the RGBA image to RGB bytes for the read-back.
     PackRgb = "pack_rgb" { image: read, packed: write }
     /// The training rasteriser's forward: colour, final transmittance and
@@ -139,6 +142,53 @@ kernels! {
     TrainForward = "train_forward" { splats: read, ranges: read, list: read, backdrop: read, pixels: write, walked: write }
     /// The training rasteriser's backward: ∂loss/∂ screen quantities per list entry.
     TrainBackward = "train_backward" { splats: read, ranges: read, list: read, pixels: read, walked: read, grads: write }
+}
+
+/// The tile rasteriser suited to the adapter: [`RasterizeBatched`] on
+/// hardware GPUs, whose loads overlap in a batch (an H200 drew a million
+/// Gaussians at 1920×1080 in 6.2 ms with per-entry reads), and
+/// [`Rasterize`] on software ones such as lavapipe, where a workgroup
+/// barrier costs more than the loads it overlaps.
+pub enum TileRasterizer {
+    /// Per-entry reads, no barriers.
+    Plain(Rasterize),
+    /// Batches through workgroup memory.
+    Batched(RasterizeBatched),
+}
+
+impl TileRasterizer {
+    /// Compiles the kernel for an adapter that is (or is not) software.
+    pub fn for_adapter(device: &wgpu::Device, software: bool) -> Self {
+        if software {
+            Self::Plain(Rasterize::new(device))
+        } else {
+            Self::Batched(RasterizeBatched::new(device))
+        }
+    }
+
+    /// Dispatches one workgroup per tile of `tiles`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn dispatch(
+        &self,
+        device: &wgpu::Device,
+        pass: &mut wgpu::ComputePass<'_>,
+        uniform: wgpu::BufferBinding<'_>,
+        projected: &wgpu::Buffer,
+        ranges: &wgpu::Buffer,
+        list: &wgpu::Buffer,
+        image: &wgpu::Buffer,
+        cut_short: &wgpu::Buffer,
+        tiles: (u32, u32),
+    ) {
+        match self {
+            Self::Plain(k) => k.dispatch(
+                device, pass, uniform, projected, ranges, list, image, cut_short, tiles,
+            ),
+            Self::Batched(k) => k.dispatch(
+                device, pass, uniform, projected, ranges, list, image, cut_short, tiles,
+            ),
+        }
+    }
 }
 
 #[cfg(test)]
