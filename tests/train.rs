@@ -355,7 +355,8 @@ fn ctrl_c_checkpoints_and_resume_continues() {
 
 /// `visage bench train` measures a short run on a fresh capture per
 /// renderer: speed, a held-out curve, the gradient error against central
-/// differences, and how far the wgpu gradients are from the CPU's.
+/// differences, how far the wgpu gradients are from the CPU's, and the
+/// loss's own time.
 #[test]
 fn bench_train_reports_speed_quality_and_gradient_error() {
     let o = visage(&[
@@ -377,6 +378,9 @@ fn bench_train_reports_speed_quality_and_gradient_error() {
         r["gradient_max_relative_error"].as_f64().unwrap() < 1e-4,
         "{r}"
     );
+    // The loss is timed at the capture's size.
+    assert!(r["loss_ms"].as_f64().unwrap() > 0.0, "{r}");
+    assert_eq!(r["loss_size"], serde_json::json!([32, 32]), "{r}");
     let runs = r["renderers"].as_array().unwrap();
     assert_eq!(runs.len(), 2, "{r}");
     assert_eq!(runs[0]["renderer"], "cpu");

@@ -8,7 +8,7 @@ use std::time::Instant;
 use clap::Args;
 use serde::Serialize;
 
-use super::stats::{emit, peak_rss_mb};
+use super::stats::{emit, peak_rss_mb, summarize};
 use crate::avatar::binding::TriangleFrame;
 use crate::cli::values::parse_size;
 use crate::error::Result;
@@ -16,6 +16,7 @@ use crate::pipeline::DatabaseSpec;
 use crate::render::Backend;
 use crate::train::capture::{capture, CaptureOptions};
 use crate::train::dataset::Dataset;
+use crate::train::loss::photometric_loss;
 use crate::train::model::gradient_check;
 use crate::train::posing::timestep_frames;
 use crate::train::target::{evaluate_view, load_target, Target};
@@ -207,6 +208,11 @@ struct TrainReport {
     gradient_max_relative_error: f64,
     gradient_parameters_checked: usize,
     peak_rss_mb: Option<f64>,
+    /// The photometric loss and its gradient (f64, on the CPU) at the
+    /// dataset's image size: median milliseconds of five evaluations. Every
+    /// iteration pays it whatever rasterises.
+    loss_ms: Option<f64>,
+    loss_size: Option<[u32; 2]>,
     renderers: Vec<RendererRun>,
 }
 
@@ -238,6 +244,9 @@ fn print_report(report: &TrainReport) {
         report.gradient_parameters_checked,
         report.peak_rss_mb.unwrap_or(0.0)
     );
+    if let (Some(ms), Some([w, h])) = (report.loss_ms, report.loss_size) {
+        println!("loss and its gradient at {w}×{h}: {ms:.1} ms an iteration");
+    }
     for run in &report.renderers {
         println!(
             "{}: {:.2} iterations/s; gradients within {:.1e} of the CPU's (largest difference over the largest gradient)",
@@ -253,6 +262,22 @@ fn print_report(report: &TrainReport) {
     }
 }
 
+/// Median time of the loss and its gradient of a grey image against
+/// `target`, at the target's size.
+fn time_loss(target: &Target) -> (f64, [u32; 2]) {
+    let [w, h] = target.camera.size;
+    let goal: Vec<f64> = target.pixels.iter().map(|&p| p as f64).collect();
+    let grey = vec![0.5; goal.len()];
+    let times = (0..5)
+        .map(|_| {
+            let t = Instant::now();
+            std::hint::black_box(photometric_loss(&grey, &goal, w as usize, h as usize, true));
+            t.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    (summarize(times).0, [w, h])
+}
+
 /// Runs `visage bench train`.
 pub fn run(args: &TrainBenchArgs) -> Result<()> {
     let (gradient_error, checked) = gradient_check::worst_relative_error();
@@ -260,6 +285,7 @@ pub fn run(args: &TrainBenchArgs) -> Result<()> {
     let dataset = &data.dataset;
     let head = crate::model::builtin::build_head();
     let (frames, targets) = held_out_targets(dataset, &head)?;
+    let (loss_ms, loss_size) = targets.first().map(time_loss).unzip();
     let mut runs = Vec::new();
     for &renderer in &args.renderers {
         runs.push(run_one(args, dataset, &frames, &targets, renderer)?);
@@ -270,6 +296,8 @@ pub fn run(args: &TrainBenchArgs) -> Result<()> {
         gradient_max_relative_error: gradient_error,
         gradient_parameters_checked: checked,
         peak_rss_mb: peak_rss_mb(),
+        loss_ms,
+        loss_size,
         renderers: runs,
     };
     emit(&report, args.json, print_report);
