@@ -90,6 +90,41 @@ pub fn describe_adapter(adapter: &wgpu::AdapterInfo) -> String {
     )
 }
 
+/// Runs `work` with the device's validation and out-of-memory errors
+/// captured, so that a failure on the GPU (a buffer the device cannot
+/// allocate, a limit this code did not foresee) is a one-line
+/// [`Error::Device`] (exit 3) naming `what`, rather than wgpu's default
+/// handler's panic.
+pub fn guarded<T>(
+    device: &wgpu::Device,
+    what: &str,
+    work: impl FnOnce() -> Result<T>,
+) -> Result<T> {
+    let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let result = work();
+    // Scopes pop innermost first.
+    let invalid = pollster::block_on(validation.pop());
+    let exhausted = pollster::block_on(memory.pop());
+    match exhausted.or(invalid) {
+        Some(error) => Err(Error::device(format!(
+            "{what} failed on the GPU: {}",
+            one_line(&error.to_string())
+        ))),
+        None => result,
+    }
+}
+
+/// wgpu's multi-line error report as one line: its kind, then each cause.
+fn one_line(report: &str) -> String {
+    report
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && *l != "Caused by:")
+        .collect::<Vec<_>>()
+        .join(": ")
+}
+
 /// Most workgroups in one dispatch dimension (wgpu's downlevel limit, and
 /// what NVIDIA's Vulkan driver allows in y and z).
 pub const MAX_GROUPS: u32 = 65_535;
@@ -264,4 +299,44 @@ pub fn map_and_read(
     }
     buffer.unmap();
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A GPU failure inside a guard is a one-line device error naming the
+    /// work (before, wgpu's default handler panicked: 20M Gaussians once
+    /// ended `bench render` with a backtrace), and the device goes on
+    /// working after it.
+    #[test]
+    fn a_gpu_failure_is_a_one_line_device_error() {
+        let gpu = pollster::block_on(open_device(true)).unwrap().unwrap();
+        let device = &gpu.device;
+        let failed = guarded(device, "making a buffer", || {
+            // MAP_READ may only go with COPY_DST: a validation error.
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size: 16,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            });
+            Ok(())
+        });
+        let Err(Error::Device(message)) = failed else {
+            panic!("{failed:?}");
+        };
+        assert!(message.starts_with("making a buffer failed on the GPU: "));
+        assert!(!message.contains('\n'), "{message}");
+        let fine = guarded(device, "making a buffer", || {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size: 16,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            });
+            Ok(7)
+        });
+        assert_eq!(fine.unwrap(), 7);
+    }
 }

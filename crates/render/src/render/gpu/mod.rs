@@ -23,7 +23,7 @@ use crate::scene::camera::Camera;
 use crate::scene::splats::SplatScene;
 use binning::GpuBinning;
 use device::{
-    describe_adapter, element_grid, map_and_read, open_device, wait, Growable, OpenDevice,
+    describe_adapter, element_grid, guarded, map_and_read, open_device, wait, Growable, OpenDevice,
 };
 use kernels::{Bind, PackRgb, Project, TileRasterizer};
 
@@ -262,6 +262,13 @@ impl GpuRenderer {
     /// Makes the scene's buffers from its records (12 floats a Gaussian)
     /// and its SH of degree `stored_degree`.
     fn upload(&mut self, local: &[f32], all_sh: &[f32], stored_degree: u8) -> Result<()> {
+        let device = self.device.clone();
+        guarded(&device, "uploading the Gaussians", || {
+            self.upload_unguarded(local, all_sh, stored_degree)
+        })
+    }
+
+    fn upload_unguarded(&mut self, local: &[f32], all_sh: &[f32], stored_degree: u8) -> Result<()> {
         let n = local.len() / 12;
         let max_binding = self.limits.max_storage_buffer_binding_size;
         let sh_binding = self
@@ -347,6 +354,18 @@ impl GpuRenderer {
 
     /// Renders the uploaded Gaussians placed on `frames` (one per triangle).
     pub fn render(
+        &mut self,
+        frames: &[TriangleFrame],
+        camera: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<RgbImage> {
+        let device = self.device.clone();
+        guarded(&device, "drawing a frame", || {
+            self.render_unguarded(frames, camera, settings)
+        })
+    }
+
+    fn render_unguarded(
         &mut self,
         frames: &[TriangleFrame],
         camera: &Camera,

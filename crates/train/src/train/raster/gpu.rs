@@ -12,7 +12,7 @@ use super::splat::{bin, Backdrop, Rasterized, Splat, SplatGrad, TILE};
 use crate::error::{Error, Result};
 use crate::render::gpu::constants::SPLAT_GRAD_FLOATS;
 use crate::render::gpu::device::{
-    describe_adapter, map_and_read, open_device, Growable, OpenDevice, SOFTWARE_LOOP_LIMIT,
+    describe_adapter, guarded, map_and_read, open_device, Growable, OpenDevice, SOFTWARE_LOOP_LIMIT,
 };
 use crate::render::gpu::kernels::{TrainBackward, TrainForward};
 use crate::render::projection::MIN_TRANSMITTANCE;
@@ -192,6 +192,18 @@ impl GpuRaster {
         size: [u32; 2],
         backdrop: &Backdrop,
     ) -> Result<Rasterized> {
+        let device = self.gpu.device.clone();
+        guarded(&device, "the training forward pass", || {
+            self.forward_unguarded(splats, size, backdrop)
+        })
+    }
+
+    fn forward_unguarded(
+        &mut self,
+        splats: &[Splat],
+        size: [u32; 2],
+        backdrop: &Backdrop,
+    ) -> Result<Rasterized> {
         let lists = bin(splats, size);
         self.check_software_walks(&lists)?;
         let grid = self.upload_scene(splats, &lists, size);
@@ -237,6 +249,18 @@ impl GpuRaster {
     /// ∂loss/∂ every splat, given ∂loss/∂ the image (the CPU pass's
     /// [`super::cpu::backward`], in f32, summed on the host in f64).
     pub fn backward(
+        &mut self,
+        splats: &[Splat],
+        raster: &Rasterized,
+        d_image: &[f64],
+    ) -> Result<Vec<SplatGrad>> {
+        let device = self.gpu.device.clone();
+        guarded(&device, "the training backward pass", || {
+            self.backward_unguarded(splats, raster, d_image)
+        })
+    }
+
+    fn backward_unguarded(
         &mut self,
         splats: &[Splat],
         raster: &Rasterized,
