@@ -391,6 +391,10 @@ fn bench_train_reports_speed_quality_and_gradient_error() {
     );
     for run in runs {
         assert!(run["iterations_per_s"].as_f64().unwrap() > 0.0);
+        // Where an iteration's time goes: every part measured.
+        for part in ["forward", "loss", "backward", "update"] {
+            assert!(run["stage_ms"][part].as_f64().unwrap() > 0.0, "{part}: {r}");
+        }
         assert!(
             run["gradient_difference_from_cpu"].as_f64().unwrap() < 1e-4,
             "{r}"

@@ -20,7 +20,7 @@ use crate::train::loss::photometric_loss;
 use crate::train::model::gradient_check;
 use crate::train::posing::timestep_frames;
 use crate::train::target::{evaluate_view, load_target, Target};
-use crate::train::trainer::{TrainOptions, Trainer};
+use crate::train::trainer::{StageSeconds, TrainOptions, Trainer};
 use std::collections::BTreeMap;
 
 /// Arguments of `visage bench train`.
@@ -194,6 +194,7 @@ fn run_one(
         renderer,
         device: trainer.rasterizer(),
         iterations_per_s: args.iterations as f64 / training_s,
+        stage_ms: StageMs::per_iteration(&trainer.stage_seconds, trainer.iteration()),
         gradient_difference_from_cpu: agreement,
         curve,
     })
@@ -222,8 +223,31 @@ struct RendererRun {
     renderer: Backend,
     device: String,
     iterations_per_s: f64,
+    /// Milliseconds an iteration spends in each part of the step.
+    stage_ms: StageMs,
     gradient_difference_from_cpu: f64,
     curve: Vec<CurvePoint>,
+}
+
+/// Mean milliseconds an iteration spends in each part of a training step.
+#[derive(Serialize)]
+struct StageMs {
+    forward: f64,
+    loss: f64,
+    backward: f64,
+    update: f64,
+}
+
+impl StageMs {
+    fn per_iteration(total: &StageSeconds, iterations: usize) -> Self {
+        let ms = |s: f64| s * 1e3 / iterations.max(1) as f64;
+        Self {
+            forward: ms(total.forward),
+            loss: ms(total.loss),
+            backward: ms(total.backward),
+            update: ms(total.update),
+        }
+    }
 }
 
 /// The held-out PSNR after so many iterations.
@@ -251,6 +275,11 @@ fn print_report(report: &TrainReport) {
         println!(
             "{}: {:.2} iterations/s; gradients within {:.1e} of the CPU's (largest difference over the largest gradient)",
             run.device, run.iterations_per_s, run.gradient_difference_from_cpu,
+        );
+        let st = &run.stage_ms;
+        println!(
+            "  an iteration: forward {:.1} ms, loss {:.1} ms, backward {:.1} ms, update {:.1} ms",
+            st.forward, st.loss, st.backward, st.update
         );
         println!("  iteration  train s  held-out PSNR dB  Gaussians");
         for row in &run.curve {

@@ -5,6 +5,8 @@
 //! does with its optimiser state. (Ten lines of arithmetic: the crates that
 //! ship Adam want their own tensor types.)
 
+use rayon::prelude::*;
+
 /// β₁, β₂ and ε of 3DGS.
 const BETA1: f64 = 0.9;
 const BETA2: f64 = 0.999;
@@ -39,16 +41,19 @@ impl AdamGroup {
         self.t += 1;
         let c1 = 1.0 - BETA1.powi(self.t);
         let c2 = 1.0 - BETA2.powi(self.t);
-        for (((p, g), m), v) in params
-            .iter_mut()
+        let lr = self.lr;
+        // Each value's update depends on its own state only: in parallel,
+        // the same bits as one at a time.
+        params
+            .par_iter_mut()
             .zip(grads)
             .zip(&mut self.m)
             .zip(&mut self.v)
-        {
-            *m = BETA1 * *m + (1.0 - BETA1) * g;
-            *v = BETA2 * *v + (1.0 - BETA2) * g * g;
-            *p -= self.lr * (*m / c1) / ((*v / c2).sqrt() + EPSILON);
-        }
+            .for_each(|(((p, g), m), v)| {
+                *m = BETA1 * *m + (1.0 - BETA1) * g;
+                *v = BETA2 * *v + (1.0 - BETA2) * g * g;
+                *p -= lr * (*m / c1) / ((*v / c2).sqrt() + EPSILON);
+            });
     }
 
     /// Keeps the state of the Gaussians where `keep` is true, in order.

@@ -14,6 +14,7 @@ mod export;
 mod schedule;
 
 use std::collections::BTreeMap;
+use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
@@ -88,6 +89,20 @@ pub struct StepReport {
     pub gaussians: usize,
 }
 
+/// Seconds spent in each part of the training steps so far (for `bench
+/// train`: where an iteration's time goes).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageSeconds {
+    /// Projection (dual numbers) and the rasteriser's forward pass.
+    pub forward: f64,
+    /// The photometric loss and its gradient.
+    pub loss: f64,
+    /// The rasteriser's backward pass and the chain rule to the parameters.
+    pub backward: f64,
+    /// Regularisers, densification statistics, Adam, densify and prune.
+    pub update: f64,
+}
+
 /// A trainer over a dataset: the model, its optimiser and the posed meshes.
 pub struct Trainer {
     /// The parameters.
@@ -116,6 +131,8 @@ pub struct Trainer {
     boxes: BTreeMap<usize, OrientedBox>,
     /// The posed vertices per timestep, for the interior layer.
     posed: BTreeMap<usize, Vec<Vec3>>,
+    /// Where the steps' time went.
+    pub stage_seconds: StageSeconds,
 }
 
 /// Adam per parameter group.
@@ -232,6 +249,7 @@ impl Trainer {
             rasterizer,
             subset,
             boxes,
+            stage_seconds: StageSeconds::default(),
             posed: if options.holes.interior {
                 posed
             } else {
@@ -311,6 +329,7 @@ impl Trainer {
         let target = &self.targets[self.order.pop().expect("refilled above")];
         let frames = &self.frames[&target.view.timestep];
         let obscurer = self.obscurer(target, it);
+        let clock = Instant::now();
         let render = Render::new(
             &self.model,
             frames,
@@ -319,9 +338,11 @@ impl Trainer {
             &obscurer,
             &mut self.rasterizer,
         )?;
+        let forward = clock.elapsed().as_secs_f64();
         let goal: Vec<f64> = target.pixels.iter().map(|&p| p as f64).collect();
         let [w, h] = target.camera.size;
         let (loss, d_image) = photometric_loss(render.image(), &goal, w as usize, h as usize, true);
+        let loss_done = clock.elapsed().as_secs_f64();
         let report = StepReport {
             iteration: it,
             loss: loss.total,
@@ -329,6 +350,7 @@ impl Trainer {
             gaussians: self.model.len(),
         };
         let mut grads = render.backward(&self.model, &d_image, &mut self.rasterizer)?;
+        let backward_done = clock.elapsed().as_secs_f64();
         self.regularise(&render, &mut grads);
         let camera = target.camera;
         self.track_densification(&render, &grads, camera.size);
@@ -340,6 +362,11 @@ impl Trainer {
         if it % s.opacity_reset_interval == 0 && it < self.options.iterations {
             self.reset_opacity();
         }
+        let stages = &mut self.stage_seconds;
+        stages.forward += forward;
+        stages.loss += loss_done - forward;
+        stages.backward += backward_done - loss_done;
+        stages.update += clock.elapsed().as_secs_f64() - backward_done;
         Ok(report)
     }
 
@@ -381,7 +408,7 @@ impl Trainer {
             grads
                 .geometry
                 .iter()
-                .flat_map(|g| g[range.clone()].to_vec())
+                .flat_map(|g| g[range.clone()].iter().copied())
                 .collect()
         };
         let mut position = gather(&|g| g.position.to_vec());
