@@ -84,6 +84,28 @@ fn lod_columns(
     })
 }
 
+/// A cut the device could not draw is a gap in its row, not the end of the
+/// run (as an exact size it refuses is): the renderer gets the full scene
+/// back for the next size.
+fn cut_or_gap(
+    columns: Result<LodColumns>,
+    renderer: &mut SplatRenderer,
+    full: &SplatScene,
+    hierarchy: &mut LodScene,
+) -> Result<Option<LodColumns>> {
+    match columns {
+        Ok(columns) => Ok(Some(columns)),
+        Err(Error::Device(_)) => {
+            hierarchy.forget();
+            match renderer.set_world_scene(full) {
+                Ok(()) | Err(Error::Device(_)) => Ok(None),
+                Err(e) => Err(e),
+            }
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// The early-stop thresholds compared on scenes (the knob that trades
 /// accuracy for speed on every renderer without resampling the image).
 const EARLY_STOPS: [f32; 4] = [1e-4, 1e-3, 1e-2, 3e-2];
@@ -151,15 +173,18 @@ pub fn bench_scene(
                 row.lod = match (lod.resolve(scene.len(), pixels), &row.outcome) {
                     (LodPolicy::Off, SizeOutcome::Drawn(frame)) => Some(LodColumns::exact(frame)),
                     (LodPolicy::Off, SizeOutcome::Refused { .. }) => None,
-                    (policy, _) => Some(lod_columns(
-                        &mut renderer,
-                        &scene,
-                        hierarchy,
-                        camera,
-                        reference,
-                        policy,
-                        rounds,
-                    )?),
+                    (policy, _) => {
+                        let columns = lod_columns(
+                            &mut renderer,
+                            &scene,
+                            hierarchy,
+                            camera,
+                            reference,
+                            policy,
+                            rounds,
+                        );
+                        cut_or_gap(columns, &mut renderer, &scene, hierarchy)?
+                    }
                 };
             }
             rows.push(row);

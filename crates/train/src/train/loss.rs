@@ -38,6 +38,9 @@ fn window() -> [f64; WINDOW] {
 /// pixel sums its taps in window order, as a serial loop would, so the result
 /// does not depend on the number of threads.
 fn blur(plane: &[f64], width: usize, height: usize, w: &[f64; WINDOW]) -> Vec<f64> {
+    if plane.is_empty() || width == 0 {
+        return vec![0.0; plane.len()];
+    }
     let mut rows = vec![0.0; plane.len()];
     rows.par_chunks_mut(width)
         .zip(plane.par_chunks(width))

@@ -82,6 +82,12 @@ impl KeyValues {
         }
     }
 
+    fn reset(&mut self, device: &wgpu::Device) {
+        for b in self.keys.iter_mut().chain(self.values.iter_mut()) {
+            b.reset(device);
+        }
+    }
+
     fn ensure(&mut self, device: &wgpu::Device, count: u32) {
         let bytes = u64::from(count.max(1)) * 4;
         for b in self.keys.iter_mut().chain(self.values.iter_mut()) {
@@ -109,9 +115,26 @@ pub(super) struct GpuBinning {
     /// Workgroups in one row of a per-element kernel's grid ([`MAX_GROUPS`];
     /// tests lower it to run the multi-row layout on small scenes).
     pub grid_columns: u32,
+    /// The device's largest storage binding: the sort's buffers (grown to
+    /// powers of two, bound whole) must fit it.
+    pub max_binding: u64,
 }
 
 impl GpuBinning {
+    /// Drops every buffer back to a small one (after a failure on the GPU).
+    pub fn reset_buffers(&mut self, device: &wgpu::Device) {
+        self.depth.reset(device);
+        self.tiles.reset(device);
+        for b in [
+            &mut self.entries,
+            &mut self.histogram,
+            &mut self.sums,
+            &mut self.ranges,
+        ] {
+            b.reset(device);
+        }
+    }
+
     /// Compiles the kernels.
     pub fn new(device: &wgpu::Device) -> Self {
         let kernels = Kernels {
@@ -136,6 +159,7 @@ impl GpuBinning {
             }),
             slots: Vec::new(),
             grid_columns: MAX_GROUPS,
+            max_binding: u64::MAX,
             depth: KeyValues::new(device, "depth sort"),
             tiles: KeyValues::new(device, "tile entries"),
             entries: Growable::new(device, "tile entry counts", storage),
@@ -181,7 +205,7 @@ impl GpuBinning {
         let tile_count = tiles.0 * tiles.1;
         self.ranges.ensure(device, u64::from(tile_count.max(1)) * 8);
         self.slots.clear();
-        check_groups(count, "Gaussians")?;
+        check_groups(count, "Gaussians", self.max_binding)?;
         let tile_grid = [tiles.0, tiles.1, 0, 0];
         let per_gaussian = self.slot(SortParams {
             tiles: tile_grid,
@@ -240,7 +264,7 @@ impl GpuBinning {
         let mut encoder = device.create_command_encoder(&Default::default());
         encoder.clear_buffer(&self.ranges.buffer, 0, None);
         if entries > 0 {
-            check_groups(entries, "tile entries")?;
+            check_groups(entries, "tile entries", self.max_binding)?;
             self.tiles.ensure(device, entries);
             let order = depth_sort.result;
             let tile_bytes = (32 - (tile_count.max(2) - 1).leading_zeros()).div_ceil(8);
@@ -425,12 +449,14 @@ struct RadixPlan {
 
 /// The radix and scan kernels give each workgroup one block of [`BLOCK`]
 /// elements along one dispatch dimension, so one sort holds at most
-/// [`MAX_GROUPS`] blocks (67 million elements).
-fn check_groups(count: u32, what: &str) -> Result<()> {
-    if count.div_ceil(BLOCK) > MAX_GROUPS {
+/// [`MAX_GROUPS`] blocks (67 million elements); and its key and value
+/// buffers (4 bytes an element, grown to a power of two, bound whole) must
+/// fit the device's largest storage binding (33.5 million on lavapipe).
+fn check_groups(count: u32, what: &str, max_binding: u64) -> Result<()> {
+    let bytes = (u64::from(count) * 4).next_power_of_two();
+    if count.div_ceil(BLOCK) > MAX_GROUPS || bytes > max_binding {
         return Err(Error::device(format!(
-            "{count} {what} are more than the GPU renderer sorts in one frame ({}); try --lod auto or --renderer cpu",
-            MAX_GROUPS * BLOCK
+            "{count} {what} are more than the GPU renderer sorts in one frame on this device; try --lod auto or --renderer cpu"
         )));
     }
     Ok(())

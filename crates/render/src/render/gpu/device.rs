@@ -166,6 +166,13 @@ impl Growable {
         }
     }
 
+    /// Goes back to a small buffer: after a failure on the GPU the buffer
+    /// may be an invalid handle that still reports the size asked for, and
+    /// [`Growable::ensure`] would keep it.
+    pub fn reset(&mut self, device: &wgpu::Device) {
+        *self = Self::new(device, self.label, self.usage);
+    }
+
     /// Makes room for `bytes`; returns true when the buffer was replaced.
     pub fn ensure(&mut self, device: &wgpu::Device, bytes: u64) -> bool {
         if self.buffer.size() >= bytes {
@@ -315,7 +322,7 @@ mod tests {
         let device = &gpu.device;
         let failed = guarded(device, "making a buffer", || {
             // MAP_READ may only go with COPY_DST: a validation error.
-            device.create_buffer(&wgpu::BufferDescriptor {
+            let _invalid = device.create_buffer(&wgpu::BufferDescriptor {
                 label: None,
                 size: 16,
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::STORAGE,
@@ -329,7 +336,7 @@ mod tests {
         assert!(message.starts_with("making a buffer failed on the GPU: "));
         assert!(!message.contains('\n'), "{message}");
         let fine = guarded(device, "making a buffer", || {
-            device.create_buffer(&wgpu::BufferDescriptor {
+            let _buffer = device.create_buffer(&wgpu::BufferDescriptor {
                 label: None,
                 size: 16,
                 usage: wgpu::BufferUsages::STORAGE,
