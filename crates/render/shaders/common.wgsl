@@ -90,8 +90,9 @@ struct RasterParams {
     tuning: vec4<f32>,      // transmittance at which a pixel stops, unused x3
 }
 
-// A training splat is three vec4s: (centre x, centre y, depth, footprint
-// half-size), (conic a, b, c, opacity), (r, g, b, unused). Returns (α, e^power,
+// A training splat, like a projected Gaussian of the renderer, is three
+// vec4s: (centre x, centre y, depth, footprint half-size), (conic a, b, c,
+// opacity), (r, g, b, unused). Returns (α, e^power,
 // pixel − centre) when it contributes to the pixel centre, α = 0 otherwise:
 // the rules of src/render/projection.rs.
 fn splat_alpha(p0: vec4<f32>, p1: vec4<f32>, pixel: vec2<f32>) -> vec4<f32> {

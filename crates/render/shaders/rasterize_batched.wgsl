@@ -78,18 +78,9 @@ fn main(
             let count = min(BATCH, range.y - start);
             var j = 0u;
             for (; j < count; j++) {
-                let p0 = batch_centre[j];
-                let d = vec2<f32>(px - p0.x, py - p0.y);
-                if (abs(d.x) > p0.w || abs(d.y) > p0.w) {
-                    continue;
-                }
-                let p1 = batch_conic[j];
-                let power = -0.5 * (p1.x * d.x * d.x + p1.z * d.y * d.y) - p1.y * d.x * d.y;
-                if (power > 0.0) {
-                    continue;
-                }
-                let alpha = min(MAX_ALPHA, p1.w * exp(power));
-                if (alpha < MIN_ALPHA) {
+                // The rules `rasterize` applies inline (common.wgsl).
+                let alpha = splat_alpha(batch_centre[j], batch_conic[j], vec2<f32>(px, py)).x;
+                if (alpha == 0.0) {
                     continue;
                 }
                 let next = transmittance * (1.0 - alpha);

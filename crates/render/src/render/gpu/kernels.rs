@@ -147,23 +147,18 @@ kernels! {
 /// The tile rasteriser suited to the adapter: [`RasterizeBatched`] on
 /// hardware GPUs, whose loads overlap in a batch (an H200 drew a million
 /// Gaussians at 1920×1080 in 8.0 ms a frame with per-entry reads, 3.8 ms
-/// batched), and
-/// [`Rasterize`] on software ones such as lavapipe, where a workgroup
-/// barrier costs more than the loads it overlaps.
-pub enum TileRasterizer {
-    /// Per-entry reads, no barriers.
-    Plain(Rasterize),
-    /// Batches through workgroup memory.
-    Batched(RasterizeBatched),
-}
+/// batched), and [`Rasterize`] on software ones such as lavapipe, where a
+/// workgroup barrier costs more than the loads it overlaps. Both bind the
+/// same buffers in the same order.
+pub struct TileRasterizer(Kernel);
 
 impl TileRasterizer {
     /// Compiles the kernel for an adapter that is (or is not) software.
     pub fn for_adapter(device: &wgpu::Device, software: bool) -> Self {
         if software {
-            Self::Plain(Rasterize::new(device))
+            Self(Rasterize::new(device).0)
         } else {
-            Self::Batched(RasterizeBatched::new(device))
+            Self(RasterizeBatched::new(device).0)
         }
     }
 
@@ -181,14 +176,8 @@ impl TileRasterizer {
         cut_short: &wgpu::Buffer,
         tiles: (u32, u32),
     ) {
-        match self {
-            Self::Plain(k) => k.dispatch(
-                device, pass, uniform, projected, ranges, list, image, cut_short, tiles,
-            ),
-            Self::Batched(k) => k.dispatch(
-                device, pass, uniform, projected, ranges, list, image, cut_short, tiles,
-            ),
-        }
+        let buffers = [projected, ranges, list, image, cut_short];
+        self.0.dispatch(device, pass, uniform, &buffers, tiles);
     }
 }
 
