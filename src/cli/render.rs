@@ -180,14 +180,22 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                     let mut hierarchy = LodScene::new(crate::render::lod::build(scene));
                     let image = hierarchy.render(&mut r, &camera, policy, &settings)?;
                     let cut = hierarchy.summary();
-                    let device = format!(
-                        "{} (level of detail: {} of {} Gaussians, levels {}-{})",
-                        r.description(),
-                        cut.drawn,
-                        scene.len(),
-                        cut.levels.0,
-                        cut.levels.1
-                    );
+                    let device = match cut.on_gpu {
+                        true => format!(
+                            "{} (level of detail, cut on the GPU: {} of {} Gaussians on screen)",
+                            r.description(),
+                            cut.drawn,
+                            scene.len(),
+                        ),
+                        false => format!(
+                            "{} (level of detail: {} of {} Gaussians, levels {}-{})",
+                            r.description(),
+                            cut.drawn,
+                            scene.len(),
+                            cut.levels.0,
+                            cut.levels.1
+                        ),
+                    };
                     (image, cut.drawn, device)
                 }
             }

@@ -592,6 +592,11 @@ fn scene_sections(scene: &SceneSummary, vm: &ViewModel) -> Vec<Section> {
             vec![
                 format!(" {visible} of {} drawn", i.gaussians),
                 match i.lod {
+                    Some(cut) if cut.on_gpu => format!(
+                        " LOD {} {} nodes, cut on the GPU",
+                        s.debug.lod.label(),
+                        cut.drawn
+                    ),
                     Some(cut) => format!(
                         " LOD {} {} nodes, levels {}-{}",
                         s.debug.lod.label(),

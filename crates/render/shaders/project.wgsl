@@ -1,5 +1,10 @@
 // project: world Gaussians -> screen-space ellipses (EWA, 3DGS numerics), SH colour,
 // depth and the tiles each footprint touches. Culled Gaussians get key.w = 0.
+// With a level-of-detail threshold (camera.tuning.z > 0) the Gaussians are the
+// nodes of a hierarchy and each decides on its own whether it is in the cut
+// (src/render/lod/cut.rs): the same cut the CPU's tree walk finds, because a
+// parent's bounding sphere holds its children's, so its size on screen is never
+// smaller and every node whose parent is opened has all its ancestors opened.
 
 @group(0) @binding(0) var<uniform> camera: Camera;
 @group(0) @binding(1) var<storage, read> world: array<vec4<f32>>;
@@ -8,10 +13,23 @@
 // in `sh`, the rest in `sh_rest`.
 @group(0) @binding(2) var<storage, read> sh: array<f32>;
 @group(0) @binding(3) var<storage, read> sh_rest: array<f32>;
+// Per node of a hierarchy (unread without a threshold): parent index (NO_PARENT for
+// the root) with LEAF_BIT set for the scene's own Gaussians; the bits of its
+// bounding sphere's radius, of its leaves' mass and of their summed opacity.
+@group(0) @binding(4) var<storage, read> lod: array<vec4<u32>>;
 // Per Gaussian, 3 x vec4: (centre x, y, depth, radius), (conic a, b, c, opacity), (rgb, 0).
-@group(0) @binding(4) var<storage, read_write> projected: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> projected: array<vec4<f32>>;
 // Per Gaussian: (depth bits, first tile x | y << 16, last tile x | y << 16, visible).
-@group(0) @binding(5) var<storage, read_write> keys: array<vec4<u32>>;
+@group(0) @binding(6) var<storage, read_write> keys: array<vec4<u32>>;
+// Gaussians drawn this frame (not culled), and of them the scene's own (all of
+// them without a hierarchy); the renderer clears it before the dispatch.
+@group(0) @binding(7) var<storage, read_write> drawn: array<atomic<u32>, 2>;
+
+const LEAF_BIT: u32 = 0x80000000u;
+const NO_PARENT: u32 = 0x7fffffffu;
+const FAR_AWAY: f32 = 3.0e38;
+
+var<workgroup> drawn_here: array<atomic<u32>, 2>;
 
 const SH_C0: f32 = 0.28209479177387814;
 const SH_C1: f32 = 0.4886025119029199;
@@ -58,25 +76,85 @@ fn cull(i: u32) {
     keys[i] = vec4<u32>(0u, 0u, 0u, 0u);
 }
 
-@compute @workgroup_size(GROUP)
-fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let i = element_index(id, groups);
-    if (i >= camera.counts.x) {
-        return;
+// The on-screen diameter in pixels of a sphere of radius r about view-space p
+// (cut.rs View::judge): unbounded once it reaches the near plane.
+fn sphere_pixels(p: vec3<f32>, r: f32) -> f32 {
+    let nearest = -p.z - r;
+    if (nearest <= camera.limits.z) {
+        return FAR_AWAY;
     }
+    return 2.0 * max(camera.intrinsics.x, camera.intrinsics.y) * r / nearest;
+}
+
+// Whether a sphere lies wholly outside the guarded view or before the near plane.
+fn sphere_outside(p: vec3<f32>, r: f32) -> bool {
+    let depth = -p.z;
+    let tan = camera.limits.xy;
+    let norm = sqrt(vec2<f32>(1.0) + tan * tan);
+    return depth + r < camera.limits.z
+        || (abs(p.x) - tan.x * depth) / norm.x > r
+        || (abs(p.y) - tan.y * depth) / norm.y > r;
+}
+
+// Whether node i is in the cut of threshold `pixels` (cut.rs): in view, small
+// enough to stand for its subtree (or a leaf), and its parent too large.
+fn in_cut(i: u32, p: vec3<f32>, link: vec4<u32>, pixels: f32) -> bool {
+    let extent = bitcast<f32>(link.y);
+    if (sphere_outside(p, extent)) {
+        return false;
+    }
+    if ((link.x & LEAF_BIT) == 0u && sphere_pixels(p, extent) > pixels) {
+        return false;
+    }
+    let parent = link.x & NO_PARENT;
+    if (parent == NO_PARENT) {
+        return true;
+    }
+    let centre = (camera.view * vec4<f32>(world[3u * parent].xyz, 1.0)).xyz;
+    return sphere_pixels(centre, bitcast<f32>(lod[parent].y)) > pixels;
+}
+
+// A merged node's opacity where it is drawn (lod/mod.rs DrawnOpacity): its
+// leaves' mass, dilated as the renderer dilates each of them, over its own
+// dilated mean area.
+fn drawn_opacity(link: vec4<u32>, depth: f32, scale: vec3<f32>) -> f32 {
+    let pixel = max(depth, camera.limits.z) / camera.intrinsics.y;
+    let dilation = DILATION * pixel * pixel;
+    let grown = sqrt(scale * scale + vec3<f32>(dilation));
+    let mass = bitcast<f32>(link.z) + 3.0 * dilation * bitcast<f32>(link.w);
+    let area = max(grown.x * grown.y + grown.y * grown.z + grown.z * grown.x, 1e-37);
+    return clamp(mass / area, 0.0, MAX_OPACITY);
+}
+
+// Projects Gaussian i: 0 when culled, 1 for a drawn merged node, 2 for a drawn
+// Gaussian of the scene.
+fn project_one(i: u32) -> u32 {
     let w0 = world[3u * i];
     let q = world[3u * i + 1u];
     let s = world[3u * i + 2u].xyz * camera.extra.x;
-    let opacity = min(w0.w, MAX_OPACITY);
-    if (!finite3(w0.xyz) || !finite3(s) || !(opacity > 0.0)) {
-        cull(i);
-        return;
-    }
+    var opacity = min(w0.w, MAX_OPACITY);
     let p = (camera.view * vec4<f32>(w0.xyz, 1.0)).xyz;
     let depth = -p.z;
+    var kind = 2u;
+    let pixels = camera.tuning.z;
+    if (pixels > 0.0) {
+        let link = lod[i];
+        if (!in_cut(i, p, link, pixels)) {
+            cull(i);
+            return 0u;
+        }
+        if ((link.x & LEAF_BIT) == 0u) {
+            kind = 1u;
+            opacity = drawn_opacity(link, depth, world[3u * i + 2u].xyz);
+        }
+    }
+    if (!finite3(w0.xyz) || !finite3(s) || !(opacity > 0.0)) {
+        cull(i);
+        return 0u;
+    }
     if (!(depth >= camera.limits.z && depth <= camera.limits.w)) {
         cull(i);
-        return;
+        return 0u;
     }
     let r = quat_to_mat(quat_normalize(q));
     let m = mat3x3<f32>(r[0] * s.x, r[1] * s.y, r[2] * s.z);
@@ -94,7 +172,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
     let det = a * c - b * b;
     if (!(det > 0.0) || !finite(det)) {
         cull(i);
-        return;
+        return 0u;
     }
     let mid = 0.5 * (a + c);
     let lambda = mid + sqrt(max(mid * mid - det, 0.1));
@@ -111,7 +189,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
     let y1 = min(floor(centre.y + radius - 0.5), height - 1.0);
     if (!finite(radius) || !(x0 <= x1) || !(y0 <= y1)) {
         cull(i);
-        return;
+        return 0u;
     }
     let dir = normalize(w0.xyz - camera.position.xyz);
     let rgb = sh_colour(i, dir);
@@ -121,4 +199,32 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
     let t0 = vec2<u32>(u32(x0) / TILE, u32(y0) / TILE);
     let t1 = vec2<u32>(u32(x1) / TILE, u32(y1) / TILE);
     keys[i] = vec4<u32>(bitcast<u32>(depth), t0.x | (t0.y << 16u), t1.x | (t1.y << 16u), 1u);
+    return kind;
+}
+
+@compute @workgroup_size(GROUP)
+fn main(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    let i = element_index(id, groups);
+    var kind = 0u;
+    if (i < camera.counts.x) {
+        kind = project_one(i);
+    }
+    // Counted per workgroup first: one global atomic a workgroup, not one a Gaussian.
+    if (kind != 0u) {
+        atomicAdd(&drawn_here[0], 1u);
+    }
+    if (kind == 2u) {
+        atomicAdd(&drawn_here[1], 1u);
+    }
+    workgroupBarrier();
+    if (local < 2u) {
+        let n = atomicLoad(&drawn_here[local]);
+        if (n > 0u) {
+            atomicAdd(&drawn[local], n);
+        }
+    }
 }

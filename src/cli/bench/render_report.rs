@@ -136,8 +136,11 @@ pub struct LodColumns {
     pub lod_leaves: Option<usize>,
     /// The coarsest and finest level drawn (none when drawn exactly).
     pub lod_levels: Option<[u16; 2]>,
-    /// Milliseconds the cut took.
+    /// Milliseconds the cut took on the CPU.
     pub lod_cut_ms: f64,
+    /// The GPU chose the cut within its frame (then `lod_drawn` counts
+    /// what reached the screen, and no levels are known).
+    pub lod_cut_on_gpu: bool,
 }
 
 impl LodColumns {
@@ -152,6 +155,7 @@ impl LodColumns {
             lod_leaves: None,
             lod_levels: None,
             lod_cut_ms: 0.0,
+            lod_cut_on_gpu: false,
         }
     }
 }
@@ -282,8 +286,11 @@ fn print_lod_rows(rows: &[SizeRow]) {
                 Drawn::Nodes(n) => n.to_string(),
                 Drawn::Exact(label) => label.to_string(),
             },
-            l.lod_levels
-                .map_or("all".into(), |[a, b]| format!("{a}-{b}")),
+            match (l.lod_levels, l.lod_cut_on_gpu) {
+                (_, true) => "on GPU".into(),
+                (Some([a, b]), _) => format!("{a}-{b}"),
+                (None, _) => "all".to_string(),
+            },
             l.lod_cut_ms,
         );
     }

@@ -79,8 +79,9 @@ fn lod_columns(
         lod_psnr_db: psnr_report(&image, reference).unwrap_or(0.0),
         lod_drawn: Drawn::Nodes(summary.drawn),
         lod_leaves: Some(summary.leaves),
-        lod_levels: Some([summary.levels.0, summary.levels.1]),
+        lod_levels: (!summary.on_gpu).then_some([summary.levels.0, summary.levels.1]),
         lod_cut_ms: summary.cut_ms,
+        lod_cut_on_gpu: summary.on_gpu,
     })
 }
 

@@ -158,11 +158,10 @@ impl SplatRenderer {
         }
     }
 
-    /// Gaussians that survived culling in the last frame (the CPU renderer
-    /// counts them; the GPU one does not read the count back).
+    /// Gaussians that survived culling in the last frame.
     pub fn visible(&self) -> Option<usize> {
         match self {
-            SplatRenderer::Gpu(_) => None,
+            SplatRenderer::Gpu(g) => Some(g.drawn().0 as usize),
             SplatRenderer::Cpu(c) => Some(c.visible()),
         }
     }

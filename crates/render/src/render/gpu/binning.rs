@@ -2,7 +2,9 @@
 //! [`TileBins`](super::tiles::TileBins) builds, bit for bit, made by compute
 //! kernels so a frame never leaves the device until its image does.
 //!
-//! 1. `sort_keys`: (depth bits, Gaussian index) for every Gaussian, culled ones last.
+//! 1. `sort_keys`: (depth bits, Gaussian index) for every Gaussian, culled ones last;
+//!    or, where most are culled (a level-of-detail cut), `cull_flags` + prefix sum
+//!    + `compact_keys`: the kept ones only, their count read back first (4 bytes).
 //! 2. A stable LSD radix sort on the top `sort_bits` of the depth, 8 bits a pass
 //!    (`radix_histogram` → prefix sum → `radix_scatter`), so ties keep index order.
 //! 3. `tiles_count` + prefix sum: where each Gaussian's tile entries start, in depth
@@ -16,8 +18,8 @@
 use super::constants::{DIGITS, SORT_BLOCK as BLOCK};
 use super::device::{element_grid, read_buffer, Growable, MAX_GROUPS};
 use super::kernels::{
-    RadixHistogram, RadixScatter, ScanApply, ScanReduce, ScanSums, SortKeys, TilesCount, TilesEmit,
-    TilesRanges,
+    CompactKeys, CullFlags, RadixHistogram, RadixScatter, ScanApply, ScanReduce, ScanSums,
+    SortKeys, TilesCount, TilesEmit, TilesRanges,
 };
 use crate::error::{Error, Result};
 
@@ -53,6 +55,8 @@ impl SortParams {
 /// The sort and binning kernels.
 struct Kernels {
     sort_keys: SortKeys,
+    cull_flags: CullFlags,
+    compact_keys: CompactKeys,
     histogram: RadixHistogram,
     scatter: RadixScatter,
     scan_reduce: ScanReduce,
@@ -123,6 +127,7 @@ pub(super) struct GpuBinning {
 impl GpuBinning {
     /// Drops every buffer back to a small one (after a failure on the GPU).
     pub fn reset_buffers(&mut self, device: &wgpu::Device) {
+        self.forget_bind_groups();
         self.depth.reset(device);
         self.tiles.reset(device);
         for b in [
@@ -135,10 +140,29 @@ impl GpuBinning {
         }
     }
 
+    /// Drops the bind groups the kernels keep (so the buffers they bound
+    /// can be freed).
+    pub fn forget_bind_groups(&self) {
+        let k = &self.kernels;
+        k.sort_keys.forget();
+        k.cull_flags.forget();
+        k.compact_keys.forget();
+        k.histogram.forget();
+        k.scatter.forget();
+        k.scan_reduce.forget();
+        k.scan_sums.forget();
+        k.scan_apply.forget();
+        k.tiles_count.forget();
+        k.tiles_emit.forget();
+        k.tiles_ranges.forget();
+    }
+
     /// Compiles the kernels.
     pub fn new(device: &wgpu::Device) -> Self {
         let kernels = Kernels {
             sort_keys: SortKeys::new(device),
+            cull_flags: CullFlags::new(device),
+            compact_keys: CompactKeys::new(device),
             histogram: RadixHistogram::new(device),
             scatter: RadixScatter::new(device),
             scan_reduce: ScanReduce::new(device),
@@ -192,7 +216,10 @@ impl GpuBinning {
     }
 
     /// Sorts the `count` Gaussians whose keys `project` wrote by depth (top
-    /// `sort_bits` bits) and bins them into the tiles of a `tiles` grid.
+    /// `sort_bits` bits) and bins them into the tiles of a `tiles` grid;
+    /// with `compact`, the culled ones are left out before the sort (worth
+    /// its extra pass and read-back where most are culled).
+    #[allow(clippy::too_many_arguments)]
     pub fn bin(
         &mut self,
         device: &wgpu::Device,
@@ -201,24 +228,31 @@ impl GpuBinning {
         count: u32,
         tiles: (u32, u32),
         sort_bits: u8,
+        compact: bool,
     ) -> Result<()> {
         let tile_count = tiles.0 * tiles.1;
         self.ranges.ensure(device, u64::from(tile_count.max(1)) * 8);
         self.slots.clear();
         check_groups(count, "Gaussians", self.max_binding)?;
+        // Per Gaussian: flags, then (scanned) where each kept one goes.
+        self.entries.ensure(device, u64::from(count.max(1)) * 4);
+        let every = self.slot(SortParams::new(count));
+        let kept = match compact {
+            true => self.count_kept(device, queue, keys, count, every)?,
+            false => count,
+        };
         let tile_grid = [tiles.0, tiles.1, 0, 0];
         let per_gaussian = self.slot(SortParams {
             tiles: tile_grid,
-            ..SortParams::new(count)
+            ..SortParams::new(kept)
         });
 
         // Phase 1: depth keys, depth sort, tile entry counts and their starts.
-        self.depth.ensure(device, count);
-        self.entries.ensure(device, u64::from(count.max(1)) * 4);
+        self.depth.ensure(device, kept);
         let depth_passes = u32::from(sort_bits.clamp(8, 32)).div_ceil(8);
         let first_byte = 4 - depth_passes;
-        let depth_sort = self.radix_plan(count, first_byte..4);
-        let entry_scan = self.scan_plan(count);
+        let depth_sort = self.radix_plan(kept, first_byte..4);
+        let entry_scan = self.scan_plan(kept);
         self.ensure_scratch(device, &depth_sort, &entry_scan);
         self.write_slots(queue);
         let mut encoder = device.create_command_encoder(&Default::default());
@@ -226,16 +260,29 @@ impl GpuBinning {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             let k = &self.kernels;
             let d = &self.depth;
-            let groups = element_grid(count, self.grid_columns);
-            k.sort_keys.dispatch(
-                device,
-                &mut pass,
-                self.uniform(per_gaussian),
-                keys,
-                &d.keys[0].buffer,
-                &d.values[0].buffer,
-                groups,
-            );
+            let groups = element_grid(kept, self.grid_columns);
+            if compact {
+                k.compact_keys.dispatch(
+                    device,
+                    &mut pass,
+                    self.uniform(every),
+                    keys,
+                    &self.entries.buffer,
+                    &d.keys[0].buffer,
+                    &d.values[0].buffer,
+                    element_grid(count, self.grid_columns),
+                );
+            } else {
+                k.sort_keys.dispatch(
+                    device,
+                    &mut pass,
+                    self.uniform(per_gaussian),
+                    keys,
+                    &d.keys[0].buffer,
+                    &d.values[0].buffer,
+                    groups,
+                );
+            }
             let order = self.encode_radix(device, &mut pass, &depth_sort, &self.depth);
             let order = &self.depth.values[order].buffer;
             k.tiles_count.dispatch(
@@ -259,6 +306,7 @@ impl GpuBinning {
         queue.submit([encoder.finish()]);
         let total: Vec<u32> = read_buffer(device, &self.total_readback, 4)?;
         let entries = total[0];
+        let count = kept;
 
         // Phase 2: entries in depth order, stable sort by tile, tile runs.
         let mut encoder = device.create_command_encoder(&Default::default());
@@ -304,6 +352,44 @@ impl GpuBinning {
         }
         queue.submit([encoder.finish()]);
         Ok(())
+    }
+
+    /// Flags the Gaussians `project` kept, scans the flags in `entries` (each
+    /// kept one's place among them) and reads back how many there are;
+    /// `every` is a parameter slot for all `count`.
+    fn count_kept(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        keys: &wgpu::Buffer,
+        count: u32,
+        every: u64,
+    ) -> Result<u32> {
+        let scan = self.scan_plan(count);
+        self.sums.ensure(device, (u64::from(scan.sums) + 1) * 4);
+        self.write_slots(queue);
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            self.kernels.cull_flags.dispatch(
+                device,
+                &mut pass,
+                self.uniform(every),
+                keys,
+                &self.entries.buffer,
+                element_grid(count, self.grid_columns),
+            );
+            self.encode_scan(device, &mut pass, &scan, &self.entries.buffer);
+        }
+        encoder.copy_buffer_to_buffer(
+            &self.sums.buffer,
+            u64::from(scan.sums) * 4,
+            &self.total_readback,
+            0,
+            4,
+        );
+        queue.submit([encoder.finish()]);
+        Ok(read_buffer::<u32>(device, &self.total_readback, 4)?[0])
     }
 
     /// Plans a radix sort of `count` elements over the bytes `bytes` (low to high).
@@ -611,18 +697,24 @@ mod tests {
                 contents: bytemuck::cast_slice(if keys.is_empty() { &[[0u32; 4]] } else { &keys }),
                 usage: wgpu::BufferUsages::STORAGE,
             });
-            binning
-                .bin(device, queue, &buffer, n as u32, tiles, bits)
-                .unwrap();
             let mut cpu = TileBins::default();
             cpu.bin(&keys, tiles, bits);
-            let tile_count = (tiles.0 * tiles.1) as usize;
-            let ranges = read_back(device, queue, &binning.ranges.buffer, 2 * tile_count);
-            let list = read_back(device, queue, binning.list(), cpu.list.len());
-            for t in 0..tile_count {
-                let (a, b) = (ranges[2 * t] as usize, ranges[2 * t + 1] as usize);
-                let gpu_tile = if a < b { &list[a..b] } else { &[][..] };
-                assert_eq!(gpu_tile, cpu.tile(t), "case {k}: tile {t} differs");
+            for compact in [false, true] {
+                binning
+                    .bin(device, queue, &buffer, n as u32, tiles, bits, compact)
+                    .unwrap();
+                let tile_count = (tiles.0 * tiles.1) as usize;
+                let ranges = read_back(device, queue, &binning.ranges.buffer, 2 * tile_count);
+                let list = read_back(device, queue, binning.list(), cpu.list.len());
+                for t in 0..tile_count {
+                    let (a, b) = (ranges[2 * t] as usize, ranges[2 * t + 1] as usize);
+                    let gpu_tile = if a < b { &list[a..b] } else { &[][..] };
+                    assert_eq!(
+                        gpu_tile,
+                        cpu.tile(t),
+                        "case {k} (compact {compact}): tile {t} differs"
+                    );
+                }
             }
         }
     }

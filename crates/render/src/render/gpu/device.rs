@@ -51,8 +51,9 @@ pub async fn open_device(allow_software: bool) -> Result<Option<OpenDevice>> {
     let mut limits = wgpu::Limits::downlevel_defaults();
     limits.max_storage_buffer_binding_size = adapter_limits.max_storage_buffer_binding_size;
     limits.max_buffer_size = adapter_limits.max_buffer_size;
-    // The training kernels bind six storage buffers.
-    limits.max_storage_buffers_per_shader_stage = 6;
+    // `project` binds seven storage buffers; eight is WebGPU's default,
+    // which every Vulkan, Metal and DX12 device wgpu runs on offers.
+    limits.max_storage_buffers_per_shader_stage = 8;
     limits.max_compute_invocations_per_workgroup = 256;
     limits.max_compute_workgroup_size_x = 256;
     limits.max_compute_workgroup_size_y = 16;

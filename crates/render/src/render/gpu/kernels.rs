@@ -3,32 +3,76 @@
 //! uniform), declared once in the [`kernels!`] table, so a wrapper's dispatch
 //! takes exactly the buffers its shader binds, in its order.
 
+use std::sync::Mutex;
+
 use super::device::{compute_pipeline, uniform_and_storage};
 
-/// A compiled kernel.
+/// A compiled kernel, with the bind groups of its recent dispatches.
 pub struct Kernel {
     pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    groups: Mutex<BindGroups>,
 }
+
+/// What one bind group binds: the uniform's buffer, offset and size, then
+/// the storage buffers in binding order.
+type Binds = (
+    wgpu::Buffer,
+    u64,
+    Option<wgpu::BufferSize>,
+    Vec<wgpu::Buffer>,
+);
+
+/// Bind groups a kernel made, each with the dispatch that last used it:
+/// a frame binds what the last frame bound, and making some forty bind
+/// groups anew every frame is CPU time the GPU waits for.
+#[derive(Default)]
+struct BindGroups {
+    made: Vec<(Binds, wgpu::BindGroup, u64)>,
+    dispatches: u64,
+}
+
+/// Dispatches of one kernel after which a bind group not used again is
+/// dropped (with its hold on the buffers it binds): more than any kernel's
+/// distinct bind groups in a frame (the scans: 9).
+const KEEP_FOR_DISPATCHES: u64 = 32;
 
 impl Kernel {
     fn compile(device: &wgpu::Device, name: &str, source: &str, read_only: &[bool]) -> Self {
+        let pipeline = compute_pipeline(device, name, source, &uniform_and_storage(read_only));
         Self {
-            pipeline: compute_pipeline(device, name, source, &uniform_and_storage(read_only)),
+            layout: pipeline.get_bind_group_layout(0),
+            pipeline,
+            groups: Mutex::default(),
         }
     }
 
-    /// Binds the uniform and the storage buffers (binding order) and dispatches.
-    fn dispatch(
-        &self,
-        device: &wgpu::Device,
-        pass: &mut wgpu::ComputePass<'_>,
-        uniform: wgpu::BufferBinding<'_>,
-        storage: &[&wgpu::Buffer],
-        groups: (u32, u32),
-    ) {
+    /// Drops every kept bind group (and so its hold on the buffers).
+    fn forget(&self) {
+        let mut groups = self.groups.lock().unwrap_or_else(|e| e.into_inner());
+        groups.made.clear();
+    }
+
+    /// The bind group of `binds`: a kept one, or a new one kept.
+    fn bind_group(&self, device: &wgpu::Device, binds: Binds) -> wgpu::BindGroup {
+        let mut groups = self.groups.lock().unwrap_or_else(|e| e.into_inner());
+        groups.dispatches += 1;
+        let now = groups.dispatches;
+        groups
+            .made
+            .retain(|(_, _, used)| now - used < KEEP_FOR_DISPATCHES);
+        if let Some(kept) = groups.made.iter_mut().find(|(b, _, _)| *b == binds) {
+            kept.2 = now;
+            return kept.1.clone();
+        }
+        let (uniform, offset, size, storage) = &binds;
         let mut entries = vec![wgpu::BindGroupEntry {
             binding: 0,
-            resource: wgpu::BindingResource::Buffer(uniform),
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: uniform,
+                offset: *offset,
+                size: *size,
+            }),
         }];
         entries.extend(
             storage
@@ -41,9 +85,29 @@ impl Kernel {
         );
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: None,
-            layout: &self.pipeline.get_bind_group_layout(0),
+            layout: &self.layout,
             entries: &entries,
         });
+        groups.made.push((binds, group.clone(), now));
+        group
+    }
+
+    /// Binds the uniform and the storage buffers (binding order) and dispatches.
+    fn dispatch(
+        &self,
+        device: &wgpu::Device,
+        pass: &mut wgpu::ComputePass<'_>,
+        uniform: wgpu::BufferBinding<'_>,
+        storage: &[&wgpu::Buffer],
+        groups: (u32, u32),
+    ) {
+        let binds = (
+            uniform.buffer.clone(),
+            uniform.offset,
+            uniform.size,
+            storage.iter().map(|b| (*b).clone()).collect(),
+        );
+        let group = self.bind_group(device, binds);
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &group, &[]);
         pass.dispatch_workgroups(groups.0.max(1), groups.1.max(1), 1);
@@ -90,6 +154,12 @@ macro_rules! kernels {
                     ))
                 }
 
+                /// Drops the bind groups it keeps (call when the buffers it
+                /// bound are replaced, so they are freed).
+                pub fn forget(&self) {
+                    self.0.forget();
+                }
+
                 /// Dispatches `groups` workgroups with its uniform and buffers.
                 #[allow(clippy::too_many_arguments)]
                 pub fn dispatch(
@@ -110,10 +180,16 @@ macro_rules! kernels {
 kernels! {
     /// Places triangle-local Gaussians in world space from the triangle frames.
     Bind = "bind" { local: read, frames: read, world: write }
-    /// Culls and projects world Gaussians, evaluates SH, writes sort keys.
-    Project = "project" { world: read, sh: read, sh_rest: read, projected: write, keys: write }
+    /// Culls and projects world Gaussians (or a hierarchy's nodes in the
+    /// cut of a level-of-detail threshold), evaluates SH, writes sort keys
+    /// and counts what it drew.
+    Project = "project" { world: read, sh: read, sh_rest: read, lod: read, projected: write, keys: write, drawn: write }
     /// Pairs each Gaussian's depth bits with its index (culled ones last).
     SortKeys = "sort_keys" { keys: read, depth: write, index: write }
+    /// Marks the Gaussians `project` kept (1) and culled (0).
+    CullFlags = "cull_flags" { keys: read, flags: write }
+    /// `sort_keys` without the culled Gaussians, placed by the scanned flags.
+    CompactKeys = "compact_keys" { keys: read, offsets: read, depth: write, index: write }
     /// Counts each block's keys per digit of one radix pass.
     RadixHistogram = "radix_histogram" { keys: read, counts: write }
     /// Moves keys and values to their sorted slots for one radix pass (stable).
@@ -179,11 +255,65 @@ impl TileRasterizer {
         let buffers = [projected, ranges, list, image, cut_short];
         self.0.dispatch(device, pass, uniform, &buffers, tiles);
     }
+
+    /// Drops the bind groups it keeps.
+    pub fn forget(&self) {
+        self.0.forget();
+    }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::BINDINGS;
+    use super::*;
+
+    /// A dispatch binding what an earlier one bound reuses its bind group;
+    /// other buffers or another uniform slot get their own; one unused for
+    /// KEEP_FOR_DISPATCHES dispatches is dropped, and `forget` drops all.
+    #[test]
+    fn bind_groups_are_kept_while_their_buffers_are_bound() {
+        let gpu = pollster::block_on(super::super::device::open_device(true))
+            .unwrap()
+            .unwrap();
+        let device = &gpu.device;
+        let buffer = |usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size: 512,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let uniform = buffer(wgpu::BufferUsages::UNIFORM);
+        let (a, b, c) = (
+            buffer(wgpu::BufferUsages::STORAGE),
+            buffer(wgpu::BufferUsages::STORAGE),
+            buffer(wgpu::BufferUsages::STORAGE),
+        );
+        let kernel = PackRgb::new(device);
+        let made = || kernel.0.groups.lock().unwrap().made.len();
+        let dispatch = |from: &wgpu::Buffer, to: &wgpu::Buffer, offset: u64| {
+            let mut encoder = device.create_command_encoder(&Default::default());
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            let binding = wgpu::BufferBinding {
+                buffer: &uniform,
+                offset,
+                size: wgpu::BufferSize::new(128),
+            };
+            kernel.dispatch(device, &mut pass, binding, from, to, (1, 1));
+        };
+        dispatch(&a, &b, 0);
+        dispatch(&a, &b, 0);
+        assert_eq!(made(), 1);
+        dispatch(&a, &c, 0);
+        dispatch(&a, &b, 256);
+        assert_eq!(made(), 3);
+        for _ in 0..KEEP_FOR_DISPATCHES {
+            dispatch(&a, &b, 0);
+        }
+        assert_eq!(made(), 1, "unused bind groups are dropped");
+        kernel.forget();
+        assert_eq!(made(), 0);
+    }
 
     /// The table's buffers are the shaders' storage bindings, in order, with
     /// the same access; every shader but common.wgsl has a wrapper.

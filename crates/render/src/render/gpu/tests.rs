@@ -419,3 +419,68 @@ fn a_refused_frame_leaves_the_renderer_drawing() {
     r.binning.max_binding = limit;
     assert!(r.render(&frames, &camera, &settings).unwrap() == expected);
 }
+
+/// The cut the GPU chooses node by node is the CPU's tree walk's: for a
+/// far, a middle and a close camera (near plane inside the scene), the
+/// same Gaussians reach the screen and the image is the image of the
+/// CPU's gathered cut drawn as a scene (merged nodes' opacity computed in
+/// f32 on the GPU, in f64 on the CPU). Uploading a plain scene afterwards
+/// forgets the hierarchy.
+#[test]
+fn gpu_cut_draws_the_cpu_cut() {
+    use crate::render::lod::{build, LodPolicy, AUTO_PIXELS};
+    let scene = crate::scene::synthetic::synthetic_scene(20_000, 9);
+    let tree = build(&scene);
+    let home = scene
+        .home_orbit(None, crate::scene::camera::UpAxis::default())
+        .unwrap();
+    let settings = RenderSettings::default();
+    let mut plain = GpuRenderer::new().unwrap();
+    let mut lod = GpuRenderer::new().unwrap();
+    lod.set_lod_tree(&tree, 7).unwrap();
+    assert_eq!(lod.lod_name(), Some(7));
+    for (radius, (w, h)) in [(2.0, (48, 32)), (1.0, (120, 80)), (0.15, (96, 64))] {
+        let orbit = Orbit {
+            radius: home.radius * radius,
+            ..home
+        };
+        let camera = orbit.camera(w, h);
+        let cut = tree.cut(&camera, LodPolicy::Auto);
+        // Close up, every node on screen is larger than the threshold.
+        assert_eq!(
+            cut.leaves < cut.nodes.len(),
+            radius >= 1.0,
+            "merged at {radius}"
+        );
+        plain.set_world_scene(&tree.gather(&cut, &camera)).unwrap();
+        let expected = plain
+            .render(&[crate::scene::splats::IDENTITY_FRAME], &camera, &settings)
+            .unwrap();
+        let image = lod.render_lod(&camera, &settings, AUTO_PIXELS).unwrap();
+        assert_eq!(lod.drawn().0, plain.drawn().0, "drawn at {radius}");
+        assert!(lod.drawn().1 <= cut.leaves as u32);
+        let worst = image
+            .pixels
+            .iter()
+            .zip(&expected.pixels)
+            .map(|(a, b)| a.abs_diff(*b))
+            .max()
+            .unwrap();
+        assert!(worst <= 2, "pixels differ by {worst} at {radius}");
+    }
+    // Without a threshold the hierarchy is drawn whole: every node in view.
+    lod.render(
+        &[crate::scene::splats::IDENTITY_FRAME],
+        &home.camera(48, 32),
+        &settings,
+    )
+    .unwrap();
+    assert!(lod.drawn().0 as usize > tree.leaves);
+    plain.set_world_scene(&scene).unwrap();
+    assert_eq!(plain.lod_name(), None);
+    lod.set_world_scene(&scene).unwrap();
+    assert_eq!(lod.lod_name(), None);
+    assert!(lod
+        .render_lod(&home.camera(48, 32), &settings, AUTO_PIXELS)
+        .is_err());
+}
