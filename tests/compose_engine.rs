@@ -860,3 +860,83 @@ fn affine_deformation_follows_reshaped_triangles_and_only_them() {
     next_similar.post.deform = Deform::Similarity;
     assert!(!e.update(&mut c, &next_similar).gaussians);
 }
+
+/// `shading = "relit"` (method §7.10): an unedited composite keeps every
+/// colour; the base's Gaussians on another face keep their places and
+/// opacities, and where a triangle turned towards the built-in studio key
+/// light its Gaussians brighten, turned away they darken, within the
+/// gain's range; a shape edit rebuilds them.
+#[test]
+fn relighting_follows_the_turn_of_each_triangle() {
+    use visage::compose::recipe::Shading;
+    use visage::compose::shading::{smooth_normals, RELIGHT_RANGE};
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.post.shading = Shading::Relit;
+    let unedited = e.compose(&resolve(e, &r));
+    r.post.shading = Shading::Kept;
+    assert_eq!(
+        unedited.gaussians.sh,
+        e.compose(&resolve(e, &r)).gaussians.sh
+    );
+
+    // The base's Gaussians on another face entirely.
+    all_groups(&mut r, &n[0], &[(&n[3], 1.0)]);
+    let kept = e.compose(&resolve(e, &r));
+    r.post.shading = Shading::Relit;
+    let relit = e.compose(&resolve(e, &r));
+    let (a, b) = (&kept.gaussians, &relit.gaussians);
+    assert_eq!(a.position, b.position);
+    assert_eq!(a.opacity_logit, b.opacity_logit);
+    assert!(b.sh.iter().all(|c| c.is_finite()));
+    let model = &e.database().model;
+    let from = smooth_normals(e.source_neutral(0), &model.triangles);
+    let to = smooth_normals(&relit.neutral, &model.triangles);
+    // The built-in captures' key light (avatar/synthetic.rs).
+    let key = Vec3::new(0.35, 0.55, 0.76).normalize();
+    let brightness = |set: &visage::avatar::gaussians::GaussianSet, i: usize| {
+        let dc = &set.sh[i * set.sh_stride()..i * set.sh_stride() + 3];
+        dc.iter().map(|&c| dc_to_rgb(c)).sum::<f32>()
+    };
+    let (mut towards, mut away, mut changed) = ((0.0f64, 0), (0.0f64, 0), 0);
+    for i in 0..a.len() {
+        let t = a.binding[i] as usize;
+        let turn = to[t].dot(key) - from[t].dot(key);
+        let (before, after) = (brightness(a, i), brightness(b, i));
+        if before != after {
+            changed += 1;
+            let ratio = after / before;
+            assert!(ratio.is_finite());
+            assert!(
+                (RELIGHT_RANGE.0 - 0.01..=RELIGHT_RANGE.1 + 0.01).contains(&ratio),
+                "{ratio}"
+            );
+        }
+        let ratio = (after / before.max(1e-3)) as f64;
+        if turn > 0.05 {
+            towards = (towards.0 + ratio, towards.1 + 1);
+        } else if turn < -0.05 {
+            away = (away.0 + ratio, away.1 + 1);
+        }
+    }
+    assert!(changed > a.len() / 4, "{changed} of {} relit", a.len());
+    assert!(towards.1 > 50 && away.1 > 50, "{towards:?} {away:?}");
+    assert!(
+        towards.0 / (towards.1 as f64) > 1.01,
+        "towards the light: {towards:?}"
+    );
+    assert!(
+        away.0 / (away.1 as f64) < 0.99,
+        "away from the light: {away:?}"
+    );
+
+    // A shape edit rebuilds the Gaussians only when they are relit.
+    let mut next = resolve(e, &r);
+    next.shape[Group::Nose.index()] = vec![0.5, 0.0, 0.0, 0.5];
+    let mut c = relit.clone();
+    assert!(e.update(&mut c, &next).gaussians);
+    let mut c = kept.clone();
+    next.post.shading = Shading::Kept;
+    assert!(!e.update(&mut c, &next).gaussians);
+}

@@ -11,7 +11,8 @@ use crate::cli::DbArgs;
 use crate::compose::blend::Blender;
 use crate::compose::engine::{Engine, PosedMesh};
 use crate::compose::recipe::{
-    AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe, Smoothing,
+    AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe, Shading,
+    Smoothing,
 };
 use crate::error::{Error, Result};
 use crate::model::regions::Group;
@@ -116,6 +117,7 @@ pub fn run(args: &EngineBenchArgs) -> Result<()> {
         colour: ColourCorrection::Skin,
         membership: Membership::Place,
         deform: Deform::Similarity,
+        shading: Shading::Kept,
     };
     for &n in &args.sources {
         // A composite drawing on all n sources: random shape weights and assignment.

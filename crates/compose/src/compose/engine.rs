@@ -15,10 +15,11 @@ use super::colour::{
 use super::deform::{apply_local_map, local_map};
 use super::membership::placements;
 use super::recipe::{
-    AnimationMode, ColourCorrection, Deform, Membership, ResolvedRecipe, Smoothing,
+    AnimationMode, ColourCorrection, Deform, Membership, ResolvedRecipe, Shading, Smoothing,
 };
 use super::seams::{SeamField, SeamNeighbours, SEAM_WIDTH};
 use super::selection::{Csr, SelectionTables};
+use super::shading::{relight_dc, smooth_normals, source_light, BakedLight};
 use super::smoothing::{own_share, split_opacity, BorderTables};
 use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
 use crate::avatar::database::Database;
@@ -41,6 +42,10 @@ pub struct Engine {
     mean_colour: [Vec<Vec<Option<Vec3>>>; 2],
     /// Skin statistics per source.
     skin: Vec<Option<SkinStats>>,
+    /// The light baked into each source's colours, fitted to its skin.
+    lights: Vec<Option<BakedLight>>,
+    /// `[source]` → its neutral mesh's smooth triangle normals.
+    source_normals: Vec<Vec<Vec3>>,
     /// Per-Gaussian skin-transfer gains by (source, colour reference), computed on
     /// first use: the CIELAB transfer costs ~100 ns a Gaussian, applying a gain ~5.
     skin_gains: Mutex<HashMap<GainKey, SharedGains>>,
@@ -94,6 +99,10 @@ pub struct Composite {
     pub blocks: Vec<Block>,
     /// Mean per-channel colour gain applied per region (1 where uncorrected).
     pub colour_gains: [Vec3; Region::COUNT],
+    /// Per source, the relighting gain of each triangle for this
+    /// composite's shape (empty until relighting first needs it): an edit
+    /// of the Gaussians alone reuses them.
+    relight_gains: Vec<Vec<Vec3>>,
 }
 
 /// What an update had to redo.
@@ -149,7 +158,7 @@ impl Engine {
                 })
                 .collect()
         });
-        let skin = (0..db.sources.len())
+        let skin: Vec<Option<SkinStats>> = (0..db.sources.len())
             .into_par_iter()
             .map(|f| {
                 let indices: Vec<u32> = SKIN_REFERENCE_REGIONS
@@ -158,6 +167,27 @@ impl Engine {
                     .collect();
                 skin_stats(&db.sources[f].gaussians, &indices)
             })
+            .collect();
+        let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
+            .into_par_iter()
+            .map(|f| {
+                let indices: Vec<u32> = SKIN_REFERENCE_REGIONS
+                    .iter()
+                    .flat_map(|&r| tables.region(Membership::Parent, f, r).iter().copied())
+                    .collect();
+                let set = &db.sources[f].gaussians;
+                source_light(
+                    set,
+                    &db.model.triangles,
+                    &neutrals[f],
+                    &indices,
+                    skin[f].as_ref(),
+                )
+            })
+            .collect();
+        let source_normals = neutrals
+            .par_iter()
+            .map(|n| smooth_normals(n, &db.model.triangles))
             .collect();
         let vertex_triangles = Csr::from_pairs(
             db.model.vertex_count(),
@@ -178,6 +208,8 @@ impl Engine {
             region_rhs,
             mean_colour,
             skin,
+            lights,
+            source_normals,
             skin_gains: Mutex::new(HashMap::new()),
             vertex_triangles,
             placements,
@@ -211,6 +243,7 @@ impl Engine {
             gaussians: GaussianSet::default(),
             blocks: Vec::new(),
             colour_gains: [Vec3::ONE; Region::COUNT],
+            relight_gains: Vec::new(),
         };
         self.select_into(recipe, &mut composite);
         composite
@@ -228,12 +261,14 @@ impl Engine {
             gaussians: old.gaussians != recipe.gaussians
                 || old.base != recipe.base
                 || old.post != recipe.post
-                || (shape && recipe.post.deform == Deform::Affine),
+                || (shape && recipe.post.deform == Deform::Affine)
+                || (shape && recipe.post.shading == Shading::Relit),
         };
         if changes.shape {
             let (neutral, residual) = self.blend_neutral(recipe);
             composite.neutral = neutral;
             composite.residual = residual;
+            composite.relight_gains.clear();
         }
         if changes.gaussians {
             self.select_into(recipe, composite);
@@ -494,6 +529,11 @@ impl Engine {
             .unwrap_or(0);
         let smoothing = recipe.post.smoothing;
         let membership = recipe.post.membership;
+        if recipe.post.shading == Shading::Relit {
+            self.relight_gains(recipe, composite);
+        } else {
+            composite.relight_gains.clear();
+        }
         // Cross-fade: own Gaussians near a border keep only part of their opacity.
         let mut own_exponent = vec![1.0f32; self.db.model.triangle_count()];
         let differs =
@@ -524,6 +564,7 @@ impl Engine {
         let gains = &mut composite.colour_gains;
         *gains = [Vec3::ONE; Region::COUNT];
         let mut seams = (smoothing == Smoothing::Blend).then(|| SeamColours::new(self, recipe));
+        let relight = &composite.relight_gains;
         for region in Region::ALL {
             let f = Self::source_of(recipe, region);
             let correction = self.correction(recipe, region, f);
@@ -534,6 +575,7 @@ impl Engine {
                 let exponent = own_exponent[placed[i as usize] as usize];
                 gain_sum +=
                     self.push_corrected(set, f, i, &correction, OpacityEdit::Split(exponent));
+                relight_last(set, relight, f);
                 if let Some(seams) = seams.as_mut() {
                     let last = set.len() - 1;
                     seams.blend(self, f, i, set.sh_of_mut(last));
@@ -568,6 +610,7 @@ impl Engine {
                     };
                     for &i in self.tables.triangle(membership, f, t) {
                         self.push_corrected(set, f, i, &correction, edit);
+                        relight_last(set, relight, f);
                     }
                 }
                 if set.len() > start {
@@ -620,6 +663,38 @@ impl Engine {
         }
     }
 
+    /// Makes the relighting gains of every source the recipe draws Gaussians
+    /// from, for the composite's shape, where they are not made yet: per
+    /// triangle, the source's light for the triangle's smooth normal here
+    /// over that on the source's own neutral (one where it did not turn).
+    fn relight_gains(&self, recipe: &ResolvedRecipe, composite: &mut Composite) {
+        let gains = &mut composite.relight_gains;
+        if gains.len() != self.db.sources.len() {
+            *gains = vec![Vec::new(); self.db.sources.len()];
+        }
+        let model = &self.db.model;
+        let mut target = None;
+        for &f in &recipe.gaussians {
+            let (Some(light), true) = (self.lights[f], gains[f].is_empty()) else {
+                continue;
+            };
+            let to: &Vec<Vec3> =
+                target.get_or_insert_with(|| smooth_normals(&composite.neutral, &model.triangles));
+            gains[f] = self.source_normals[f]
+                .iter()
+                .zip(to)
+                .map(|(&from, &to)| {
+                    // Unturned triangles (most, for a small edit) cost a compare.
+                    if from != to && from != Vec3::ZERO && to != Vec3::ZERO {
+                        light.gain(from, to)
+                    } else {
+                        Vec3::ONE
+                    }
+                })
+                .collect();
+        }
+    }
+
     /// Copies Gaussian `i` of source `f` into `set` with a colour correction and an
     /// opacity edit; returns the colour gain used.
     fn push_corrected(
@@ -644,6 +719,22 @@ impl Engine {
             apply_gain(set.sh_of_mut(last), gain);
         }
         gain
+    }
+}
+
+/// Relights the last Gaussian of `set`, copied from source `f`, by its
+/// triangle's gain in `gains` (`shading = "relit"`, docs/method.md §7.10);
+/// nothing when the source has none (not relit, or no light fitted). Done
+/// as each Gaussian is copied in, while its colour is in the cache.
+fn relight_last(set: &mut GaussianSet, gains: &[Vec<Vec3>], f: usize) {
+    let i = set.len() - 1;
+    let gain = gains
+        .get(f)
+        .and_then(|g| g.get(set.binding[i] as usize))
+        .copied()
+        .unwrap_or(Vec3::ONE);
+    if gain != Vec3::ONE {
+        relight_dc(&mut set.sh_of_mut(i)[..3], gain);
     }
 }
 

@@ -12,6 +12,7 @@ pub mod recipe;
 pub mod rules;
 pub mod seams;
 pub mod selection;
+pub mod shading;
 pub mod smoothing;
 
 use crate::avatar::database::Database;

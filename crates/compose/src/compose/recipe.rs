@@ -99,6 +99,19 @@ pub enum Deform {
     Affine,
 }
 
+/// What a source's baked light does where the blend turned its triangles
+/// (docs/method.md §7.10).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Shading {
+    /// Colours as trained, lit as the source's own face was.
+    #[default]
+    Kept,
+    /// Each Gaussian relit by its source's light for its triangle's new
+    /// normal over the old (the light fitted to the source's skin).
+    Relit,
+}
+
 /// How the composite is animated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -136,6 +149,9 @@ pub struct PostProcess {
     /// How Gaussians follow a reshaped triangle.
     #[serde(skip_serializing_if = "is_default_deform")]
     pub deform: Deform,
+    /// Whether colours are relit for their triangles' new normals.
+    #[serde(skip_serializing_if = "is_default_shading")]
+    pub shading: Shading,
 }
 
 impl PostProcess {
@@ -146,6 +162,7 @@ impl PostProcess {
         colour: ColourCorrection::Thesis,
         membership: Membership::Parent,
         deform: Deform::Similarity,
+        shading: Shading::Kept,
     };
     /// The post-processing that measured best against ground truth
     /// (docs/method.md §13, README): `--pipeline ours` and the study's edited
@@ -155,6 +172,7 @@ impl PostProcess {
         colour: ColourCorrection::Semantic,
         membership: Membership::Place,
         deform: Deform::Similarity,
+        shading: Shading::Relit,
     };
 }
 
@@ -164,6 +182,10 @@ fn is_default_membership(m: &Membership) -> bool {
 
 fn is_default_deform(d: &Deform) -> bool {
     *d == Deform::default()
+}
+
+fn is_default_shading(s: &Shading) -> bool {
+    *s == Shading::default()
 }
 
 /// Prints like a derived `Debug`, leaving `membership` and `deform` out while
@@ -179,6 +201,9 @@ impl std::fmt::Debug for PostProcess {
         }
         if self.deform != Deform::default() {
             d.field("deform", &self.deform);
+        }
+        if self.shading != Shading::default() {
+            d.field("shading", &self.shading);
         }
         d.finish()
     }

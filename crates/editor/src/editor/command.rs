@@ -12,7 +12,9 @@ use std::fmt;
 use std::iter::Peekable;
 use std::str::SplitWhitespace;
 
-use crate::compose::recipe::{AnimationMode, ColourCorrection, Deform, Membership, Smoothing};
+use crate::compose::recipe::{
+    AnimationMode, ColourCorrection, Deform, Membership, Shading, Smoothing,
+};
 use crate::model::regions::Group;
 use crate::render::lod::LodPolicy;
 use crate::scene::camera::CameraOverrides;
@@ -499,6 +501,13 @@ impl Named for Deform {
     const WORDS: &'static [&'static str] = &["similarity", "affine"];
 }
 
+impl Named for Shading {
+    const NAMES: &'static [(Self, &'static str)] =
+        &[(Shading::Kept, "kept"), (Shading::Relit, "relit")];
+    const LABEL: &'static str = "shading";
+    const WORDS: &'static [&'static str] = &["kept", "relit"];
+}
+
 impl Named for AnimationMode {
     const NAMES: &'static [(Self, &'static str)] = &[
         (AnimationMode::Fast, "fast"),
@@ -723,6 +732,10 @@ commands! {
     /// Set (or with `None`, toggle) how Gaussians follow a reshaped triangle.
     Deform(choice: Option<Deform> as Choice<Deform>)
         => "deform", "[similarity|affine]", "Gaussians follow a reshaped triangle's size or its whole stretch", PostProcessing, edit;
+    /// Set (or with `None`, toggle) whether colours are relit for their
+    /// triangles' new normals.
+    Shading(choice: Option<Shading> as Choice<Shading>)
+        => "shading", "[kept|relit]", "keep each source's baked light or relight it for the blended shape", PostProcessing, edit;
     /// Drive the composite with a motion ("rest" for none).
     Motion(motion: String as MotionName) => "motion", "NAME|rest", "drive the composite with a motion", Animation, edit;
     /// Switch to the next motion.
@@ -885,6 +898,8 @@ mod tests {
             "membership",
             "deform affine",
             "deform",
+            "shading relit",
+            "shading",
             "motion talk",
             "next-motion",
             "play",

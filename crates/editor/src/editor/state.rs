@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use crate::compose::recipe::{
-    AnimationMode, ColourCorrection, Deform, GroupEdit, Membership, Recipe, Smoothing,
+    AnimationMode, ColourCorrection, Deform, GroupEdit, Membership, Recipe, Shading, Smoothing,
 };
 use crate::model::regions::Group;
 use crate::pipeline::workbench::DebugView;
@@ -411,6 +411,12 @@ impl EditorState {
                 post.deform = d.unwrap_or(match post.deform {
                     Deform::Similarity => Deform::Affine,
                     Deform::Affine => Deform::Similarity,
+                })
+            }
+            Command::Shading(s) => {
+                post.shading = s.unwrap_or(match post.shading {
+                    Shading::Kept => Shading::Relit,
+                    Shading::Relit => Shading::Kept,
                 })
             }
             other => return Err(misrouted(other)),
