@@ -271,7 +271,7 @@ mod tests {
     /// KEEP_FOR_DISPATCHES dispatches is dropped, and `forget` drops all.
     #[test]
     fn bind_groups_are_kept_while_their_buffers_are_bound() {
-        let gpu = pollster::block_on(super::super::device::open_device(true))
+        let gpu = pollster::block_on(crate::render::gpu::device::open_device(true))
             .unwrap()
             .unwrap();
         let device = &gpu.device;
