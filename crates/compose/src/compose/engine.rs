@@ -158,36 +158,29 @@ impl Engine {
                 })
                 .collect()
         });
-        let skin: Vec<Option<SkinStats>> = (0..db.sources.len())
-            .into_par_iter()
+        // Each source's Gaussians of the regions its skin is judged by.
+        let skin_indices: Vec<Vec<u32>> = (0..db.sources.len())
             .map(|f| {
-                let indices: Vec<u32> = SKIN_REFERENCE_REGIONS
+                SKIN_REFERENCE_REGIONS
                     .iter()
                     .flat_map(|&r| tables.region(Membership::Parent, f, r).iter().copied())
-                    .collect();
-                skin_stats(&db.sources[f].gaussians, &indices)
+                    .collect()
             })
+            .collect();
+        let skin: Vec<Option<SkinStats>> = (0..db.sources.len())
+            .into_par_iter()
+            .map(|f| skin_stats(&db.sources[f].gaussians, &skin_indices[f]))
+            .collect();
+        let source_normals: Vec<Vec<Vec3>> = neutrals
+            .par_iter()
+            .map(|n| smooth_normals(n, &db.model.triangles))
             .collect();
         let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
             .into_par_iter()
             .map(|f| {
-                let indices: Vec<u32> = SKIN_REFERENCE_REGIONS
-                    .iter()
-                    .flat_map(|&r| tables.region(Membership::Parent, f, r).iter().copied())
-                    .collect();
                 let set = &db.sources[f].gaussians;
-                source_light(
-                    set,
-                    &db.model.triangles,
-                    &neutrals[f],
-                    &indices,
-                    skin[f].as_ref(),
-                )
+                source_light(set, &source_normals[f], &skin_indices[f], skin[f].as_ref())
             })
-            .collect();
-        let source_normals = neutrals
-            .par_iter()
-            .map(|n| smooth_normals(n, &db.model.triangles))
             .collect();
         let vertex_triangles = Csr::from_pairs(
             db.model.vertex_count(),

@@ -115,17 +115,15 @@ impl BakedLight {
 
 /// The light baked into a source's colours, fitted to its Gaussians
 /// `indices` (its skin regions'): each counts by its weight in a mean colour
-/// times how skin-like its colour is (`stats`), at the normal of its parent
-/// triangle on the source's neutral mesh `neutral`.
+/// times how skin-like its colour is (`stats`), at the smooth normal of its
+/// parent triangle on the source's neutral mesh (`normals`, per triangle).
 pub fn source_light(
     set: &GaussianSet,
-    triangles: &[[u32; 3]],
-    neutral: &[Vec3],
+    normals: &[Vec3],
     indices: &[u32],
     stats: Option<&SkinStats>,
 ) -> Option<BakedLight> {
     let stride = set.sh_stride();
-    let normals = smooth_normals(neutral, triangles);
     let samples = indices.iter().filter_map(|&i| {
         let i = i as usize;
         let normal = *normals.get(set.binding[i] as usize)?;
