@@ -468,6 +468,27 @@ fn gpu_cut_draws_the_cpu_cut() {
             .unwrap();
         assert!(worst <= 2, "pixels differ by {worst} at {radius}");
     }
+    // A hierarchy of one Gaussian (its root a leaf) draws it; one of a
+    // scene with nothing drawable draws nothing.
+    let mut one = crate::scene::splats::SplatScene::with_degree(scene.sh_degree);
+    one.push(
+        Vec3::from(home.target),
+        scene.rotation[0],
+        Vec3::splat(0.05),
+        0.9,
+        scene.sh_of(0),
+    );
+    let camera = home.camera(32, 24);
+    let mut single = GpuRenderer::new().unwrap();
+    single.set_lod_tree(&build(&one), 1).unwrap();
+    single.render_lod(&camera, &settings, AUTO_PIXELS).unwrap();
+    assert_eq!(single.drawn(), (1, 1));
+    one.opacity[0] = 0.0;
+    single.set_lod_tree(&build(&one), 2).unwrap();
+    let blank = single.render_lod(&camera, &settings, AUTO_PIXELS).unwrap();
+    assert_eq!(single.drawn(), (0, 0));
+    assert!(blank.pixels.iter().all(|&p| p == 0));
+
     // Without a threshold the hierarchy is drawn whole: every node in view.
     lod.render(
         &[crate::scene::splats::IDENTITY_FRAME],
