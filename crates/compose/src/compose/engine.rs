@@ -19,7 +19,7 @@ use super::recipe::{
 };
 use super::seams::{SeamField, SeamNeighbours, SEAM_WIDTH};
 use super::selection::{Csr, SelectionTables};
-use super::shading::{relight_dc, smooth_normals, source_light, BakedLight};
+use super::shading::{smooth_normals, source_light, BakedLight};
 use super::smoothing::{own_share, split_opacity, BorderTables};
 use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
 use crate::avatar::database::Database;
@@ -727,7 +727,10 @@ fn relight_last(set: &mut GaussianSet, gains: &[Vec<Vec3>], f: usize) {
         .copied()
         .unwrap_or(Vec3::ONE);
     if gain != Vec3::ONE {
-        relight_dc(&mut set.sh_of_mut(i)[..3], gain);
+        // The DC coefficients only: the baked diffuse light lives there, the
+        // view-dependent bands stay as trained (a few percent of a skin
+        // Gaussian's colour; scaling them too cost as much again as an edit).
+        apply_gain(&mut set.sh_of_mut(i)[..3], gain);
     }
 }
 

@@ -11,7 +11,7 @@
 use glam::{DMat4, DVec4, Vec3, Vec4};
 
 use super::colour::{colour_weight, skin_likeness, srgb_to_lab, SkinStats};
-use crate::avatar::gaussians::{dc_to_rgb, GaussianSet, SH_C0};
+use crate::avatar::gaussians::{dc_to_rgb, GaussianSet};
 use crate::avatar::synthetic::vertex_normals;
 
 /// Largest and smallest relighting gain: a turn that would change a colour
@@ -28,17 +28,17 @@ const MIN_SAMPLES: usize = 64;
 /// surface of unit normal n.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BakedLight {
-    /// Per channel (r, g, b): (a, bx, by, bz).
-    pub channels: [DVec4; 3],
-    /// The same in f32 as (bx, by, bz, a), for relighting many Gaussians.
-    fast: [Vec4; 3],
+    /// Per channel (r, g, b): (bx, by, bz, a), in f32 for relighting many
+    /// Gaussians.
+    channels: [Vec4; 3],
 }
 
 impl BakedLight {
     /// The light of these per-channel (a, bx, by, bz).
     pub fn new(channels: [DVec4; 3]) -> BakedLight {
-        let fast = channels.map(|c| Vec4::new(c.y as f32, c.z as f32, c.w as f32, c.x as f32));
-        BakedLight { channels, fast }
+        BakedLight {
+            channels: channels.map(|c| Vec4::new(c.y as f32, c.z as f32, c.w as f32, c.x as f32)),
+        }
     }
 
     /// Fits the light to skin samples: each a colour (display RGB), the unit
@@ -73,19 +73,19 @@ impl BakedLight {
         }
         let inverse = normal_matrix.inverse();
         let light = BakedLight::new(rhs.map(|r| inverse * r));
-        let channels = light.channels;
         let mean_normal = (normal_matrix.x_axis.truncate() / scale).as_vec3();
         let facing = light.brightness(mean_normal.normalize_or(Vec3::Z));
-        (channels.iter().all(|c| c.is_finite()) && facing.min_element() > 0.05).then_some(light)
+        (light.channels.iter().all(|c| c.is_finite()) && facing.min_element() > 0.05)
+            .then_some(light)
     }
 
     /// Brightness per channel of a surface facing `normal` (unit).
     pub fn brightness(&self, normal: Vec3) -> Vec3 {
         let x = normal.extend(1.0);
         Vec3::new(
-            self.fast[0].dot(x),
-            self.fast[1].dot(x),
-            self.fast[2].dot(x),
+            self.channels[0].dot(x),
+            self.channels[1].dot(x),
+            self.channels[2].dot(x),
         )
     }
 
@@ -133,16 +133,6 @@ pub fn source_light(
         (normal != Vec3::ZERO).then_some((colour, normal, colour_weight(set, i) * likeness))
     });
     BakedLight::fit(samples)
-}
-
-/// Applies a relighting gain to a Gaussian's DC coefficients (the three
-/// of `dc`): the light baked into its diffuse colour. The view-dependent
-/// bands stay as trained — they are a few percent of a skin Gaussian's
-/// colour, and scaling them cost as much again as the rest of an edit.
-pub fn relight_dc(dc: &mut [f32], gain: Vec3) {
-    for (c, g) in dc.iter_mut().zip(gain.to_array()) {
-        *c = (g * (SH_C0 * *c + 0.5) - 0.5) / SH_C0;
-    }
 }
 
 fn outer(a: DVec4, b: DVec4) -> DMat4 {
