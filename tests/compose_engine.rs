@@ -867,9 +867,9 @@ fn affine_deformation_follows_reshaped_triangles_and_only_them() {
 /// light its Gaussians brighten, turned away they darken, within the
 /// gain's range; a shape edit rebuilds them.
 #[test]
-fn relighting_follows_the_turn_of_each_triangle() {
+fn relighting_follows_the_turn_and_the_hollows_of_each_triangle() {
     use visage::compose::recipe::Shading;
-    use visage::compose::shading::{smooth_normals, RELIGHT_RANGE};
+    use visage::compose::shading::{exposures, RELIGHT_RANGE};
     let e = engine();
     let n = names(e);
     let mut r = Recipe::unedited(&n[0]);
@@ -891,8 +891,8 @@ fn relighting_follows_the_turn_of_each_triangle() {
     assert_eq!(a.opacity_logit, b.opacity_logit);
     assert!(b.sh.iter().all(|c| c.is_finite()));
     let model = &e.database().model;
-    let from = smooth_normals(e.source_neutral(0), &model.triangles);
-    let to = smooth_normals(&relit.neutral, &model.triangles);
+    let from = exposures(e.source_neutral(0), &model.triangles);
+    let to = exposures(&relit.neutral, &model.triangles);
     // The built-in captures' key light (avatar/synthetic.rs).
     let key = Vec3::new(0.35, 0.55, 0.76).normalize();
     let brightness = |set: &visage::avatar::gaussians::GaussianSet, i: usize| {
@@ -900,9 +900,10 @@ fn relighting_follows_the_turn_of_each_triangle() {
         dc.iter().map(|&c| dc_to_rgb(c)).sum::<f32>()
     };
     let (mut towards, mut away, mut changed) = ((0.0f64, 0), (0.0f64, 0), 0);
+    let (mut deeper, mut shallower) = ((0.0f64, 0), (0.0f64, 0));
     for i in 0..a.len() {
         let t = a.binding[i] as usize;
-        let turn = to[t].dot(key) - from[t].dot(key);
+        let turn = to[t].normal.dot(key) - from[t].normal.dot(key);
         let (before, after) = (brightness(a, i), brightness(b, i));
         if before != after {
             changed += 1;
@@ -918,8 +919,28 @@ fn relighting_follows_the_turn_of_each_triangle() {
             towards = (towards.0 + ratio, towards.1 + 1);
         } else if turn < -0.05 {
             away = (away.0 + ratio, away.1 + 1);
+        } else if turn.abs() < 0.02 {
+            // Facing the light as before, but in a hollow it was not in.
+            let hollowing = to[t].cavity - from[t].cavity;
+            if hollowing > 0.3 {
+                deeper = (deeper.0 + ratio, deeper.1 + 1);
+            } else if hollowing < -0.3 {
+                shallower = (shallower.0 + ratio, shallower.1 + 1);
+            }
         }
     }
+    assert!(
+        deeper.1 > 20 && shallower.1 > 20,
+        "{deeper:?} {shallower:?}"
+    );
+    assert!(
+        deeper.0 / (deeper.1 as f64) < 0.97,
+        "into a hollow: {deeper:?}"
+    );
+    assert!(
+        shallower.0 / (shallower.1 as f64) > 1.03,
+        "out of a hollow: {shallower:?}"
+    );
     assert!(changed > a.len() / 4, "{changed} of {} relit", a.len());
     assert!(towards.1 > 50 && away.1 > 50, "{towards:?} {away:?}");
     assert!(

@@ -19,7 +19,7 @@ use super::recipe::{
 };
 use super::seams::{SeamField, SeamNeighbours, SEAM_WIDTH};
 use super::selection::{Csr, SelectionTables};
-use super::shading::{smooth_normals, source_light, BakedLight};
+use super::shading::{exposures, source_light, BakedLight, Exposure};
 use super::smoothing::{own_share, split_opacity, BorderTables};
 use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
 use crate::avatar::database::Database;
@@ -44,8 +44,8 @@ pub struct Engine {
     skin: Vec<Option<SkinStats>>,
     /// The light baked into each source's colours, fitted to its skin.
     lights: Vec<Option<BakedLight>>,
-    /// `[source]` → its neutral mesh's smooth triangle normals.
-    source_normals: Vec<Vec<Vec3>>,
+    /// `[source]` → the exposure of each triangle of its neutral mesh.
+    source_exposures: Vec<Vec<Exposure>>,
     /// Per-Gaussian skin-transfer gains by (source, colour reference), computed on
     /// first use: the CIELAB transfer costs ~100 ns a Gaussian, applying a gain ~5.
     skin_gains: Mutex<HashMap<GainKey, SharedGains>>,
@@ -171,15 +171,20 @@ impl Engine {
             .into_par_iter()
             .map(|f| skin_stats(&db.sources[f].gaussians, &skin_indices[f]))
             .collect();
-        let source_normals: Vec<Vec<Vec3>> = neutrals
+        let source_exposures: Vec<Vec<Exposure>> = neutrals
             .par_iter()
-            .map(|n| smooth_normals(n, &db.model.triangles))
+            .map(|n| exposures(n, &db.model.triangles))
             .collect();
         let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
             .into_par_iter()
             .map(|f| {
                 let set = &db.sources[f].gaussians;
-                source_light(set, &source_normals[f], &skin_indices[f], skin[f].as_ref())
+                source_light(
+                    set,
+                    &source_exposures[f],
+                    &skin_indices[f],
+                    skin[f].as_ref(),
+                )
             })
             .collect();
         let vertex_triangles = Csr::from_pairs(
@@ -202,7 +207,7 @@ impl Engine {
             mean_colour,
             skin,
             lights,
-            source_normals,
+            source_exposures,
             skin_gains: Mutex::new(HashMap::new()),
             vertex_triangles,
             placements,
@@ -671,14 +676,14 @@ impl Engine {
             let (Some(light), true) = (self.lights[f], gains[f].is_empty()) else {
                 continue;
             };
-            let to: &Vec<Vec3> =
-                target.get_or_insert_with(|| smooth_normals(&composite.neutral, &model.triangles));
-            gains[f] = self.source_normals[f]
+            let to: &Vec<Exposure> =
+                target.get_or_insert_with(|| exposures(&composite.neutral, &model.triangles));
+            gains[f] = self.source_exposures[f]
                 .iter()
                 .zip(to)
                 .map(|(&from, &to)| {
-                    // Unturned triangles (most, for a small edit) cost a compare.
-                    if from != to && from != Vec3::ZERO && to != Vec3::ZERO {
+                    // Unchanged triangles (most, for a small edit) cost a compare.
+                    if from != to && from.normal != Vec3::ZERO && to.normal != Vec3::ZERO {
                         light.gain(from, to)
                     } else {
                         Vec3::ONE

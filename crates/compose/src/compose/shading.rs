@@ -1,14 +1,16 @@
 //! Baked light under a new shape (docs/method.md §7.10). A trained avatar's
 //! colours hold the light of its capture: a cheek facing the key light is
-//! brighter than one turned away. A composite moves a source's Gaussians onto
-//! the blended face, where many triangles face another way, but their colours
+//! brighter than one turned away, a hollow darker than an open cheek. A
+//! composite moves a source's Gaussians onto the blended face, where many
+//! triangles face another way and hollows deepen or open, but their colours
 //! still say how the source's own face was lit. Each source's light is
 //! estimated from its own skin — colour as a linear function of the surface
-//! normal, c = a + b·n per channel (first-order irradiance; the skin's albedo
-//! is taken as even) — and every Gaussian moved onto a triangle that turned
-//! is relit by the ratio of that light for the new normal to the old.
+//! normal and of how far the surface lies in a hollow, c = a + b·n + e·κ per
+//! channel (first-order irradiance and a cavity term; the skin's albedo is
+//! taken as even) — and every Gaussian moved onto a triangle whose exposure
+//! changed is relit by the ratio of that light there to the light it had.
 
-use glam::{DMat4, DVec4, Vec3, Vec4};
+use glam::{Vec3, Vec4};
 
 use super::colour::{colour_weight, skin_likeness, srgb_to_lab, SkinStats};
 use crate::avatar::gaussians::{dc_to_rgb, GaussianSet};
@@ -24,76 +26,132 @@ const ROUNDING: f32 = 1e-5;
 /// Fewest skin Gaussians a light is fitted to.
 const MIN_SAMPLES: usize = 64;
 
-/// The light a source's skin shows: per channel, brightness a + b·n for a
-/// surface of unit normal n.
+/// Weighted variance of the samples' cavity below which it tells the light
+/// nothing (a surface without hollows): the fit leaves the term out.
+const MIN_CAVITY_VARIANCE: f64 = 1e-6;
+
+/// What the light baked at a point of a surface depends on: which way the
+/// surface faces and how far it lies in a hollow.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Exposure {
+    /// Unit normal (zero where the surface has none).
+    pub normal: Vec3,
+    /// Cavity depth (≥ 0; zero on convex and flat surface), see [`cavities`].
+    pub cavity: f32,
+}
+
+/// The light a source's skin shows: per channel, brightness a + b·n + e·κ
+/// for a surface of unit normal n in a hollow of cavity depth κ (e ≤ 0:
+/// hollows are shaded by the rest of the face).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BakedLight {
-    /// Per channel (r, g, b): (bx, by, bz, a), in f32 for relighting many
-    /// Gaussians.
+    /// Per channel (r, g, b): (bx, by, bz, a).
     channels: [Vec4; 3],
+    /// Per channel: e, the brightness a unit of cavity depth takes away.
+    cavity: Vec3,
 }
 
 impl BakedLight {
-    /// The light of these per-channel (a, bx, by, bz).
-    pub fn new(channels: [DVec4; 3]) -> BakedLight {
+    /// The light of these per-channel (a, bx, by, bz) and cavity terms e.
+    pub fn new(channels: [[f64; 4]; 3], cavity: Vec3) -> BakedLight {
         BakedLight {
-            channels: channels.map(|c| Vec4::new(c.y as f32, c.z as f32, c.w as f32, c.x as f32)),
+            channels: channels
+                .map(|[a, x, y, z]| Vec4::new(x as f32, y as f32, z as f32, a as f32)),
+            cavity,
         }
     }
 
-    /// Fits the light to skin samples: each a colour (display RGB), the unit
-    /// normal of the surface it sits on, and a weight. None when the samples
-    /// are too few, do not span enough directions to tell the light's, or
-    /// leave a channel dark where they face.
-    pub fn fit(samples: impl IntoIterator<Item = (Vec3, Vec3, f32)>) -> Option<BakedLight> {
-        let mut normal_matrix = DMat4::ZERO;
-        let mut rhs = [DVec4::ZERO; 3];
+    /// Fits the light to skin samples: each a colour (display RGB), the
+    /// exposure of the surface it sits on, and a weight. None when the
+    /// samples are too few, do not span enough directions to tell the
+    /// light's, or leave a channel dark where they face. The cavity term is
+    /// left out where the samples' hollows vary too little to tell it, or
+    /// where they would come out brighter (no light does that).
+    pub fn fit(samples: impl IntoIterator<Item = (Vec3, Exposure, f32)>) -> Option<BakedLight> {
+        let mut system = [[0.0f64; 5]; 5];
+        let mut rhs = [[0.0f64; 5]; 3];
         let mut count = 0usize;
-        for (colour, normal, weight) in samples {
-            if !(weight > 0.0 && colour.is_finite() && normal.is_finite()) {
+        for (colour, exposure, weight) in samples {
+            let Exposure { normal: n, cavity } = exposure;
+            if !(weight > 0.0 && colour.is_finite() && n.is_finite() && cavity.is_finite()) {
                 continue;
             }
-            let x = DVec4::new(1.0, normal.x as f64, normal.y as f64, normal.z as f64);
+            let x = [1.0, n.x as f64, n.y as f64, n.z as f64, cavity as f64];
             let w = weight as f64;
-            normal_matrix += outer(x * w, x);
+            for (row, &xi) in system.iter_mut().zip(&x) {
+                for (entry, &xj) in row.iter_mut().zip(&x) {
+                    *entry += w * xi * xj;
+                }
+            }
             for (ch, r) in rhs.iter_mut().enumerate() {
-                *r += x * (w * colour[ch] as f64);
+                for (entry, &xi) in r.iter_mut().zip(&x) {
+                    *entry += w * xi * colour[ch] as f64;
+                }
             }
             count += 1;
         }
         if count < MIN_SAMPLES {
             return None;
         }
-        // Normals all alike (a flat patch) leave the light's direction unknown.
-        let scale = normal_matrix.x_axis.x.max(f64::MIN_POSITIVE);
-        let conditioned = normal_matrix * (1.0 / scale);
-        let determinant = conditioned.determinant().abs();
-        if determinant.is_nan() || determinant <= 1e-9 {
-            return None;
-        }
-        let inverse = normal_matrix.inverse();
-        let light = BakedLight::new(rhs.map(|r| inverse * r));
-        let mean_normal = (normal_matrix.x_axis.truncate() / scale).as_vec3();
-        let facing = light.brightness(mean_normal.normalize_or(Vec3::Z));
+        let total = system[0][0].max(f64::MIN_POSITIVE);
+        let cavity_variance = system[4][4] / total - (system[0][4] / total).powi(2);
+        let with_cavity = cavity_variance > MIN_CAVITY_VARIANCE;
+        let light = Self::solve(&system, &rhs, with_cavity)
+            .filter(|l| l.cavity.max_element() <= 0.0)
+            .or_else(|| Self::solve(&system, &rhs, false))?;
+        let mean_normal = Vec3::new(
+            (system[0][1] / total) as f32,
+            (system[0][2] / total) as f32,
+            (system[0][3] / total) as f32,
+        );
+        let facing = light.brightness(Exposure {
+            normal: mean_normal.normalize_or(Vec3::Z),
+            cavity: 0.0,
+        });
         (light.channels.iter().all(|c| c.is_finite()) && facing.min_element() > 0.05)
             .then_some(light)
     }
 
-    /// Brightness per channel of a surface facing `normal` (unit).
-    pub fn brightness(&self, normal: Vec3) -> Vec3 {
-        let x = normal.extend(1.0);
+    /// Solves the weighted least squares of [`BakedLight::fit`], with the
+    /// cavity term or without; None for a system that cannot tell the light
+    /// (normals all alike).
+    fn solve(system: &[[f64; 5]; 5], rhs: &[[f64; 5]; 3], with_cavity: bool) -> Option<Self> {
+        let n = if with_cavity { 5 } else { 4 };
+        // Scaled by the total weight, so its size does not decide.
+        let scale = system[0][0].max(f64::MIN_POSITIVE);
+        let mut matrix = [[0.0f64; 5]; 5];
+        for (i, row) in matrix.iter_mut().enumerate().take(n) {
+            for (j, entry) in row.iter_mut().enumerate().take(n) {
+                *entry = system[i][j] / scale;
+            }
+        }
+        let factor = cholesky(&matrix, n)?;
+        let mut channels = [[0.0f64; 4]; 3];
+        let mut cavity = Vec3::ZERO;
+        for ch in 0..3 {
+            let b: [f64; 5] = std::array::from_fn(|i| rhs[ch][i] / scale);
+            let x = cholesky_solve(&factor, &b, n);
+            channels[ch].copy_from_slice(&x[..4]);
+            cavity[ch] = if with_cavity { x[4] as f32 } else { 0.0 };
+        }
+        Some(BakedLight::new(channels, cavity))
+    }
+
+    /// Brightness per channel of a surface of this exposure.
+    pub fn brightness(&self, at: Exposure) -> Vec3 {
+        let x = at.normal.extend(1.0);
         Vec3::new(
             self.channels[0].dot(x),
             self.channels[1].dot(x),
             self.channels[2].dot(x),
-        )
+        ) + self.cavity * at.cavity
     }
 
-    /// The per-channel gain that relights a colour seen on a surface facing
-    /// `from` as it would look facing `to`: exactly one when they are equal
-    /// or differ by rounding (a source's mesh moved whole), one where the
-    /// light is too dark to divide by, within [`RELIGHT_RANGE`].
-    pub fn gain(&self, from: Vec3, to: Vec3) -> Vec3 {
+    /// The per-channel gain that relights a colour seen on a surface of
+    /// exposure `from` as it would look at `to`: exactly one when they are
+    /// equal or differ by rounding (a source's mesh moved whole), one where
+    /// the light is too dark to divide by, within [`RELIGHT_RANGE`].
+    pub fn gain(&self, from: Exposure, to: Exposure) -> Vec3 {
         if from == to {
             return Vec3::ONE;
         }
@@ -113,51 +171,119 @@ impl BakedLight {
     }
 }
 
+/// Lower-triangular L with L·Lᵀ = the leading n×n block of `m`; None when
+/// it is not (numerically) positive definite.
+fn cholesky(m: &[[f64; 5]; 5], n: usize) -> Option<[[f64; 5]; 5]> {
+    let mut l = [[0.0f64; 5]; 5];
+    for i in 0..n {
+        for j in 0..=i {
+            let sum: f64 = (0..j).map(|k| l[i][k] * l[j][k]).sum();
+            if i == j {
+                let d = m[i][i] - sum;
+                // Relative to the diagonal: a column that depends on others.
+                // NaN fails the test too.
+                let pivot_ok = d > 1e-9 * m[i][i].abs().max(1e-300);
+                if !pivot_ok {
+                    return None;
+                }
+                l[i][i] = d.sqrt();
+            } else {
+                l[i][j] = (m[i][j] - sum) / l[j][j];
+            }
+        }
+    }
+    Some(l)
+}
+
+/// x with L·Lᵀ·x = b (the leading n entries).
+fn cholesky_solve(l: &[[f64; 5]; 5], b: &[f64; 5], n: usize) -> [f64; 5] {
+    let mut y = [0.0f64; 5];
+    for i in 0..n {
+        y[i] = (b[i] - (0..i).map(|k| l[i][k] * y[k]).sum::<f64>()) / l[i][i];
+    }
+    let mut x = [0.0f64; 5];
+    for i in (0..n).rev() {
+        x[i] = (y[i] - (i + 1..n).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
+    }
+    x
+}
+
 /// The light baked into a source's colours, fitted to its Gaussians
 /// `indices` (its skin regions'): each counts by its weight in a mean colour
-/// times how skin-like its colour is (`stats`), at the smooth normal of its
-/// parent triangle on the source's neutral mesh (`normals`, per triangle).
+/// times how skin-like its colour is (`stats`), at the exposure of its
+/// parent triangle on the source's neutral mesh (`exposures`, per triangle).
 pub fn source_light(
     set: &GaussianSet,
-    normals: &[Vec3],
+    exposures: &[Exposure],
     indices: &[u32],
     stats: Option<&SkinStats>,
 ) -> Option<BakedLight> {
     let stride = set.sh_stride();
     let samples = indices.iter().filter_map(|&i| {
         let i = i as usize;
-        let normal = *normals.get(set.binding[i] as usize)?;
+        let exposure = *exposures.get(set.binding[i] as usize)?;
         let dc = &set.sh[i * stride..i * stride + 3];
         let colour = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
         let likeness = stats.map_or(1.0, |s| skin_likeness(srgb_to_lab(colour), s));
-        (normal != Vec3::ZERO).then_some((colour, normal, colour_weight(set, i) * likeness))
+        (exposure.normal != Vec3::ZERO).then_some((
+            colour,
+            exposure,
+            colour_weight(set, i) * likeness,
+        ))
     });
     BakedLight::fit(samples)
 }
 
-fn outer(a: DVec4, b: DVec4) -> DMat4 {
-    DMat4::from_cols(a * b.x, a * b.y, a * b.z, a * b.w)
-}
-
-/// Unit normal of the triangle with these corners (zero when degenerate).
-pub fn face_normal(corners: [Vec3; 3]) -> Vec3 {
-    (corners[1] - corners[0])
-        .cross(corners[2] - corners[0])
-        .normalize_or_zero()
-}
-
-/// Each triangle's smooth normal: the mean of its corners' area-weighted
-/// vertex normals (the surface's shading normal over the triangle, as a
-/// renderer interpolates it), zero where they cancel.
-pub fn smooth_normals(mesh: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
+/// Each triangle's exposure on `mesh`: its smooth normal and the mean cavity
+/// depth of its corners.
+pub fn exposures(mesh: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Exposure> {
     let vertex = vertex_normals(mesh, triangles);
+    let depth = cavities(mesh, triangles, &vertex);
     triangles
         .iter()
-        .map(|t| {
-            t.iter()
+        .map(|t| Exposure {
+            normal: t
+                .iter()
                 .map(|&v| vertex[v as usize])
                 .sum::<Vec3>()
-                .normalize_or_zero()
+                .normalize_or_zero(),
+            cavity: t.iter().map(|&v| depth[v as usize]).sum::<f32>() / 3.0,
+        })
+        .collect()
+}
+
+/// Per vertex: whether it lies in a hollow, and how squarely — the cosine
+/// of the angle between its umbrella vector (from it to the centroid of its
+/// neighbours, the discrete mean-curvature normal) and its normal, zero
+/// where the surface bulges or the umbrella lies in the tangent plane. A
+/// scale-free cavity indicator: ambient light reaches a hollow from fewer
+/// directions, so its skin looks darker than its normal alone says, and
+/// how much darker each source's own skin tells ([`BakedLight::fit`]).
+pub fn cavities(mesh: &[Vec3], triangles: &[[u32; 3]], normals: &[Vec3]) -> Vec<f32> {
+    let mut sum = vec![Vec3::ZERO; mesh.len()];
+    let mut count = vec![0u32; mesh.len()];
+    for t in triangles {
+        for k in 0..3 {
+            let (i, j) = (t[k] as usize, t[(k + 1) % 3] as usize);
+            sum[i] += mesh[j];
+            sum[j] += mesh[i];
+            count[i] += 1;
+            count[j] += 1;
+        }
+    }
+    (0..mesh.len())
+        .map(|v| {
+            if count[v] == 0 {
+                return 0.0;
+            }
+            let umbrella = sum[v] / count[v] as f32 - mesh[v];
+            let length = umbrella.length();
+            let cosine = umbrella.dot(normals[v]) / length;
+            if length > 0.0 && cosine.is_finite() {
+                cosine.max(0.0)
+            } else {
+                0.0
+            }
         })
         .collect()
 }
@@ -166,7 +292,17 @@ pub fn smooth_normals(mesh: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
 mod tests {
     use super::*;
 
-    fn sphere_samples(light: Vec3, albedo: Vec3) -> Vec<(Vec3, Vec3, f32)> {
+    /// A surface facing `normal` outside any hollow.
+    fn facing(normal: Vec3) -> Exposure {
+        Exposure {
+            normal,
+            cavity: 0.0,
+        }
+    }
+
+    /// Samples of a hemisphere lit by a wrapped key light, in hollows of
+    /// depth 0 to 0.9 that take `darkening` per unit of depth away.
+    fn sphere_samples(light: Vec3, albedo: Vec3, darkening: f32) -> Vec<(Vec3, Exposure, f32)> {
         let mut out = Vec::new();
         for i in 0..40 {
             for j in 0..20 {
@@ -175,11 +311,17 @@ mod tests {
                 if n.z < 0.0 {
                     continue;
                 }
-                let shade = 0.55 + 0.5 * (n.dot(light) + 0.4) / 1.4;
-                out.push((albedo * shade, n, 1.0));
+                let cavity = ((i * 7 + j * 3) % 10) as f32 / 10.0;
+                let shade = 0.55 + 0.5 * (n.dot(light) + 0.4) / 1.4 - darkening * cavity;
+                let exposure = Exposure { normal: n, cavity };
+                out.push((albedo * shade, exposure, 1.0));
             }
         }
         out
+    }
+
+    fn key() -> Vec3 {
+        Vec3::new(0.35, 0.55, 0.76).normalize()
     }
 
     /// A wrapped key light (linear in the normal where it is not clipped)
@@ -187,26 +329,101 @@ mod tests {
     /// gives the colour the light gives there.
     #[test]
     fn recovers_a_linear_light_and_relights_by_its_ratio() {
-        let key = Vec3::new(0.35, 0.55, 0.76).normalize();
         let albedo = Vec3::new(0.8, 0.6, 0.5);
-        let light = BakedLight::fit(sphere_samples(key, albedo)).unwrap();
-        let (from, to) = (Vec3::Z, Vec3::new(0.6, 0.0, 0.8));
-        let shade = |n: Vec3| 0.55 + 0.5 * (n.dot(key) + 0.4) / 1.4;
-        let relit = albedo * shade(from) * light.gain(from, to);
+        let light = BakedLight::fit(sphere_samples(key(), albedo, 0.0)).unwrap();
+        let (from, to) = (facing(Vec3::Z), facing(Vec3::new(0.6, 0.0, 0.8)));
+        let shade = |n: Vec3| 0.55 + 0.5 * (n.dot(key()) + 0.4) / 1.4;
+        let relit = albedo * shade(from.normal) * light.gain(from, to);
         assert!(
-            (relit - albedo * shade(to)).abs().max_element() < 1e-4,
+            (relit - albedo * shade(to.normal)).abs().max_element() < 1e-4,
             "{relit}"
         );
         assert_eq!(light.gain(to, to), Vec3::ONE);
-        let nudged = (to + Vec3::splat(1e-7)).normalize();
+        let nudged = facing((to.normal + Vec3::splat(1e-7)).normalize());
         assert_eq!(light.gain(to, nudged), Vec3::ONE);
     }
 
-    /// Smooth normals of a mesh with a degenerate triangle, a sliver and a
-    /// part on its own: unit where a triangle's corners agree, zero where a
-    /// lone degenerate triangle has none, never NaN.
+    /// Skin darker in its hollows gives the light a cavity term: a Gaussian
+    /// moved out of a hollow brightens by what the hollow took, one moved
+    /// into a hollow darkens, one that only turned relights as before.
     #[test]
-    fn smooth_normals_of_hard_meshes_are_unit_or_zero() {
+    fn recovers_the_darkening_of_hollows() {
+        let albedo = Vec3::new(0.8, 0.6, 0.5);
+        let light = BakedLight::fit(sphere_samples(key(), albedo, 0.3)).unwrap();
+        let shade = |e: Exposure| 0.55 + 0.5 * (e.normal.dot(key()) + 0.4) / 1.4 - 0.3 * e.cavity;
+        let hollow = Exposure {
+            normal: Vec3::Z,
+            cavity: 0.8,
+        };
+        let open = facing(Vec3::new(0.6, 0.0, 0.8));
+        for (from, to) in [(hollow, open), (open, hollow), (facing(Vec3::Z), open)] {
+            let relit = albedo * shade(from) * light.gain(from, to);
+            assert!(
+                (relit - albedo * shade(to)).abs().max_element() < 1e-4,
+                "{from:?} -> {to:?}: {relit}"
+            );
+        }
+        assert!(light.gain(hollow, facing(Vec3::Z)).min_element() > 1.2);
+    }
+
+    /// A cavity term that would brighten hollows (no light does; an albedo
+    /// that happens to be lighter there), or hollows that never vary, leave
+    /// the term out: the light is the one fitted to the normals alone.
+    #[test]
+    fn leaves_out_a_cavity_term_the_samples_cannot_tell() {
+        let albedo = Vec3::new(0.7, 0.5, 0.4);
+        let normals_only = BakedLight::fit(
+            sphere_samples(key(), albedo, 0.0)
+                .into_iter()
+                .map(|(c, e, w)| (c, facing(e.normal), w)),
+        )
+        .unwrap();
+        assert_eq!(normals_only.cavity, Vec3::ZERO);
+        let brighter = BakedLight::fit(sphere_samples(key(), albedo, -0.2)).unwrap();
+        assert_eq!(brighter.cavity, Vec3::ZERO);
+        let hollow = Exposure {
+            normal: Vec3::Z,
+            cavity: 0.9,
+        };
+        assert_eq!(brighter.gain(hollow, facing(Vec3::Z)), Vec3::ONE);
+    }
+
+    /// The bottom of a pit is a hollow (its umbrella points along its
+    /// normal), the top of a bump and the middle of a plane are not; an
+    /// isolated vertex, a repeated one and a degenerate fan give zero,
+    /// never NaN.
+    #[test]
+    fn cavities_find_pits_not_bumps_or_planes() {
+        // A fan of six around a centre at height h, normal +z.
+        let fan = |h: f32| {
+            let mut mesh = vec![Vec3::new(0.0, 0.0, h)];
+            for k in 0..6 {
+                let a = k as f32 * std::f32::consts::TAU / 6.0;
+                mesh.push(Vec3::new(a.cos(), a.sin(), 0.0));
+            }
+            let triangles: Vec<[u32; 3]> = (0..6).map(|k| [0, 1 + k, 1 + (k + 1) % 6]).collect();
+            (mesh, triangles)
+        };
+        let up = vec![Vec3::Z; 7];
+        for (h, expected) in [(-0.5f32, 1.0f32), (0.5, 0.0), (0.0, 0.0)] {
+            let (mesh, triangles) = fan(h);
+            let depth = cavities(&mesh, &triangles, &up);
+            assert!((depth[0] - expected).abs() < 1e-5, "h {h}: {}", depth[0]);
+        }
+        let mesh = [Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::X];
+        let depth = cavities(&mesh, &[[0, 1, 2]], &[Vec3::Z; 4]);
+        assert!(depth.iter().all(|d| *d == 0.0), "{depth:?}");
+        let exposure = exposures(&mesh, &[[0, 1, 2]]);
+        assert!(exposure
+            .iter()
+            .all(|e| e.cavity.is_finite() && e.normal.is_finite()));
+    }
+
+    /// Normals of a mesh with a degenerate triangle, a sliver and a part on
+    /// its own: unit where a triangle's corners agree, zero where a lone
+    /// degenerate triangle has none, never NaN.
+    #[test]
+    fn normals_of_hard_meshes_are_unit_or_zero() {
         let mesh = [
             Vec3::ZERO,
             Vec3::X,
@@ -217,7 +434,10 @@ mod tests {
             Vec3::new(7.0, 0.0, 0.0),
         ];
         let triangles = [[0, 1, 2], [1, 3, 2], [4, 5, 6]];
-        let normals = smooth_normals(&mesh, &triangles);
+        let normals: Vec<Vec3> = exposures(&mesh, &triangles)
+            .iter()
+            .map(|e| e.normal)
+            .collect();
         assert!((normals[0] - Vec3::Z).length() < 1e-6);
         assert!(
             (normals[1] - Vec3::Z).length() < 1e-6,
@@ -234,37 +454,32 @@ mod tests {
     /// Near-black skin (a dark skin in deep shade) shows no light to fit.
     #[test]
     fn near_black_skin_gives_no_light() {
-        let key = Vec3::new(0.35, 0.55, 0.76).normalize();
-        assert!(BakedLight::fit(sphere_samples(key, Vec3::splat(0.03))).is_none());
-        assert!(BakedLight::fit(sphere_samples(key, Vec3::splat(0.15))).is_some());
+        assert!(BakedLight::fit(sphere_samples(key(), Vec3::splat(0.03), 0.0)).is_none());
+        assert!(BakedLight::fit(sphere_samples(key(), Vec3::splat(0.15), 0.0)).is_some());
     }
 
     /// Too few samples, all one normal, or non-finite ones give no light;
-    /// a degenerate triangle has no normal and a dark light no gain.
+    /// a dark light gives no gain and a steep one at most the clamp.
     #[test]
     fn refuses_what_tells_no_light() {
-        let one_way = vec![(Vec3::splat(0.5), Vec3::Z, 1.0); 500];
+        let one_way = vec![(Vec3::splat(0.5), facing(Vec3::Z), 1.0); 500];
         assert!(BakedLight::fit(one_way).is_none());
-        let few = sphere_samples(Vec3::Z, Vec3::ONE)
+        let few = sphere_samples(Vec3::Z, Vec3::ONE, 0.0)
             .into_iter()
             .take(10)
             .collect::<Vec<_>>();
         assert!(BakedLight::fit(few).is_none());
-        let mut bad = sphere_samples(Vec3::Z, Vec3::ONE);
+        let mut bad = sphere_samples(Vec3::Z, Vec3::ONE, 0.0);
         for s in bad.iter_mut() {
             s.0 = Vec3::NAN;
         }
         assert!(BakedLight::fit(bad).is_none());
-        assert_eq!(
-            face_normal([Vec3::ZERO, Vec3::X, Vec3::X * 2.0]),
-            Vec3::ZERO
-        );
-        let dark = BakedLight::new([DVec4::new(0.01, 0.0, 0.0, 0.0); 3]);
-        assert_eq!(dark.gain(Vec3::Z, Vec3::X), Vec3::ONE);
-        let steep = BakedLight::new([DVec4::new(0.5, 0.0, 0.0, 0.45); 3]);
+        let dark = BakedLight::new([[0.01, 0.0, 0.0, 0.0]; 3], Vec3::ZERO);
+        assert_eq!(dark.gain(facing(Vec3::Z), facing(Vec3::X)), Vec3::ONE);
+        let steep = BakedLight::new([[0.5, 0.0, 0.0, 0.45]; 3], Vec3::ZERO);
         let g = steep.gain(
-            Vec3::Z,
-            Vec3::new(0.0, 0.0, -1.0).lerp(Vec3::X, 0.5).normalize(),
+            facing(Vec3::Z),
+            facing(Vec3::new(0.0, 0.0, -1.0).lerp(Vec3::X, 0.5).normalize()),
         );
         assert!(g.min_element() >= RELIGHT_RANGE.0);
     }
