@@ -18,7 +18,9 @@
 
 use glam::Vec3;
 
-use crate::avatar::gaussians::{dc_to_rgb, sigmoid, GaussianSet, SH_C0};
+use rayon::prelude::*;
+
+use crate::avatar::gaussians::{dc_to_rgb, facing_rgb, sigmoid, GaussianSet, SH_C0};
 use crate::model::geometry::smoothstep;
 use crate::model::regions::Region;
 
@@ -182,17 +184,16 @@ pub fn colour_only_skin_likeness(lab: Vec3, stats: &SkinStats) -> f32 {
 /// Regions whose Gaussians define a source's skin tone.
 pub const SKIN_REFERENCE_REGIONS: [Region; 2] = [Region::Skin, Region::Nose];
 
-/// Estimates skin statistics from the Gaussians `indices` of a set: a first mean
-/// over all of them, then the mean over the skin-like ones.
-pub fn skin_stats(set: &GaussianSet, indices: &[u32]) -> Option<SkinStats> {
-    let stride = set.sh_stride();
+/// Estimates skin statistics from the Gaussians `indices` of a set, each of
+/// display colour `colours[i]` (as a camera facing its surface sees it,
+/// [`facing_colours`]): a first mean over all of them, weighted by opacity,
+/// then the mean over the skin-like ones.
+pub fn skin_stats(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Option<SkinStats> {
     let labs: Vec<(Vec3, f32)> = indices
         .iter()
-        .map(|&i| {
+        .filter_map(|&i| {
             let i = i as usize;
-            let dc = &set.sh[i * stride..i * stride + 3];
-            let rgb = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
-            (srgb_to_lab(rgb), sigmoid(set.opacity_logit[i]))
+            Some((srgb_to_lab(*colours.get(i)?), sigmoid(set.opacity_logit[i])))
         })
         .filter(|(lab, w)| lab.is_finite() && w.is_finite())
         .collect();
@@ -209,11 +210,28 @@ pub fn skin_stats(set: &GaussianSet, indices: &[u32]) -> Option<SkinStats> {
     weighted(&|lab, a| a * skin_likeness(lab, &rough)).or(Some(rough))
 }
 
-/// The per-channel gain that moves a Gaussian's DC colour from `from` skin
-/// statistics towards `to`, in proportion to how skin-like it is (1 when it is
-/// not skin). Expressed as a gain so view-dependent terms follow (`apply_gain`).
-pub fn skin_transfer_gain(dc: [f32; 3], from: &SkinStats, to: &SkinStats) -> Vec3 {
-    let rgb = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
+/// Each Gaussian's display colour as a camera facing its surface head-on
+/// sees it ([`facing_rgb`]): `normals[t]` is the unit normal of triangle t,
+/// each Gaussian takes its parent triangle's (the DC colour where it has
+/// none). What colour statistics and corrections judge a Gaussian by.
+pub fn facing_colours(set: &GaussianSet, normals: &[Vec3]) -> Vec<Vec3> {
+    (0..set.len())
+        .into_par_iter()
+        .map(|i| {
+            let normal = normals
+                .get(set.binding[i] as usize)
+                .copied()
+                .unwrap_or(Vec3::ZERO);
+            facing_rgb(set.sh_of(i), normal)
+        })
+        .collect()
+}
+
+/// The per-channel gain that moves a Gaussian of display colour `rgb` from
+/// `from` skin statistics towards `to`, in proportion to how skin-like it is
+/// (1 when it is not skin). Expressed as a gain so view-dependent terms follow
+/// (`apply_gain`).
+pub fn skin_transfer_gain(rgb: Vec3, from: &SkinStats, to: &SkinStats) -> Vec3 {
     let lab = srgb_to_lab(rgb);
     if !lab.is_finite() {
         return Vec3::ONE;
@@ -249,14 +267,13 @@ pub fn strict_skin_likeness(lab: Vec3, stats: &SkinStats) -> f32 {
     smoothstep(14.0, 8.0, skin_distance(lab, stats.mean))
 }
 
-/// The semantic correction's gain for a Gaussian of `region` with DC colour
-/// `dc`: the skin transfer from `from` to `to` where it is skin, nothing
-/// where it is not (see [`holds_no_skin`], [`strict_skin_likeness`]).
-pub fn semantic_skin_gain(dc: [f32; 3], region: Region, from: &SkinStats, to: &SkinStats) -> Vec3 {
+/// The semantic correction's gain for a Gaussian of `region` with display
+/// colour `rgb`: the skin transfer from `from` to `to` where it is skin,
+/// nothing where it is not (see [`holds_no_skin`], [`strict_skin_likeness`]).
+pub fn semantic_skin_gain(rgb: Vec3, region: Region, from: &SkinStats, to: &SkinStats) -> Vec3 {
     if holds_no_skin(region) {
         return Vec3::ONE;
     }
-    let rgb = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
     let lab = srgb_to_lab(rgb);
     if !lab.is_finite() {
         return Vec3::ONE;
@@ -363,15 +380,59 @@ mod tests {
             mean: srgb_to_lab(Vec3::new(0.45, 0.3, 0.2)),
         };
         let mut skin = vec![rgb_to_dc(0.9), rgb_to_dc(0.75), rgb_to_dc(0.65)];
-        let gain = skin_transfer_gain([skin[0], skin[1], skin[2]], &from, &to);
+        let gain = skin_transfer_gain(Vec3::new(0.9, 0.75, 0.65), &from, &to);
         apply_gain(&mut skin, gain);
         assert!(
             (dc_to_rgb(skin[0]) - 0.45).abs() < 0.02,
             "{}",
             dc_to_rgb(skin[0])
         );
-        let hair = [rgb_to_dc(0.05), rgb_to_dc(0.04), rgb_to_dc(0.03)];
+        let hair = Vec3::new(0.05, 0.04, 0.03);
         assert_eq!(skin_transfer_gain(hair, &from, &to), Vec3::ONE);
+    }
+
+    /// A dark skin whose trained colour is split between the DC term and a
+    /// first band that brightens what faces the camera: its statistics are
+    /// of the colour a facing camera sees, and the transfer brings that seen
+    /// colour (not the DC colour) to the light skin.
+    #[test]
+    fn skin_is_judged_and_moved_by_the_colour_a_facing_camera_sees() {
+        use crate::avatar::gaussians::{facing_rgb, SH_C1};
+        use glam::Quat;
+        let seen = Vec3::new(0.45, 0.30, 0.20);
+        let shine = 0.08;
+        let normal = Vec3::Z;
+        let mut set = GaussianSet::with_degree(1);
+        for k in 0..20 {
+            let mut sh = [0.0f32; 12];
+            let wobble = 1.0 + 0.01 * (k % 5) as f32;
+            for ch in 0..3 {
+                sh[ch] = rgb_to_dc(seen[ch] * wobble - shine);
+                sh[6 + ch] = -shine * normal.z / SH_C1;
+            }
+            set.push(0, Vec3::ZERO, Quat::IDENTITY, Vec3::ZERO, 2.0, &sh);
+        }
+        let colours = facing_colours(&set, &[normal]);
+        assert!(
+            (colours[0] - seen).abs().max_element() < 1e-5,
+            "{}",
+            colours[0]
+        );
+        let indices: Vec<u32> = (0..20).collect();
+        let from = skin_stats(&set, &colours, &indices).unwrap();
+        assert!((lab_to_srgb(from.mean) - seen * 1.02).abs().max_element() < 0.01);
+        let to = stats(Vec3::new(0.9, 0.75, 0.65));
+        let mut sh = set.sh_of(0).to_vec();
+        apply_gain(
+            &mut sh,
+            semantic_skin_gain(colours[0], Region::Skin, &from, &to),
+        );
+        let moved = facing_rgb(&sh, normal);
+        let want = Vec3::new(0.9, 0.75, 0.65) / 1.02;
+        assert!(
+            (moved - want).abs().max_element() < 0.02,
+            "{moved} against {want}"
+        );
     }
 
     fn stats(rgb: Vec3) -> SkinStats {
@@ -401,7 +462,7 @@ mod tests {
             |albedo: Vec3, light_level: f32| linear_to_srgb(srgb_to_linear(albedo) * light_level);
         for level in [0.45, 1.0, 1.3] {
             let source = lit(light, level);
-            let gain = semantic_skin_gain(dc(source), Region::Nose, &from, &to);
+            let gain = semantic_skin_gain(source, Region::Nose, &from, &to);
             let got = corrected(source, gain);
             let want = lit(dark, level);
             assert!(
@@ -421,7 +482,7 @@ mod tests {
         let light = Vec3::new(0.9, 0.75, 0.65);
         let dark = Vec3::new(0.45, 0.3, 0.2);
         for (from, to) in [(light, dark), (dark, light)] {
-            let gain = semantic_skin_gain(dc(from), Region::Skin, &stats(from), &stats(to));
+            let gain = semantic_skin_gain(from, Region::Skin, &stats(from), &stats(to));
             let got = srgb_to_lab(corrected(from, gain));
             let want = srgb_to_lab(to);
             assert!((got - want).length() < 2.0, "{from} -> {got}, want {want}");
@@ -433,7 +494,7 @@ mod tests {
             Region::TeethUpper,
             Region::LipsInside,
         ] {
-            let gain = semantic_skin_gain(dc(light), region, &stats(light), &stats(dark));
+            let gain = semantic_skin_gain(light, region, &stats(light), &stats(dark));
             assert_eq!(gain, Vec3::ONE, "{region:?}");
         }
         // Pink lips and a dark brow in mixed regions stay as they are, while the
@@ -442,24 +503,24 @@ mod tests {
         let from = stats(light);
         let to = stats(dark);
         assert_eq!(
-            semantic_skin_gain(dc(lips), Region::Lips, &from, &to),
+            semantic_skin_gain(lips, Region::Lips, &from, &to),
             Vec3::ONE
         );
-        assert_ne!(skin_transfer_gain(dc(lips), &from, &to), Vec3::ONE);
+        assert_ne!(skin_transfer_gain(lips, &from, &to), Vec3::ONE);
         let brow = Vec3::new(0.2, 0.14, 0.1);
-        let gain = semantic_skin_gain(dc(brow), Region::LeftEyeRegion, &from, &to);
+        let gain = semantic_skin_gain(brow, Region::LeftEyeRegion, &from, &to);
         assert_eq!(gain, Vec3::ONE);
         // Eye sockets are the lids' skin round the eyeball (FLAME's sockets
         // are every triangle within two eyeball radii): skin there moves,
         // the pink inside of a built-in socket does not.
         for region in [Region::LeftEyeSocket, Region::RightEyeSocket] {
-            let got = corrected(light, semantic_skin_gain(dc(light), region, &from, &to));
+            let got = corrected(light, semantic_skin_gain(light, region, &from, &to));
             assert!(
                 (srgb_to_lab(got) - srgb_to_lab(dark)).length() < 2.0,
                 "{got}"
             );
             let pink = Vec3::new(0.62, 0.30, 0.30);
-            assert_eq!(semantic_skin_gain(dc(pink), region, &from, &to), Vec3::ONE);
+            assert_eq!(semantic_skin_gain(pink, region, &from, &to), Vec3::ONE);
         }
     }
 
@@ -481,15 +542,15 @@ mod tests {
                 Vec3::splat(1e-6),
             ] {
                 for region in [Region::Skin, Region::Lips, Region::Nose] {
-                    let g = semantic_skin_gain(dc(rgb), region, from, to);
+                    let g = semantic_skin_gain(rgb, region, from, to);
                     assert!(g.is_finite(), "{rgb} {region:?}: {g}");
                     assert!(g.min_element() >= GAIN_RANGE.0 && g.max_element() <= GAIN_RANGE.1);
                 }
             }
         }
-        let g = semantic_skin_gain([f32::NAN, 0.0, 0.0], Region::Skin, &skin, &black);
+        let g = semantic_skin_gain(Vec3::new(f32::NAN, 0.0, 0.0), Region::Skin, &skin, &black);
         assert_eq!(g, Vec3::ONE);
-        let g = semantic_skin_gain([f32::INFINITY; 3], Region::Skin, &skin, &black);
+        let g = semantic_skin_gain(Vec3::INFINITY, Region::Skin, &skin, &black);
         assert!(g.is_finite());
     }
 }

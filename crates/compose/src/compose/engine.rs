@@ -9,8 +9,8 @@ use rayon::prelude::*;
 
 use super::blend::{Blender, SparseRhs};
 use super::colour::{
-    apply_gain, blend_towards, colour_weight, semantic_skin_gain, skin_stats, skin_transfer_gain,
-    thesis_gain, weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
+    apply_gain, blend_towards, colour_weight, facing_colours, semantic_skin_gain, skin_stats,
+    skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
 };
 use super::deform::{apply_local_map, local_map};
 use super::membership::placements;
@@ -42,6 +42,9 @@ pub struct Engine {
     mean_colour: [Vec<Vec<Option<Vec3>>>; 2],
     /// Skin statistics per source.
     skin: Vec<Option<SkinStats>>,
+    /// `[source]` → each Gaussian's colour as a camera facing its surface
+    /// sees it, what its skin likeness and colour transfer judge it by.
+    facing: Vec<Vec<Vec3>>,
     /// The light baked into each source's colours, fitted to its skin.
     lights: Vec<Option<BakedLight>>,
     /// `[source]` → the exposure of each triangle of its neutral mesh.
@@ -167,13 +170,19 @@ impl Engine {
                     .collect()
             })
             .collect();
-        let skin: Vec<Option<SkinStats>> = (0..db.sources.len())
-            .into_par_iter()
-            .map(|f| skin_stats(&db.sources[f].gaussians, &skin_indices[f]))
-            .collect();
         let source_exposures: Vec<Vec<Exposure>> = neutrals
             .par_iter()
             .map(|n| exposures(n, &db.model.triangles))
+            .collect();
+        let facing: Vec<Vec<Vec3>> = (0..db.sources.len())
+            .map(|f| {
+                let normals: Vec<Vec3> = source_exposures[f].iter().map(|e| e.normal).collect();
+                facing_colours(&db.sources[f].gaussians, &normals)
+            })
+            .collect();
+        let skin: Vec<Option<SkinStats>> = (0..db.sources.len())
+            .into_par_iter()
+            .map(|f| skin_stats(&db.sources[f].gaussians, &facing[f], &skin_indices[f]))
             .collect();
         let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
             .into_par_iter()
@@ -206,6 +215,7 @@ impl Engine {
             region_rhs,
             mean_colour,
             skin,
+            facing,
             lights,
             source_exposures,
             skin_gains: Mutex::new(HashMap::new()),
@@ -469,17 +479,17 @@ impl Engine {
             .or_insert_with(|| {
                 let set = &self.db.sources[source].gaussians;
                 let regions = &self.db.model.triangle_regions;
+                let colours = &self.facing[source];
                 let gains = (0..set.len())
                     .into_par_iter()
                     .map(|i| {
-                        let sh = set.sh_of(i);
-                        let dc = [sh[0], sh[1], sh[2]];
+                        let rgb = colours[i];
                         match semantic {
                             Some(m) => {
                                 let t = self.tables.counted_triangles(m, source)[i];
-                                semantic_skin_gain(dc, regions[t as usize], &from, &to)
+                                semantic_skin_gain(rgb, regions[t as usize], &from, &to)
                             }
-                            None => skin_transfer_gain(dc, &from, &to),
+                            None => skin_transfer_gain(rgb, &from, &to),
                         }
                     })
                     .collect();

@@ -212,6 +212,8 @@ fn cholesky_solve(l: &[[f64; 5]; 5], b: &[f64; 5], n: usize) -> [f64; 5] {
 /// `indices` (its skin regions'): each counts by its weight in a mean colour
 /// times how skin-like its colour is (`stats`), at the exposure of its
 /// parent triangle on the source's neutral mesh (`exposures`, per triangle).
+/// Fitted to the DC colours, which relighting scales (fitted to the colours
+/// a facing camera sees instead, `largest-shape` lost 0.13 dB at 128²).
 pub fn source_light(
     set: &GaussianSet,
     exposures: &[Exposure],

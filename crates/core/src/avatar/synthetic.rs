@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use super::binding::{triangle_frames, world_to_local, WorldGaussian};
 use super::database::{Database, SourceAvatar};
-use super::gaussians::{logit, rgb_to_dc, sh_coefficients, GaussianSet};
+use super::gaussians::{logit, rgb_to_dc, sh_coefficients, GaussianSet, SH_C1};
 use crate::model::builtin::layout::{Side, EYE_CENTER, EYE_OPENING, MOUTH_Y};
 use crate::model::geometry::{fractal_noise, lerp, smoothstep, value_noise};
 use crate::model::head::HeadModel;
@@ -461,9 +461,6 @@ pub fn allocate(weights: &[f32], total: usize) -> Vec<usize> {
 
 /// Steps of the R2 low-discrepancy sequence (inverse powers of the plastic number).
 const R2: (f32, f32) = (0.754_877_7, 0.569_840_3);
-
-/// SH constant of degree 1.
-const SH_C1: f32 = 0.488_602_5;
 
 fn place_gaussians(
     model: &HeadModel,

@@ -118,6 +118,33 @@ pub fn eval_rgb_f32(sh: &[f32], use_degree: u8, d: [f32; 3]) -> [f32; 3] {
 mod tests {
     use super::*;
 
+    /// The colour composition judges a Gaussian by (a camera facing its
+    /// surface head-on, through degree 1) is what this evaluation gives
+    /// along d = −normal once degrees 2 and 3 are dropped, for normals all
+    /// round the sphere.
+    #[test]
+    fn facing_colour_is_the_renderers_colour_head_on() {
+        use crate::avatar::gaussians::facing_rgb;
+        let sh: Vec<f32> = (0..48)
+            .map(|k| ((k * 37 % 23) as f32 - 11.0) * 0.05)
+            .collect();
+        for k in 0..40 {
+            let (theta, phi) = (k as f32 * 0.61, k as f32 * 0.37);
+            let n = glam::Vec3::new(theta.sin() * phi.cos(), phi.sin(), theta.cos() * phi.cos());
+            let d = (-n).as_dvec3().to_array();
+            let want = eval_rgb(&sh, 1, d);
+            let got = facing_rgb(&sh, n);
+            for ch in 0..3 {
+                // eval_rgb clamps at zero; the facing colour does not.
+                assert!(
+                    (got[ch] as f64).max(0.0) - want[ch] < 1e-5
+                        && want[ch] - (got[ch] as f64).max(0.0) < 1e-5,
+                    "normal {n}: {got} against {want:?}"
+                );
+            }
+        }
+    }
+
     /// f32 evaluation stays within a few f32 steps of the f64 one for SH
     /// coefficients of trained-scene size, all degrees, many directions.
     #[test]
