@@ -23,7 +23,7 @@ use super::shading::{exposures, source_light, BakedLight, Exposure};
 use super::smoothing::{own_share, split_opacity, BorderTables};
 use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
 use crate::avatar::database::Database;
-use crate::avatar::gaussians::{dc_to_rgb, logit, sigmoid, GaussianSet};
+use crate::avatar::gaussians::{logit, sigmoid, GaussianSet};
 use crate::error::Result;
 use crate::model::head::{Joint, Pose};
 use crate::model::regions::Region;
@@ -836,7 +836,6 @@ impl<'a> SeamColours<'a> {
             return known;
         }
         let membership = self.recipe.post.membership;
-        let set = &engine.db.sources[s].gaussians;
         let bary = engine.placements_of(membership, s);
         let weights = engine.colour_weights_of(s);
         let model = &engine.db.model;
@@ -855,9 +854,9 @@ impl<'a> SeamColours<'a> {
                 if w <= 0.0 {
                     continue;
                 }
-                let dc = &set.sh_of(j)[..3];
-                let rgb = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
-                sum += w * rgb * correction.gain(j);
+                // As a facing camera sees it: the colour the seam blends
+                // towards is the colour the other side shows.
+                sum += w * engine.facing[s][j] * correction.gain(j);
                 total += w;
             }
         }
