@@ -287,13 +287,25 @@ pub fn semantic_skin_gain(rgb: Vec3, region: Region, from: &SkinStats, to: &Skin
 }
 
 /// Regions that are skin but for small details (face, nose, ears, neck, the
-/// eye sockets — the lids round the eyeball): the likeness of the skin mode
-/// decides there; elsewhere (lips, eye regions, the hairline, the collar)
-/// the strict one.
+/// eye sockets — the lids round the eyeball — and the eye regions — lids,
+/// with lashes and brows far enough from any skin tone for the likeness to
+/// leave them): the likeness of the skin mode decides there; elsewhere (lips,
+/// the hairline, the collar) the strict one. Until session 18 the eye regions
+/// and sockets were strict (the sockets against method §7.7's word): shaded
+/// lids kept part of the source's tone (dark-base-light-eyes 29.39 → 30.45
+/// dB at 128², non-skin ΔE unchanged).
 fn mostly_skin(region: Region) -> bool {
     matches!(
         region,
-        Region::Skin | Region::Nose | Region::LeftEar | Region::RightEar | Region::Neck
+        Region::Skin
+            | Region::Nose
+            | Region::LeftEar
+            | Region::RightEar
+            | Region::Neck
+            | Region::LeftEyeSocket
+            | Region::RightEyeSocket
+            | Region::LeftEyeRegion
+            | Region::RightEyeRegion
     )
 }
 
@@ -510,6 +522,29 @@ mod tests {
         let brow = Vec3::new(0.2, 0.14, 0.1);
         let gain = semantic_skin_gain(brow, Region::LeftEyeRegion, &from, &to);
         assert_eq!(gain, Vec3::ONE);
+        // A lid in shade is skin: it takes the other skin in the same shade
+        // (under the strict likeness it kept part of its own tone).
+        let lid = light * 0.72;
+        for region in [
+            Region::LeftEyeRegion,
+            Region::RightEyeRegion,
+            Region::LeftEyeSocket,
+            Region::RightEyeSocket,
+        ] {
+            let got = corrected(lid, semantic_skin_gain(lid, region, &from, &to));
+            let want = srgb_to_lab(linear_to_srgb(
+                srgb_to_linear(dark) * srgb_to_linear(lid) / srgb_to_linear(light),
+            ));
+            assert!(
+                (srgb_to_lab(got) - want).length() < 1.0,
+                "{region:?}: {got}"
+            );
+        }
+        let strict = corrected(lid, semantic_skin_gain(lid, Region::Lips, &from, &to));
+        assert!(
+            (srgb_to_lab(strict) - srgb_to_lab(dark * 0.72)).length() > 3.0,
+            "{strict}"
+        );
         // Eye sockets are the lids' skin round the eyeball (FLAME's sockets
         // are every triangle within two eyeball radii): skin there moves,
         // the pink inside of a built-in socket does not.
