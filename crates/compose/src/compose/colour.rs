@@ -240,16 +240,14 @@ pub fn skin_transfer_gain(rgb: Vec3, from: &SkinStats, to: &SkinStats) -> Vec3 {
 }
 
 /// Regions that hold no skin at all: the semantic correction leaves them as
-/// captured whatever their colour.
+/// captured whatever their colour. The eyeballs are not among them (since
+/// session 18): the lids cover their rim, and lid skin counted there moves
+/// by the strict likeness with lightness counted fully, which leaves whites
+/// and irises — a dark skin's brown iris too — as they are.
 pub fn holds_no_skin(region: Region) -> bool {
     matches!(
         region,
-        Region::LeftEyeball
-            | Region::RightEyeball
-            | Region::TeethUpper
-            | Region::TeethLower
-            | Region::LipsInside
-            | Region::Hair
+        Region::TeethUpper | Region::TeethLower | Region::LipsInside | Region::Hair
     )
 }
 
@@ -280,6 +278,10 @@ pub fn semantic_skin_gain(rgb: Vec3, region: Region, from: &SkinStats, to: &Skin
     }
     let k = if mostly_skin(region) {
         skin_likeness(lab, from)
+    } else if matches!(region, Region::LeftEyeball | Region::RightEyeball) {
+        // Lightness counted fully: a brown iris in shade is a dark skin's
+        // hue and chroma, but far darker than the lid skin over the rim.
+        smoothstep(14.0, 8.0, (lab - from.mean).length())
     } else {
         strict_skin_likeness(lab, from)
     };
@@ -500,13 +502,31 @@ mod tests {
             assert!((got - want).length() < 2.0, "{from} -> {got}, want {want}");
         }
         // Regions that hold no skin keep their colour even when it is skin-like.
-        for region in [
-            Region::Hair,
-            Region::LeftEyeball,
-            Region::TeethUpper,
-            Region::LipsInside,
-        ] {
+        for region in [Region::Hair, Region::TeethUpper, Region::LipsInside] {
             let gain = semantic_skin_gain(light, region, &stats(light), &stats(dark));
+            assert_eq!(gain, Vec3::ONE, "{region:?}");
+        }
+        // On an eyeball, lid skin moves; the white and a green or brown iris
+        // do not.
+        for region in [Region::LeftEyeball, Region::RightEyeball] {
+            let gain = semantic_skin_gain(light, region, &stats(light), &stats(dark));
+            let got = srgb_to_lab(corrected(light, gain));
+            assert!(
+                (got - srgb_to_lab(dark)).length() < 2.0,
+                "{region:?}: {got}"
+            );
+            for eye in [
+                Vec3::new(0.93, 0.91, 0.88),
+                Vec3::new(0.25, 0.45, 0.3),
+                Vec3::new(0.3, 0.17, 0.08),
+            ] {
+                let gain = semantic_skin_gain(eye, region, &stats(light), &stats(dark));
+                assert_eq!(gain, Vec3::ONE, "{region:?} {eye}");
+            }
+            // A dark skin's brown iris is near its skin in hue and chroma,
+            // and stays: it is much darker.
+            let (skin, iris) = (Vec3::new(0.53, 0.36, 0.25), Vec3::new(0.3, 0.17, 0.08));
+            let gain = semantic_skin_gain(iris, region, &stats(skin), &stats(light));
             assert_eq!(gain, Vec3::ONE, "{region:?}");
         }
         // Pink lips and a dark brow in mixed regions stay as they are, while the
