@@ -20,7 +20,8 @@ use glam::Vec3;
 
 use rayon::prelude::*;
 
-use crate::avatar::gaussians::{dc_to_rgb, facing_rgb, sigmoid, GaussianSet, SH_C0};
+use crate::avatar::gaussians::{dc_to_rgb, sigmoid, GaussianSet, SH_C0};
+use crate::avatar::sh::seen_rgb;
 use crate::model::geometry::smoothstep;
 use crate::model::regions::Region;
 
@@ -185,8 +186,8 @@ pub fn colour_only_skin_likeness(lab: Vec3, stats: &SkinStats) -> f32 {
 pub const SKIN_REFERENCE_REGIONS: [Region; 2] = [Region::Skin, Region::Nose];
 
 /// Estimates skin statistics from the Gaussians `indices` of a set, each of
-/// display colour `colours[i]` (as a camera facing its surface sees it,
-/// [`facing_colours`]): a first mean over all of them, weighted by opacity,
+/// display colour `colours[i]` (as the capture's cameras saw it,
+/// [`seen_colours`]): a first mean over all of them, weighted by opacity,
 /// then the mean over the skin-like ones.
 pub fn skin_stats(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Option<SkinStats> {
     let labs: Vec<(Vec3, f32)> = indices
@@ -210,20 +211,44 @@ pub fn skin_stats(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Optio
     weighted(&|lab, a| a * skin_likeness(lab, &rough)).or(Some(rough))
 }
 
-/// Each Gaussian's display colour as a camera facing its surface head-on
-/// sees it ([`facing_rgb`]): `normals[t]` is the unit normal of triangle t,
-/// each Gaussian takes its parent triangle's (the DC colour where it has
-/// none). What colour statistics and corrections judge a Gaussian by.
-pub fn facing_colours(set: &GaussianSet, normals: &[Vec3]) -> Vec<Vec3> {
+/// Yaw and pitch (degrees) of the cameras a source is taken to have been
+/// captured from: a frontal arc of ±60° yaw in two rows of pitch, as
+/// NeRSemble's rig (GaussianAvatars' data) and `visage capture`'s 8-camera
+/// rig are.
+pub const CAPTURE_ARC: [(f32, f32); 8] = [
+    (-60.0, -8.0),
+    (-20.0, -8.0),
+    (20.0, -8.0),
+    (60.0, -8.0),
+    (-60.0, 12.0),
+    (-20.0, 12.0),
+    (20.0, 12.0),
+    (60.0, 12.0),
+];
+
+/// The view directions (camera to head, unit) of the [`CAPTURE_ARC`]
+/// cameras, the head looking along +z.
+pub fn capture_directions() -> Vec<Vec3> {
+    CAPTURE_ARC
+        .iter()
+        .map(|&(yaw, pitch)| {
+            let (y, p) = (yaw.to_radians(), pitch.to_radians());
+            -Vec3::new(y.sin() * p.cos(), p.sin(), y.cos() * p.cos())
+        })
+        .collect()
+}
+
+/// Each Gaussian's display colour as the capture's cameras saw it on
+/// average ([`seen_rgb`] over [`capture_directions`], every SH band): what
+/// colour statistics and corrections judge a Gaussian by. Trained from a
+/// frontal arc, a source's DC term and the low orders of its higher bands
+/// trade against one another, so neither the DC colour nor the first band
+/// alone is the colour anyone saw (method §7.6).
+pub fn seen_colours(set: &GaussianSet) -> Vec<Vec3> {
+    let directions = capture_directions();
     (0..set.len())
         .into_par_iter()
-        .map(|i| {
-            let normal = normals
-                .get(set.binding[i] as usize)
-                .copied()
-                .unwrap_or(Vec3::ZERO);
-            facing_rgb(set.sh_of(i), normal)
-        })
+        .map(|i| seen_rgb(set.sh_of(i), &directions))
         .collect()
 }
 
@@ -405,28 +430,33 @@ mod tests {
         assert_eq!(skin_transfer_gain(hair, &from, &to), Vec3::ONE);
     }
 
-    /// A dark skin whose trained colour is split between the DC term and a
-    /// first band that brightens what faces the camera: its statistics are
-    /// of the colour a facing camera sees, and the transfer brings that seen
-    /// colour (not the DC colour) to the light skin.
+    /// A dark skin trained from a frontal arc, whose colour is split
+    /// between a bluish, lighter DC term and a first band that takes the
+    /// lift back from every camera of the arc (the trade the arc leaves
+    /// free): its statistics are of the colour the cameras saw, not the DC
+    /// colour, and the transfer brings that seen colour to the light skin.
     #[test]
-    fn skin_is_judged_and_moved_by_the_colour_a_facing_camera_sees() {
-        use crate::avatar::gaussians::{facing_rgb, SH_C1};
+    fn skin_is_judged_and_moved_by_the_colour_the_cameras_saw() {
+        use crate::avatar::gaussians::SH_C1;
         use glam::Quat;
+        let directions = capture_directions();
+        assert!(directions
+            .iter()
+            .all(|d| (d.length() - 1.0).abs() < 1e-6 && d.z < -0.45));
+        let mean_dz = directions.iter().map(|d| d.z).sum::<f32>() / directions.len() as f32;
         let seen = Vec3::new(0.45, 0.30, 0.20);
-        let shine = 0.08;
-        let normal = Vec3::Z;
+        let lift = Vec3::new(0.05, 0.06, 0.08);
         let mut set = GaussianSet::with_degree(1);
         for k in 0..20 {
             let mut sh = [0.0f32; 12];
             let wobble = 1.0 + 0.01 * (k % 5) as f32;
             for ch in 0..3 {
-                sh[ch] = rgb_to_dc(seen[ch] * wobble - shine);
-                sh[6 + ch] = -shine * normal.z / SH_C1;
+                sh[ch] = rgb_to_dc(seen[ch] * wobble + lift[ch]);
+                sh[6 + ch] = -lift[ch] / (SH_C1 * mean_dz);
             }
             set.push(0, Vec3::ZERO, Quat::IDENTITY, Vec3::ZERO, 2.0, &sh);
         }
-        let colours = facing_colours(&set, &[normal]);
+        let colours = seen_colours(&set);
         assert!(
             (colours[0] - seen).abs().max_element() < 1e-5,
             "{}",
@@ -441,12 +471,15 @@ mod tests {
             &mut sh,
             semantic_skin_gain(colours[0], Region::Skin, &from, &to),
         );
-        let moved = facing_rgb(&sh, normal);
+        let moved = seen_rgb(&sh, &directions);
         let want = Vec3::new(0.9, 0.75, 0.65) / 1.02;
         assert!(
             (moved - want).abs().max_element() < 0.02,
             "{moved} against {want}"
         );
+        // Judged by its DC colour the same skin would have moved too little.
+        let dc = Vec3::from_array(std::array::from_fn(|ch| dc_to_rgb(set.sh_of(0)[ch])));
+        assert!((dc - seen).min_element() > 0.04, "{dc}");
     }
 
     fn stats(rgb: Vec3) -> SkinStats {

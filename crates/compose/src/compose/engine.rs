@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use super::blend::{Blender, SparseRhs};
 use super::colour::{
-    apply_gain, blend_towards, colour_weight, facing_colours, semantic_skin_gain, skin_stats,
+    apply_gain, blend_towards, colour_weight, seen_colours, semantic_skin_gain, skin_stats,
     skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
 };
 use super::deform::{apply_local_map, local_map};
@@ -42,9 +42,9 @@ pub struct Engine {
     mean_colour: [Vec<Vec<Option<Vec3>>>; 2],
     /// Skin statistics per source.
     skin: Vec<Option<SkinStats>>,
-    /// `[source]` → each Gaussian's colour as a camera facing its surface
-    /// sees it, what its skin likeness and colour transfer judge it by.
-    facing: Vec<Vec<Vec3>>,
+    /// `[source]` → each Gaussian's colour as the capture's cameras saw it,
+    /// what its skin likeness and colour transfer judge it by.
+    seen: Vec<Vec<Vec3>>,
     /// The light baked into each source's colours, fitted to its skin.
     lights: Vec<Option<BakedLight>>,
     /// `[source]` → the exposure of each triangle of its neutral mesh.
@@ -174,15 +174,14 @@ impl Engine {
             .par_iter()
             .map(|n| exposures(n, &db.model.triangles))
             .collect();
-        let facing: Vec<Vec<Vec3>> = (0..db.sources.len())
-            .map(|f| {
-                let normals: Vec<Vec3> = source_exposures[f].iter().map(|e| e.normal).collect();
-                facing_colours(&db.sources[f].gaussians, &normals)
-            })
+        let seen: Vec<Vec<Vec3>> = db
+            .sources
+            .iter()
+            .map(|source| seen_colours(&source.gaussians))
             .collect();
         let skin: Vec<Option<SkinStats>> = (0..db.sources.len())
             .into_par_iter()
-            .map(|f| skin_stats(&db.sources[f].gaussians, &facing[f], &skin_indices[f]))
+            .map(|f| skin_stats(&db.sources[f].gaussians, &seen[f], &skin_indices[f]))
             .collect();
         let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
             .into_par_iter()
@@ -215,7 +214,7 @@ impl Engine {
             region_rhs,
             mean_colour,
             skin,
-            facing,
+            seen,
             lights,
             source_exposures,
             skin_gains: Mutex::new(HashMap::new()),
@@ -479,7 +478,7 @@ impl Engine {
             .or_insert_with(|| {
                 let set = &self.db.sources[source].gaussians;
                 let regions = &self.db.model.triangle_regions;
-                let colours = &self.facing[source];
+                let colours = &self.seen[source];
                 let gains = (0..set.len())
                     .into_par_iter()
                     .map(|i| {
@@ -854,9 +853,9 @@ impl<'a> SeamColours<'a> {
                 if w <= 0.0 {
                     continue;
                 }
-                // As a facing camera sees it: the colour the seam blends
+                // As the cameras saw it: the colour the seam blends
                 // towards is the colour the other side shows.
-                sum += w * engine.facing[s][j] * correction.gain(j);
+                sum += w * engine.seen[s][j] * correction.gain(j);
                 total += w;
             }
         }

@@ -30,25 +30,6 @@ pub fn dc_to_rgb(dc: f32) -> f32 {
 /// The SH constant of degree 1.
 pub const SH_C1: f32 = 0.488_602_5;
 
-/// The display colour (unclamped) a Gaussian's SH coefficients `sh` (one
-/// Gaussian's, coefficient-major) show to a camera facing the surface of unit
-/// `normal` head-on, through degree 1: trained avatars keep part of their
-/// diffuse colour in the first band (the side of a face turned from the light
-/// is lit by it from the cameras that see it), so the DC term alone is not the
-/// colour anyone saw. Degrees 2 and 3 carry highlights and are left out; a
-/// zero normal, or degree 0, gives the DC colour.
-pub fn facing_rgb(sh: &[f32], normal: Vec3) -> Vec3 {
-    let dc = Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]));
-    if sh.len() < 12 {
-        return dc;
-    }
-    // 3DGS evaluates C1·(−y·f1 + z·f2 − x·f3) at d, the unit direction from
-    // the camera to the Gaussian: here d = −normal.
-    let d = -normal;
-    let band = |k: usize| Vec3::new(sh[3 * k], sh[3 * k + 1], sh[3 * k + 2]);
-    dc + SH_C1 * (-d.y * band(1) + d.z * band(2) - d.x * band(3))
-}
-
 /// Triangle-bound Gaussians. All arrays have one entry per Gaussian except `sh`,
 /// which has `3 · sh_coefficients(sh_degree)` floats per Gaussian laid out
 /// coefficient-major: `[coef][channel]` (coefficient 0 is the DC term).
@@ -215,37 +196,6 @@ pub fn logit(p: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A first band that brightens what faces a camera (the built-in
-    /// captures' shine) shows from the front and darkens from behind; with no
-    /// normal, or no first band, the colour is the DC colour.
-    #[test]
-    fn facing_colour_adds_the_first_band_seen_head_on() {
-        let n = Vec3::new(0.36, 0.48, 0.8);
-        let shine = 0.1;
-        let mut sh = vec![0.0f32; 12];
-        for ch in 0..3 {
-            sh[ch] = rgb_to_dc(0.4 + 0.1 * ch as f32);
-            sh[3 + ch] = shine * n.y / SH_C1;
-            sh[6 + ch] = -shine * n.z / SH_C1;
-            sh[9 + ch] = shine * n.x / SH_C1;
-        }
-        let dc = Vec3::new(0.4, 0.5, 0.6);
-        assert!(
-            (facing_rgb(&sh, n) - (dc + Vec3::splat(shine)))
-                .abs()
-                .max_element()
-                < 1e-6
-        );
-        assert!(
-            (facing_rgb(&sh, -n) - (dc - Vec3::splat(shine)))
-                .abs()
-                .max_element()
-                < 1e-6
-        );
-        assert!((facing_rgb(&sh, Vec3::ZERO) - dc).abs().max_element() < 1e-6);
-        assert!((facing_rgb(&sh[..3], n) - dc).abs().max_element() < 1e-6);
-    }
 
     #[test]
     fn sh_degree_round_trip() {

@@ -6,4 +6,5 @@ pub mod binding;
 pub mod database;
 pub mod gaussians;
 pub mod rebind;
+pub mod sh;
 pub mod synthetic;
