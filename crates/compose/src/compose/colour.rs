@@ -21,7 +21,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::avatar::gaussians::{dc_to_rgb, sigmoid, GaussianSet, SH_C0};
-use crate::avatar::sh::seen_rgb;
+use crate::avatar::sh::Views;
 use crate::model::geometry::smoothstep;
 use crate::model::regions::Region;
 
@@ -268,16 +268,16 @@ pub fn capture_directions() -> Vec<Vec3> {
 }
 
 /// Each Gaussian's display colour as the capture's cameras saw it on
-/// average ([`seen_rgb`] over [`capture_directions`], every SH band): what
+/// average ([`Views::seen_rgb`] over [`capture_directions`], every SH band): what
 /// colour statistics and corrections judge a Gaussian by. Trained from a
 /// frontal arc, a source's DC term and the low orders of its higher bands
 /// trade against one another, so neither the DC colour nor the first band
 /// alone is the colour anyone saw (method §7.6).
 pub fn seen_colours(set: &GaussianSet) -> Vec<Vec3> {
-    let directions = capture_directions();
+    let views = Views::new(&capture_directions());
     (0..set.len())
         .into_par_iter()
-        .map(|i| seen_rgb(set.sh_of(i), &directions))
+        .map(|i| views.seen_rgb(set.sh_of(i)))
         .collect()
 }
 
@@ -496,7 +496,7 @@ mod tests {
             &mut sh,
             semantic_skin_gain(colours[0], Region::Skin, &from, &to),
         );
-        let moved = seen_rgb(&sh, &directions);
+        let moved = Views::new(&directions).seen_rgb(&sh);
         let want = Vec3::new(0.9, 0.75, 0.65) / 1.02;
         assert!(
             (moved - want).abs().max_element() < 0.02,

@@ -1,9 +1,11 @@
 //! Real spherical-harmonics colour evaluation, degrees 0-3, in the 3D Gaussian
 //! Splatting convention: rgb = max(0, 0.5 + Σ basis(d)·coef) where d is the unit
 //! direction from the camera to the Gaussian. The renderers, the trainer and
-//! the composition's colour statistics ([`seen_rgb`]) share it.
+//! the composition's colour statistics ([`Views::seen_rgb`]) share it.
 
 use glam::Vec3;
+
+use super::gaussians::dc_to_rgb;
 
 /// Degree 0 constant.
 pub const C0: f64 = 0.282_094_791_773_878_14;
@@ -105,8 +107,13 @@ pub fn eval_rgb(sh: &[f32], use_degree: u8, d: [f64; 3]) -> [f64; 3] {
 /// against the f64 version is measured by `visage bench render` and bounded
 /// by a test).
 pub fn eval_rgb_f32(sh: &[f32], use_degree: u8, d: [f32; 3]) -> [f32; 3] {
-    let b = basis_f32(use_degree, d);
     let coefficients = (use_degree as usize + 1).pow(2);
+    rgb_from_basis(sh, &basis_f32(use_degree, d), coefficients)
+}
+
+/// The clamped colour of coefficient-major SH `sh` under basis values `b`,
+/// through the first `coefficients` coefficients.
+fn rgb_from_basis(sh: &[f32], b: &[f32; 16], coefficients: usize) -> [f32; 3] {
     let mut rgb = [0.5f32; 3];
     for (coef, bk) in sh.chunks_exact(3).zip(b).take(coefficients) {
         rgb[0] += bk * coef[0];
@@ -116,36 +123,43 @@ pub fn eval_rgb_f32(sh: &[f32], use_degree: u8, d: [f32; 3]) -> [f32; 3] {
     rgb.map(|c| if c.is_finite() { c.max(0.0) } else { 0.0 })
 }
 
-/// The display colour a Gaussian of coefficient-major SH `sh` shows on
-/// average to cameras looking along `directions` (unit, camera to Gaussian),
-/// every band it has counted and each view clamped at zero as the renderers
-/// clamp it; the DC colour when `directions` is empty. A source trained from
-/// a frontal arc of cameras sees every view with d_z near −1, so its DC term
-/// and the low orders of the higher bands trade against one another (on a
-/// dark skin by as much as the colour itself): only what those cameras saw is
-/// determined, and that is what this gives.
-pub fn seen_rgb(sh: &[f32], directions: &[Vec3]) -> Vec3 {
-    let dc = || {
-        Vec3::new(
-            0.5 + C0 as f32 * sh[0],
-            0.5 + C0 as f32 * sh[1],
-            0.5 + C0 as f32 * sh[2],
-        )
-    };
-    if directions.is_empty() {
-        return dc();
+/// A set of view directions with their SH basis values evaluated once, so
+/// that the colour many Gaussians show them costs a dot product each.
+pub struct Views {
+    bases: Vec<[f32; 16]>,
+}
+
+impl Views {
+    /// The views along `directions` (unit, camera to Gaussian).
+    pub fn new(directions: &[Vec3]) -> Views {
+        Views {
+            bases: directions
+                .iter()
+                .map(|d| basis_f32(3, d.to_array()))
+                .collect(),
+        }
     }
-    let degree = match sh.len() / 3 {
-        n if n >= 16 => 3,
-        n if n >= 9 => 2,
-        n if n >= 4 => 1,
-        _ => 0,
-    };
-    let sum: Vec3 = directions
-        .iter()
-        .map(|d| Vec3::from(eval_rgb_f32(sh, degree, d.to_array())))
-        .sum();
-    sum / directions.len() as f32
+
+    /// The display colour a Gaussian of coefficient-major SH `sh` shows on
+    /// average to these views, every band it has counted and each view
+    /// clamped at zero as the renderers clamp it; the DC colour when there
+    /// is no view. A source trained from a frontal arc of cameras sees every
+    /// view with d_z near −1, so its DC term and the low orders of the
+    /// higher bands trade against one another (on a dark skin by as much as
+    /// a tenth of the colour): only what those cameras saw is determined,
+    /// and that is what this gives.
+    pub fn seen_rgb(&self, sh: &[f32]) -> Vec3 {
+        if self.bases.is_empty() {
+            return Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]));
+        }
+        let coefficients = (sh.len() / 3).min(16);
+        let sum: Vec3 = self
+            .bases
+            .iter()
+            .map(|b| Vec3::from(rgb_from_basis(sh, b, coefficients)))
+            .sum();
+        sum / self.bases.len() as f32
+    }
 }
 
 #[cfg(test)]
@@ -237,7 +251,7 @@ mod tests {
             0.5 + (0..16).map(|k| b[k] * sh[3 * k] as f64).sum::<f64>()
         };
         assert!(directions.iter().any(|d| red(d) < 0.0));
-        let got = seen_rgb(&sh, &directions);
+        let got = Views::new(&directions).seen_rgb(&sh);
         for ch in 0..3 {
             assert!(
                 (got[ch] as f64 - want[ch]).abs() < 1e-5,
@@ -245,9 +259,9 @@ mod tests {
             );
         }
         let dc = Vec3::new(0.5, 0.5, 0.5) + C0 as f32 * Vec3::new(sh[0], sh[1], sh[2]);
-        assert!((seen_rgb(&sh, &[]) - dc).abs().max_element() < 1e-6);
+        assert!((Views::new(&[]).seen_rgb(&sh) - dc).abs().max_element() < 1e-6);
         assert!(
-            (seen_rgb(&sh[..3], &directions) - dc.max(Vec3::ZERO))
+            (Views::new(&directions).seen_rgb(&sh[..3]) - dc.max(Vec3::ZERO))
                 .abs()
                 .max_element()
                 < 1e-6
