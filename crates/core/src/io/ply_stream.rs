@@ -73,75 +73,191 @@ fn f32_at(row: &[u8], at: usize) -> f32 {
     f32::from_le_bytes([row[at], row[at + 1], row[at + 2], row[at + 3]])
 }
 
+/// A 3DGS PLY read front to back in chunks of whole rows, each decoded in
+/// parallel: what [`read_fast`] fills a whole scene from, and what a build
+/// that must not hold the scene (the level-of-detail cache of a scene larger
+/// than memory) reads once per pass, [`PlyStream::rewind`] starting the next.
+pub struct PlyStream {
+    file: std::fs::File,
+    path: std::path::PathBuf,
+    layout: Layout,
+    rows: usize,
+    /// Byte offset of the first row.
+    body: usize,
+    file_len: u64,
+    degree: u8,
+    /// Rows decoded in this pass.
+    done: usize,
+    /// Body bytes read but not yet decoded.
+    pending: Vec<u8>,
+}
+
+impl PlyStream {
+    /// Opens `path` for streaming; `Ok(None)` when the file is not of the
+    /// kind the fast path handles (the general reader then names what is
+    /// wrong with it, or reads it).
+    pub fn open(path: &Path) -> Result<Option<PlyStream>> {
+        let access = |e| FileError::access("read", path, e);
+        let mut file = std::fs::File::open(path).map_err(access)?;
+        let mut head = vec![0u8; 64 << 10];
+        let n = read_up_to(&mut file, &mut head).map_err(access)?;
+        head.truncate(n);
+        let Ok((PlyFormat::BinaryLittleEndian, elements, body)) = parse_header(&head) else {
+            return Ok(None);
+        };
+        let [element] = elements.as_slice() else {
+            return Ok(None);
+        };
+        let Some(layout) = Layout::of(element) else {
+            return Ok(None);
+        };
+        let rows = element.count;
+        let file_len = file.metadata().map_err(access)?.len();
+        let need = (rows as u64)
+            .checked_mul(layout.row as u64)
+            .and_then(|b| b.checked_add(body as u64));
+        if need.is_none_or(|need| need > file_len) {
+            return Err(FileError::Malformed(format!(
+                "{}: PLY header claims {rows} vertices, more than the file holds",
+                path.display()
+            )));
+        }
+        let degree = sh_degree_for(1 + layout.rest.len() / 3).expect("checked by the layout");
+        Ok(Some(PlyStream {
+            file,
+            path: path.to_path_buf(),
+            layout,
+            rows,
+            body,
+            file_len,
+            degree,
+            done: 0,
+            pending: head[body.min(head.len())..].to_vec(),
+        }))
+    }
+
+    /// The file read.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Gaussians in the file.
+    pub fn len(&self) -> usize {
+        self.rows
+    }
+
+    /// True for a file of no Gaussians.
+    pub fn is_empty(&self) -> bool {
+        self.rows == 0
+    }
+
+    /// SH degree of every Gaussian.
+    pub fn sh_degree(&self) -> u8 {
+        self.degree
+    }
+
+    /// The file's size in bytes.
+    pub fn file_len(&self) -> u64 {
+        self.file_len
+    }
+
+    /// Bytes of the file read so far in this pass (header included).
+    pub fn bytes_done(&self) -> u64 {
+        (self.body + self.done * self.layout.row) as u64
+    }
+
+    /// Rows decoded so far in this pass: the index of the next chunk's first.
+    pub fn rows_done(&self) -> usize {
+        self.done
+    }
+
+    /// Starts another pass from the first row.
+    pub fn rewind(&mut self) -> Result<()> {
+        use std::io::{Seek, SeekFrom};
+        self.file
+            .seek(SeekFrom::Start(self.body as u64))
+            .map_err(|e| FileError::access("read", &self.path, e))?;
+        self.pending.clear();
+        self.done = 0;
+        Ok(())
+    }
+
+    /// The next chunk of rows as a scene of their own; None at the end of
+    /// the file.
+    pub fn next_chunk(&mut self) -> Result<Option<SplatScene>> {
+        let take = self.rows_per_chunk().min(self.rows - self.done);
+        if take == 0 {
+            return Ok(None);
+        }
+        let mut chunk = SplatScene::with_degree(self.degree);
+        chunk.resize_zeroed(take);
+        self.decode_next(&mut chunk, 0, take)?;
+        Ok(Some(chunk))
+    }
+
+    fn rows_per_chunk(&self) -> usize {
+        (CHUNK_BYTES / self.layout.row).max(1)
+    }
+
+    /// Decodes the next `take` rows into `scene` from row `at`.
+    fn decode_next(&mut self, scene: &mut SplatScene, at: usize, take: usize) -> Result<()> {
+        let bytes = take * self.layout.row;
+        if self.pending.len() < bytes {
+            let have = self.pending.len();
+            self.pending.resize(bytes, 0);
+            self.file
+                .read_exact(&mut self.pending[have..])
+                .map_err(|e| FileError::access("read", &self.path, e))?;
+        }
+        let stride = 3 * sh_coefficients(self.degree);
+        let rows = Rows {
+            bytes: &self.pending[..bytes],
+            first_in_file: self.done,
+        };
+        decode_rows(&self.layout, rows, at, stride, scene)
+            .map_err(|e| FileError::Malformed(format!("{}: {e}", self.path.display())))?;
+        self.pending.drain(..bytes);
+        self.done += take;
+        Ok(())
+    }
+}
+
 /// Reads a 3DGS PLY through the fast path; `Ok(None)` when the file is not of
 /// the kind it handles. `progress` hears (bytes read, file size) after each chunk.
 pub fn read_fast(path: &Path, progress: Progress) -> Result<Option<SplatScene>> {
-    let mut file = std::fs::File::open(path).map_err(|e| FileError::access("read", path, e))?;
-    let mut head = vec![0u8; 64 << 10];
-    let n = read_up_to(&mut file, &mut head).map_err(|e| FileError::access("read", path, e))?;
-    head.truncate(n);
-    let Ok((PlyFormat::BinaryLittleEndian, elements, body)) = parse_header(&head) else {
+    let Some(mut stream) = PlyStream::open(path)? else {
         return Ok(None);
     };
-    let [element] = elements.as_slice() else {
-        return Ok(None);
-    };
-    let Some(layout) = Layout::of(element) else {
-        return Ok(None);
-    };
-    let rows = element.count;
-    let file_len = file
-        .metadata()
-        .map_err(|e| FileError::access("read", path, e))?
-        .len();
-    let need = (rows as u64)
-        .checked_mul(layout.row as u64)
-        .and_then(|b| b.checked_add(body as u64));
-    if need.is_none_or(|need| need > file_len) {
-        return Err(FileError::Malformed(format!(
-            "{}: PLY header claims {rows} vertices, more than the file holds",
-            path.display()
-        )));
-    }
-    let degree = sh_degree_for(1 + layout.rest.len() / 3).expect("checked by the layout");
-    let stride = 3 * sh_coefficients(degree);
-    let mut scene = SplatScene::with_degree(degree);
-    scene.position = vec![Vec3::ZERO; rows];
-    scene.rotation = vec![Quat::IDENTITY; rows];
-    scene.scale = vec![Vec3::ZERO; rows];
-    scene.opacity = vec![0.0; rows];
-    scene.sh = Arc::new(vec![0.0; rows * stride]);
-
-    // The body bytes already read, then whole chunks of rows.
-    let mut pending: Vec<u8> = head[body.min(head.len())..].to_vec();
-    let rows_per_chunk = (CHUNK_BYTES / layout.row).max(1);
-    let mut done = 0;
-    while done < rows {
-        let take = rows_per_chunk.min(rows - done);
-        let bytes = take * layout.row;
-        if pending.len() < bytes {
-            let have = pending.len();
-            pending.resize(bytes, 0);
-            file.read_exact(&mut pending[have..])
-                .map_err(|e| FileError::access("read", path, e))?;
-        }
-        decode_rows(&layout, &pending[..bytes], done, stride, &mut scene)
-            .map_err(|e| FileError::Malformed(format!("{}: {e}", path.display())))?;
-        pending.drain(..bytes);
-        done += take;
-        progress((body + done * layout.row) as u64, file_len);
+    let rows = stream.len();
+    let mut scene = SplatScene::with_degree(stream.sh_degree());
+    scene.resize_zeroed(rows);
+    while stream.rows_done() < rows {
+        let at = stream.rows_done();
+        let take = stream.rows_per_chunk().min(rows - at);
+        stream.decode_next(&mut scene, at, take)?;
+        progress(stream.bytes_done(), stream.file_len());
     }
     Ok(Some(scene))
 }
 
-/// Fills `scene` rows `first..first + bytes.len() / row` from `bytes`, in parallel.
+/// Whole rows of the file, and the index of the first.
+struct Rows<'a> {
+    bytes: &'a [u8],
+    first_in_file: usize,
+}
+
+/// Fills `scene` rows `first..first + rows.bytes.len() / row` from `rows`, in parallel.
 fn decode_rows(
     layout: &Layout,
-    bytes: &[u8],
+    rows: Rows<'_>,
     first: usize,
     stride: usize,
     scene: &mut SplatScene,
 ) -> std::result::Result<(), String> {
+    let Rows {
+        bytes,
+        first_in_file,
+    } = rows;
     let count = bytes.len() / layout.row;
     let range = first..first + count;
     let per_channel = layout.rest.len() / 3;
@@ -181,7 +297,7 @@ fn decode_rows(
                 if !finite {
                     return Err(format!(
                         "Gaussian {} has a NaN or infinite value",
-                        first + k
+                        first_in_file + k
                     ));
                 }
                 *position = p;

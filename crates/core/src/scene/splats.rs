@@ -85,6 +85,17 @@ impl SplatScene {
         all.extend(std::iter::repeat_n(0.0, stride - take));
     }
 
+    /// Sets the number of Gaussians to `len`, new ones all zero with the
+    /// identity rotation: room for a reader to fill in place.
+    pub fn resize_zeroed(&mut self, len: usize) {
+        let stride = self.sh_stride();
+        self.position.resize(len, Vec3::ZERO);
+        self.rotation.resize(len, Quat::IDENTITY);
+        self.scale.resize(len, Vec3::ZERO);
+        self.opacity.resize(len, 0.0);
+        Arc::make_mut(&mut self.sh).resize(len * stride, 0.0);
+    }
+
     /// Axis-aligned bounds of the means (None when empty or all non-finite).
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         let mut it = self.position.iter().filter(|p| p.is_finite());
