@@ -8,7 +8,7 @@ use clap::Args;
 use serde_json::json;
 
 use crate::error::Result;
-use crate::pipeline::lod::{open_cached, CacheOrigin};
+use crate::pipeline::lod::{default_memory_budget, open_cached, parse_memory_budget, CacheOrigin};
 
 /// Arguments of `visage lod`.
 #[derive(Args, Debug, Clone)]
@@ -20,6 +20,11 @@ pub struct LodArgs {
     /// $XDG_CACHE_HOME/visage/lod, else ~/.cache/visage/lod).
     #[arg(long, value_name = "DIR")]
     cache_dir: Option<PathBuf>,
+    /// Memory the build may take, and the check of a cache found reads
+    /// within (e.g. 512M, 2G; default: a quarter of the machine's memory,
+    /// at most 1.5G).
+    #[arg(long, value_name = "SIZE", value_parser = parse_memory_budget)]
+    memory_budget: Option<usize>,
     /// Print one JSON document.
     #[arg(long)]
     json: bool,
@@ -28,11 +33,11 @@ pub struct LodArgs {
 /// Runs `visage lod`.
 pub fn run(args: &LodArgs) -> Result<()> {
     let note = |line: &str| eprintln!("visage: {line}");
+    let budget = args.memory_budget.unwrap_or_else(default_memory_budget);
     let mut reports = Vec::new();
     for file in &args.files {
-        // Only the coarse levels are read back: the cache is checked, not held.
         let (tree, origin, cache) =
-            open_cached(file, args.cache_dir.as_deref(), 64 << 20, &note, &|_, _| {})?;
+            open_cached(file, args.cache_dir.as_deref(), budget, &note, &|_, _| {})?;
         let header = tree.header();
         let (status, why, seconds) = match origin {
             CacheOrigin::Found => ("found", String::new(), 0.0),

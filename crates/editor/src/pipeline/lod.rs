@@ -8,13 +8,16 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::error::Result;
+use crate::io::ply_stream::PlyStream;
 use crate::io::Progress;
 use crate::render::image::RgbImage;
 use crate::render::lod::cache::{
     cache_dir, cache_path, content_hash, fingerprint, modified_ns, read_error, read_header,
     still_matches, write_cache, SourceFacts,
 };
-use crate::render::lod::{cut, layout, Cut, LodPolicy, LodTree, PagedTree, AUTO_PIXELS};
+use crate::render::lod::{
+    build_streamed, cut, layout, Cut, Listener, LodPolicy, LodTree, PagedTree, AUTO_PIXELS,
+};
 use crate::render::settings::RenderSettings;
 use crate::render::SplatRenderer;
 use crate::scene::camera::Camera;
@@ -217,10 +220,12 @@ pub enum CacheOrigin {
 /// Opens the level-of-detail cache of the scene file at `path` (in `dir`,
 /// by default the user's cache folder), building it first when it is
 /// missing, stale (the file changed) or damaged (truncated, corrupted, from
-/// another version): the old one is replaced. `note` hears what is going on,
-/// one line at a time, and `progress` the bytes of the scene read while
-/// building. Building reads the whole scene into memory once, and is
-/// refused up front where the machine has too little memory for it.
+/// another version): the old one is replaced. `budget` bounds the memory of
+/// the hierarchy paged in and of the build. `note` hears what is going on,
+/// one line at a time, and `progress` how far each stage of a build is. A
+/// 3DGS PLY is built in passes over the file within the budget, whatever
+/// its size; other formats are read whole, and refused up front where the
+/// machine has too little memory for that.
 pub fn open_cached(
     path: &Path,
     dir: Option<&Path>,
@@ -245,9 +250,15 @@ pub fn open_cached(
             },
         },
     };
-    check_memory_for_build(path)?;
     let t = Instant::now();
-    let bytes = build_cache(path, fingerprint, &cache, &why, note, progress)?;
+    let build = Build {
+        path,
+        fingerprint,
+        cache: &cache,
+        why: &why,
+        memory: budget,
+    };
+    let bytes = build.run(note, progress)?;
     let seconds = t.elapsed().as_secs_f64();
     note(&format!(
         "level-of-detail cache written: {} ({:.0} MB in {seconds:.1} s)",
@@ -266,50 +277,83 @@ pub fn open_cached(
     ))
 }
 
-/// Reads the scene, builds its hierarchy and writes the cache.
-fn build_cache(
-    path: &Path,
+/// A cache to build.
+struct Build<'a> {
+    path: &'a Path,
     fingerprint: [u8; 32],
-    cache: &Path,
-    why: &str,
-    note: &dyn Fn(&str),
-    progress: Progress,
-) -> Result<u64> {
-    let modified = modified_ns(path);
-    let content = content_hash(path)?;
-    // Read first, so a file that is no scene fails in one line.
-    let scene = crate::io::splat::read_scene_with(path, progress)?;
-    let t = Instant::now();
-    note(&format!(
-        "building the level-of-detail cache of {} ({why}): merging {} Gaussians…",
-        path.display(),
-        scene.len()
-    ));
-    let facts = SourceFacts {
-        fingerprint,
-        content,
-        len: std::fs::metadata(path)
-            .map_err(|e| read_error(path, e))?
-            .len(),
-        modified_ns: modified,
-        bounds: scene.robust_bounds().unwrap_or_default(),
-        ground_up: ground_up(&scene),
-        gaussians: scene.len() as u64,
-    };
-    let name = path.display();
-    let layout = layout(scene).ok_or_else(|| {
-        crate::error::Error::input(format!("{name} holds no Gaussian that can be drawn"))
-    })?;
-    note(&format!(
-        "{} nodes merged in {:.1} s; writing…",
-        layout.len(),
-        t.elapsed().as_secs_f64()
-    ));
-    write_cache(&layout, &facts, cache)
+    cache: &'a Path,
+    why: &'a str,
+    /// Bytes of memory it may take.
+    memory: usize,
 }
 
-/// Memory a cache build needs per byte of the scene file: the scene
-/// itself (about its INRIA PLY size), the merged nodes (0.6 of the
+impl Build<'_> {
+    /// Builds the cache, streamed where the file allows it; returns its size.
+    fn run(&self, note: &dyn Fn(&str), progress: Progress) -> Result<u64> {
+        let path = self.path;
+        let facts = SourceFacts {
+            fingerprint: self.fingerprint,
+            content: content_hash(path)?,
+            len: std::fs::metadata(path)
+                .map_err(|e| read_error(path, e))?
+                .len(),
+            modified_ns: modified_ns(path),
+            bounds: Default::default(),
+            ground_up: None,
+            gaussians: 0,
+        };
+        if let Some(mut stream) = PlyStream::open(path)? {
+            note(&format!(
+                "building the level-of-detail cache of {} ({}) in passes over the file, within {} MiB…",
+                path.display(),
+                self.why,
+                self.memory >> 20
+            ));
+            let listen = Listener { note, progress };
+            return build_streamed(&mut stream, facts, self.cache, self.memory, &listen);
+        }
+        check_memory_for_build(path)?;
+        self.in_memory(facts, note, progress)
+    }
+
+    /// Reads the whole scene, builds its hierarchy and writes the cache.
+    fn in_memory(
+        &self,
+        facts: SourceFacts,
+        note: &dyn Fn(&str),
+        progress: Progress,
+    ) -> Result<u64> {
+        let path = self.path;
+        // Read first, so a file that is no scene fails in one line.
+        let scene = crate::io::splat::read_scene_with(path, progress)?;
+        let t = Instant::now();
+        note(&format!(
+            "building the level-of-detail cache of {} ({}): merging {} Gaussians…",
+            path.display(),
+            self.why,
+            scene.len()
+        ));
+        let facts = SourceFacts {
+            bounds: scene.robust_bounds().unwrap_or_default(),
+            ground_up: ground_up(&scene),
+            gaussians: scene.len() as u64,
+            ..facts
+        };
+        let name = path.display();
+        let layout = layout(scene).ok_or_else(|| {
+            crate::error::Error::input(format!("{name} holds no Gaussian that can be drawn"))
+        })?;
+        note(&format!(
+            "{} nodes merged in {:.1} s; writing…",
+            layout.len(),
+            t.elapsed().as_secs_f64()
+        ));
+        write_cache(&layout, &facts, self.cache)
+    }
+}
+
+/// Memory an in-memory cache build needs per byte of the scene file: the
+/// scene itself (about its INRIA PLY size), the merged nodes (0.6 of the
 /// Gaussians) and the layout, measured at 2.3 on a 20M-Gaussian PLY
 /// (11.2 GB peak for 4.96 GB); SPZ and SuperSplat's compressed PLY hold
 /// about ten and four times their size once read.

@@ -16,9 +16,10 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
-use super::{Layout, NodeLink};
+use super::{Layout, Member, NodeLink};
 use crate::error::{Error, Result};
 use crate::scene::camera::UpAxis;
+use crate::scene::splats::SplatScene;
 
 /// Nodes per chunk: the unit read, checked and evicted.
 pub const CHUNK_NODES: usize = 8192;
@@ -112,7 +113,7 @@ impl Header {
         self.table_offset() + 32 * self.chunks() as u64
     }
 
-    fn encode(&self) -> Vec<u8> {
+    pub(super) fn encode(&self) -> Vec<u8> {
         let s = &self.source;
         let mut b = Vec::with_capacity(HEADER_BYTES);
         b.extend_from_slice(MAGIC);
@@ -307,41 +308,92 @@ pub fn write_cache(tree: &Layout, source: &SourceFacts, path: &Path) -> Result<u
         dropped: tree.dropped() as u64,
         sh_degree: tree.sh_degree(),
     };
+    write_through_partial(path, |partial| write_records(tree, &header, partial))?;
+    Ok(header.file_len())
+}
+
+/// Runs `write` on a partial file of this process beside `path`
+/// (`NAME.lod.partial.PID`) and renames it to `path` when it succeeded;
+/// removes it when it failed.
+pub(super) fn write_through_partial(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<()>,
+) -> Result<()> {
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| Error::io("create", dir, e))?;
     }
     remove_abandoned_partials(path);
     let partial = path.with_extension(format!("lod.partial.{}", std::process::id()));
-    let written = write_records(tree, &header, &partial);
-    if let Err(e) = written {
+    if let Err(e) = write(&partial) {
         let _ = std::fs::remove_file(&partial);
         return Err(e);
     }
-    std::fs::rename(&partial, path).map_err(|e| Error::io("write", path, e))?;
-    Ok(header.file_len())
+    std::fs::rename(&partial, path).map_err(|e| Error::io("write", path, e))
 }
 
-/// Removes partial files of `path` left by processes that are gone (killed
-/// during a build); a build under way in another process keeps its own.
+/// Removes partial files and build folders of `path` left by processes
+/// that are gone (killed during a build); a build under way in another
+/// process keeps its own.
 fn remove_abandoned_partials(path: &Path) {
     let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
         return;
     };
-    let prefix = format!("{}.partial.", name.to_string_lossy());
+    let name = name.to_string_lossy();
+    let prefixes = [format!("{name}.partial."), format!("{name}.build.")];
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
     };
     for entry in entries.flatten() {
         let file = entry.file_name().to_string_lossy().into_owned();
-        let Some(pid) = file.strip_prefix(&prefix) else {
+        let Some(pid) = prefixes.iter().find_map(|p| file.strip_prefix(p.as_str())) else {
             continue;
         };
         let alive = pid
             .parse::<u32>()
             .is_ok_and(|pid| Path::new(&format!("/proc/{pid}")).exists());
-        if !alive {
+        if alive {
+            continue;
+        }
+        if entry.path().is_dir() {
+            let _ = std::fs::remove_dir_all(entry.path());
+        } else {
             let _ = std::fs::remove_file(entry.path());
         }
+    }
+}
+
+/// A scratch folder of this process beside the cache `path`
+/// (`NAME.lod.build.PID`), removed when dropped, and by a later build when
+/// the process that made it was killed.
+pub(super) struct ScratchDir(PathBuf);
+
+impl ScratchDir {
+    /// Makes the folder (and the cache folder), clearing what killed
+    /// builds left.
+    pub(super) fn beside(path: &Path) -> Result<ScratchDir> {
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io("create", dir, e))?;
+        }
+        remove_abandoned_partials(path);
+        let name = path
+            .file_name()
+            .map_or_else(Default::default, |n| n.to_os_string());
+        let mut own = name;
+        own.push(format!(".build.{}", std::process::id()));
+        let dir = path.with_file_name(own);
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io("create", &dir, e))?;
+        Ok(ScratchDir(dir))
+    }
+
+    /// A file in it.
+    pub(super) fn file(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
     }
 }
 
@@ -356,15 +408,7 @@ fn write_records(tree: &Layout, header: &Header, path: &Path) -> Result<()> {
     for i in 0..tree.len() {
         record.clear();
         let (link, node) = tree.node(i);
-        let head = RecordHead {
-            link,
-            position: node.position.to_array(),
-            rotation: node.rotation.to_array(),
-            scale: node.scale.to_array(),
-            opacity: node.opacity,
-        };
-        record.extend_from_slice(bytemuck::bytes_of(&head));
-        record.extend_from_slice(bytemuck::cast_slice(node.sh));
+        push_record(&mut record, link, &node);
         out.write_all(&record).map_err(fail)?;
         chunk.update(&record);
         if (i + 1) % CHUNK_NODES == 0 || i + 1 == tree.len() {
@@ -375,6 +419,82 @@ fn write_records(tree: &Layout, header: &Header, path: &Path) -> Result<()> {
     out.write_all(&table).map_err(fail)?;
     out.flush().map_err(fail)?;
     out.get_ref().sync_all().map_err(fail)
+}
+
+/// Appends node `node` with `link` as one record.
+pub(super) fn push_record(out: &mut Vec<u8>, link: NodeLink, node: &Member<'_>) {
+    let head = RecordHead {
+        link,
+        position: node.position.to_array(),
+        rotation: node.rotation.to_array(),
+        scale: node.scale.to_array(),
+        opacity: node.opacity,
+    };
+    out.extend_from_slice(bytemuck::bytes_of(&head));
+    out.extend_from_slice(bytemuck::cast_slice(node.sh));
+}
+
+/// Whole records decoded: their links and their Gaussians (SH degree
+/// `degree`).
+pub(super) fn decode_records(bytes: &[u8], degree: u8) -> (Vec<NodeLink>, SplatScene) {
+    let mut nodes = SplatScene::with_degree(degree);
+    let record = RECORD_HEAD + 4 * nodes.sh_stride();
+    let count = bytes.len() / record;
+    let mut links = Vec::with_capacity(count);
+    nodes.position.reserve(count);
+    nodes.rotation.reserve(count);
+    nodes.scale.reserve(count);
+    nodes.opacity.reserve(count);
+    let sh = std::sync::Arc::make_mut(&mut nodes.sh);
+    sh.reserve(count * (record - RECORD_HEAD) / 4);
+    for r in bytes.chunks_exact(record) {
+        let head: RecordHead = bytemuck::pod_read_unaligned(&r[..RECORD_HEAD]);
+        links.push(head.link);
+        nodes.position.push(Vec3::from_array(head.position));
+        nodes.rotation.push(glam::Quat::from_array(head.rotation));
+        nodes.scale.push(Vec3::from_array(head.scale));
+        nodes.opacity.push(head.opacity);
+        sh.extend(
+            r[RECORD_HEAD..]
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes(b.try_into().unwrap())),
+        );
+    }
+    (links, nodes)
+}
+
+/// Completes a cache whose records are already at their places in `file`:
+/// writes the header, then hashes the records chunk by chunk (reading them
+/// back) and writes the table after them.
+pub(super) fn finish_in_place(file: &File, header: &Header, path: &Path) -> Result<()> {
+    use rayon::prelude::*;
+    use std::os::unix::fs::FileExt;
+    let fail = |e| Error::io("write", path, e);
+    file.set_len(header.file_len()).map_err(fail)?;
+    file.write_all_at(&header.encode(), 0).map_err(fail)?;
+    let chunk_bytes = CHUNK_NODES * header.record_bytes();
+    let records = header.nodes * header.record_bytes() as u64;
+    let mut table = Vec::with_capacity(32 * header.chunks());
+    // Read a few dozen chunks at a time and hash them in parallel.
+    const BATCH: usize = 32;
+    let mut buffer = vec![0u8; BATCH * chunk_bytes];
+    let mut at = 0u64;
+    while at < records {
+        let take = ((records - at) as usize).min(buffer.len());
+        file.read_exact_at(&mut buffer[..take], HEADER_BYTES as u64 + at)
+            .map_err(|e| Error::io("read back", path, e))?;
+        let hashes: Vec<[u8; 32]> = buffer[..take]
+            .par_chunks(chunk_bytes)
+            .map(|c| *blake3::hash(c).as_bytes())
+            .collect();
+        for h in hashes {
+            table.extend_from_slice(&h);
+        }
+        at += take as u64;
+    }
+    file.write_all_at(&table, header.table_offset())
+        .map_err(fail)?;
+    file.sync_all().map_err(fail)
 }
 
 /// Reads and checks a cache's header and chunk table; the error says in a

@@ -3,17 +3,21 @@
 //! bottom-up over an octree of the scene (`tree.rs`), and a per-camera cut
 //! through it that draws a node in place of its subtree wherever the
 //! subtree projects to a pixel or less (`cut.rs`). The cost of a frame then
-//! follows the image, not the file.
+//! follows the image, not the file. The cache file (`cache.rs`) of a scene
+//! larger than memory is built cell by cell from the file (`streamed.rs`)
+//! and read back by chunks (`paged.rs`).
 
 pub mod cache;
 mod cut;
 mod merge;
 mod paged;
+mod streamed;
 mod tree;
 
 pub use cut::{cut, cut_at, Cut, LodPolicy, AUTO_PER_PIXEL, AUTO_PIXELS};
 pub use merge::{mean_area, merge, Member, Merged};
 pub use paged::PagedTree;
+pub use streamed::{build_streamed, Listener};
 pub use tree::{build, layout, Layout, MAX_CHILDREN};
 
 use std::sync::Arc;

@@ -9,11 +9,11 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use glam::{Quat, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 
 use super::cache::{
-    read_error, read_header, Header, RecordHead, CHUNK_NODES, HEADER_BYTES, RECORD_HEAD,
+    decode_records, read_error, read_header, Header, CHUNK_NODES, HEADER_BYTES, RECORD_HEAD,
 };
 use super::{Cut, DrawnOpacity, Hierarchy, NodeLink};
 use crate::error::{Error, Result};
@@ -133,24 +133,7 @@ impl PagedTree {
         if blake3::hash(&bytes).as_bytes() != &self.table[k] {
             return Err(format!("chunk {k} is damaged (its hash does not match)"));
         }
-        let stride = self.header.sh_stride();
-        let mut nodes = SplatScene::with_degree(self.header.sh_degree);
-        let mut links = Vec::with_capacity(count);
-        let sh = Arc::make_mut(&mut nodes.sh);
-        sh.reserve(count * stride);
-        for r in bytes.chunks_exact(record) {
-            let head: RecordHead = bytemuck::pod_read_unaligned(&r[..RECORD_HEAD]);
-            links.push(head.link);
-            nodes.position.push(Vec3::from_array(head.position));
-            nodes.rotation.push(Quat::from_array(head.rotation));
-            nodes.scale.push(Vec3::from_array(head.scale));
-            nodes.opacity.push(head.opacity);
-            sh.extend(
-                r[RECORD_HEAD..]
-                    .chunks_exact(4)
-                    .map(|b| f32::from_le_bytes(b.try_into().unwrap())),
-            );
-        }
+        let (links, nodes) = decode_records(&bytes, self.header.sh_degree);
         Ok(Chunk { links, nodes })
     }
 

@@ -61,8 +61,39 @@ struct NewNode {
     children: Vec<u32>,
 }
 
+impl Arena {
+    /// The scene's Gaussians as the leaves, every one drawable.
+    fn of_leaves(scene: SplatScene) -> Arena {
+        let extent = scene
+            .scale
+            .iter()
+            .map(|s| RADIUS_SIGMAS as f32 * s.abs().max_element())
+            .collect();
+        let mass = scene
+            .scale
+            .iter()
+            .zip(&scene.opacity)
+            .map(|(s, o)| ((*o as f64 * mean_area(*s)) as f32, *o))
+            .collect();
+        Self::of_roots(scene, extent, mass)
+    }
+
+    /// Leaves that stand for subtrees built elsewhere: their extents and
+    /// (mass, summed opacity) are the subtrees'.
+    fn of_roots(scene: SplatScene, extent: Vec<f32>, mass: Vec<(f32, f32)>) -> Arena {
+        let leaves = scene.len();
+        Arena {
+            scene,
+            extent,
+            mass,
+            children: Vec::new(),
+            leaves,
+        }
+    }
+}
+
 /// Whether a Gaussian can ever be drawn (the renderers cull the rest).
-fn usable(scene: &SplatScene, i: usize) -> bool {
+pub(super) fn usable(scene: &SplatScene, i: usize) -> bool {
     scene.position[i].is_finite()
         && scene.scale[i].is_finite()
         && scene.rotation[i].is_finite()
@@ -83,6 +114,35 @@ fn morton(cell: [u32; 3]) -> u64 {
         x
     }
     spread(cell[0]) | spread(cell[1]) << 1 | spread(cell[2]) << 2
+}
+
+/// The octree the hierarchy follows: the cube on the drawable Gaussians'
+/// bounds, [`MORTON_BITS`] levels deep, its cells numbered along the Morton
+/// curve. Level `l`'s cell of a code is its top `3 l` bits.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Grid {
+    lo: Vec3,
+    size: f32,
+}
+
+impl Grid {
+    /// Levels below the root.
+    pub(super) const LEVELS: u32 = MORTON_BITS;
+
+    /// The octree over the box `lo..hi`.
+    pub(super) fn over(lo: Vec3, hi: Vec3) -> Grid {
+        Grid {
+            lo,
+            size: (hi - lo).max_element().max(f32::MIN_POSITIVE),
+        }
+    }
+
+    /// The Morton code of the finest cell holding `p`.
+    pub(super) fn code(&self, p: Vec3) -> u64 {
+        let cells = ((1u32 << MORTON_BITS) - 1) as f32;
+        let t = ((p - self.lo) / self.size * cells).clamp(Vec3::ZERO, Vec3::splat(cells));
+        morton([t.x as u32, t.y as u32, t.z as u32])
+    }
 }
 
 /// Builds the hierarchy of `scene` in memory. Gaussians that can never be
@@ -106,58 +166,57 @@ pub fn layout(scene: SplatScene) -> Option<Layout> {
     let source = if (0..total).all(|i| usable(&scene, i)) {
         scene
     } else {
+        // Copied as they are (not through `push`, which renormalises the
+        // rotation): the hierarchy of the drawable Gaussians does not
+        // depend on what else the file held.
         let mut kept = SplatScene::with_degree(scene.sh_degree);
+        let sh = std::sync::Arc::make_mut(&mut kept.sh);
         for i in (0..total).filter(|&i| usable(&scene, i)) {
-            kept.push(
-                scene.position[i],
-                scene.rotation[i],
-                scene.scale[i],
-                scene.opacity[i],
-                scene.sh_of(i),
-            );
+            kept.position.push(scene.position[i]);
+            kept.rotation.push(scene.rotation[i]);
+            kept.scale.push(scene.scale[i]);
+            kept.opacity.push(scene.opacity[i]);
+            sh.extend_from_slice(scene.sh_of(i));
         }
         kept
     };
-    if source.is_empty() {
-        return None;
-    }
-    let leaves = source.len();
-    let extent = source
-        .scale
-        .iter()
-        .map(|s| RADIUS_SIGMAS as f32 * s.abs().max_element())
-        .collect();
-    let mass = source
-        .scale
-        .iter()
-        .zip(&source.opacity)
-        .map(|(s, o)| ((*o as f64 * mean_area(*s)) as f32, *o))
-        .collect();
-    let mut arena = Arena {
-        scene: source,
-        extent,
-        mass,
-        children: Vec::new(),
-        leaves,
-    };
-    let order = morton_order(&arena.scene);
+    let (lo, hi) = source.bounds()?;
+    let order = morton_order(&source, Grid::over(lo, hi));
+    let mut layout = layout_sorted(source, order);
+    layout.dropped = total - layout.leaves();
+    Some(layout)
+}
+
+/// The hierarchy of drawable Gaussians whose codes on the scene's grid are
+/// `order` (ascending, ties by index): one octree cell's subtree when they
+/// are that cell's Gaussians, exactly as the whole scene's build makes it.
+pub(super) fn layout_sorted(scene: SplatScene, order: Vec<(u64, u32)>) -> Layout {
+    let mut arena = Arena::of_leaves(scene);
     let root = merge_levels(&mut arena, order);
-    Some(breadth_first(arena, root, total - leaves))
+    breadth_first(arena, root, 0)
+}
+
+/// The hierarchy over subtrees built separately (`roots`, each with its
+/// extent and (mass, summed opacity)), on the codes `order` of their
+/// first Gaussians: the top of a hierarchy built cell by cell.
+pub(super) fn layout_over(
+    roots: SplatScene,
+    extent: Vec<f32>,
+    mass: Vec<(f32, f32)>,
+    order: Vec<(u64, u32)>,
+) -> Layout {
+    let mut arena = Arena::of_roots(roots, extent, mass);
+    let root = merge_levels(&mut arena, order);
+    breadth_first(arena, root, 0)
 }
 
 /// The usable Gaussians' ids with their Morton codes, in curve order.
-fn morton_order(scene: &SplatScene) -> Vec<(u64, u32)> {
-    let (lo, hi) = scene.bounds().expect("usable Gaussians have finite means");
-    let size = (hi - lo).max_element().max(f32::MIN_POSITIVE);
-    let cells = ((1u32 << MORTON_BITS) - 1) as f32;
+fn morton_order(scene: &SplatScene, grid: Grid) -> Vec<(u64, u32)> {
     let mut order: Vec<(u64, u32)> = scene
         .position
         .par_iter()
         .enumerate()
-        .map(|(i, p)| {
-            let t = ((*p - lo) / size * cells).clamp(Vec3::ZERO, Vec3::splat(cells));
-            (morton([t.x as u32, t.y as u32, t.z as u32]), i as u32)
-        })
+        .map(|(i, p)| (grid.code(*p), i as u32))
         .collect();
     order.par_sort_unstable();
     order
@@ -327,6 +386,13 @@ impl Layout {
     /// Node `i`: its place and its Gaussian.
     pub fn node(&self, i: usize) -> (NodeLink, Member<'_>) {
         (self.links[i], self.arena.member(self.order[i]))
+    }
+
+    /// For a node that is one of the Gaussians the build was given, its
+    /// index among them.
+    pub(super) fn leaf_index(&self, i: usize) -> Option<usize> {
+        let id = self.order[i] as usize;
+        (id < self.arena.leaves).then_some(id)
     }
 
     /// The hierarchy in memory.
