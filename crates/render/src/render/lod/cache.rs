@@ -51,6 +51,19 @@ pub struct RecordHead {
     pub opacity: f32,
 }
 
+impl RecordHead {
+    /// The fixed part of `node`'s record with `link`.
+    pub fn of(link: NodeLink, node: &Member<'_>) -> RecordHead {
+        RecordHead {
+            link,
+            position: node.position.to_array(),
+            rotation: node.rotation.to_array(),
+            scale: node.scale.to_array(),
+            opacity: node.opacity,
+        }
+    }
+}
+
 /// What identifies the source a cache was built from, and what opening the
 /// scene needs without reading it.
 #[derive(Clone, Debug, PartialEq)]
@@ -423,14 +436,7 @@ fn write_records(tree: &Layout, header: &Header, path: &Path) -> Result<()> {
 
 /// Appends node `node` with `link` as one record.
 pub(super) fn push_record(out: &mut Vec<u8>, link: NodeLink, node: &Member<'_>) {
-    let head = RecordHead {
-        link,
-        position: node.position.to_array(),
-        rotation: node.rotation.to_array(),
-        scale: node.scale.to_array(),
-        opacity: node.opacity,
-    };
-    out.extend_from_slice(bytemuck::bytes_of(&head));
+    out.extend_from_slice(bytemuck::bytes_of(&RecordHead::of(link, node)));
     out.extend_from_slice(bytemuck::cast_slice(node.sh));
 }
 

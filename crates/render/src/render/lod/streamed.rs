@@ -32,7 +32,7 @@ use super::cache::{
     decode_records, finish_in_place, push_record, write_through_partial, Header, RecordHead,
     ScratchDir, SourceFacts, HEADER_BYTES, RECORD_HEAD,
 };
-use super::tree::{layout_over, layout_sorted, usable, Grid, Layout};
+use super::tree::{layout_over, layout_sorted, morton_order, usable, Grid, Layout};
 use super::{Member, NodeLink};
 use crate::error::{Error, Result};
 use crate::io::ply_stream::PlyStream;
@@ -458,8 +458,9 @@ struct Subtree {
     group: usize,
     /// Nodes per level below its root (level 0: the root).
     levels: Vec<u64>,
-    /// Its root, as the top of the hierarchy merges it.
-    root: (NodeLink, RecordHead, Vec<f32>),
+    /// Its root's record (its link local to the subtree) and SH, as the
+    /// top of the hierarchy merges it.
+    root: (RecordHead, Vec<f32>),
 }
 
 /// Builds every cell's subtree, group by group.
@@ -481,13 +482,7 @@ fn build_groups(
         let _ = std::fs::remove_file(&spilled);
         let (_, scene) = decode_records(&bytes, degree);
         drop(bytes);
-        let mut order: Vec<(u64, u32)> = scene
-            .position
-            .par_iter()
-            .enumerate()
-            .map(|(i, p)| (grid.code(*p), i as u32))
-            .collect();
-        order.par_sort_unstable();
+        let order = morton_order(&scene, grid);
         let path = scratch.file(&built_name(g));
         let fail = |e| Error::io("write", &path, e);
         let mut out = BufWriter::with_capacity(4 << 20, File::create(&path).map_err(fail)?);
@@ -554,18 +549,12 @@ fn write_subtree(
         out.write_all(&record)?;
     }
     let (link, root) = layout.node(0);
-    let head = RecordHead {
-        link,
-        position: root.position.to_array(),
-        rotation: root.rotation.to_array(),
-        scale: root.scale.to_array(),
-        opacity: root.opacity,
-    };
+    let head = RecordHead::of(link, &root);
     Ok(Subtree {
         code,
         group,
         levels,
-        root: (link, head, root.sh.to_vec()),
+        root: (head, root.sh.to_vec()),
     })
 }
 
@@ -575,7 +564,8 @@ fn top_of(subtrees: &[Subtree], degree: u8) -> Layout {
     let mut extent = Vec::with_capacity(subtrees.len());
     let mut mass = Vec::with_capacity(subtrees.len());
     for s in subtrees {
-        let (link, head, sh) = &s.root;
+        let (head, sh) = &s.root;
+        let link = head.link;
         roots.position.push(head.position.into());
         roots.rotation.push(glam::Quat::from_array(head.rotation));
         roots.scale.push(head.scale.into());

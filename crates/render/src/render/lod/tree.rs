@@ -210,8 +210,9 @@ pub(super) fn layout_over(
     breadth_first(arena, root, 0)
 }
 
-/// The usable Gaussians' ids with their Morton codes, in curve order.
-fn morton_order(scene: &SplatScene, grid: Grid) -> Vec<(u64, u32)> {
+/// The Gaussians' ids with their Morton codes on `grid`, in curve order
+/// (ties by id).
+pub(super) fn morton_order(scene: &SplatScene, grid: Grid) -> Vec<(u64, u32)> {
     let mut order: Vec<(u64, u32)> = scene
         .position
         .par_iter()
