@@ -481,8 +481,8 @@ pub(super) fn finish_in_place(file: &File, header: &Header, path: &Path) -> Resu
     let chunk_bytes = CHUNK_NODES * header.record_bytes();
     let records = header.nodes * header.record_bytes() as u64;
     let mut table = Vec::with_capacity(32 * header.chunks());
-    // Read a few dozen chunks at a time and hash them in parallel.
-    const BATCH: usize = 32;
+    // Read a few chunks (16 MB at degree 3) at a time and hash them in parallel.
+    const BATCH: usize = 8;
     let mut buffer = vec![0u8; BATCH * chunk_bytes];
     let mut at = 0u64;
     while at < records {

@@ -1,7 +1,9 @@
 //! Building a scene's hierarchy without holding the scene: the cache of a
 //! 3DGS PLY is built in passes over the file, in memory bounded by a budget
-//! whatever the file's size, and comes out byte for byte the cache the
-//! in-memory build writes.
+//! whatever the file's size. Its records (every node and link) and chunk
+//! hashes are byte for byte the in-memory build's; the header's framing box
+//! and ground come from a sample of at most [`SAMPLE`] Gaussians, where the
+//! in-memory build looks at all of them (the same for smaller files).
 //!
 //! 1. One pass finds the drawable Gaussians' bounds (the octree's cube) and
 //!    keeps every k-th Gaussian for framing (the bounds and ground a view
@@ -45,8 +47,10 @@ use crate::scene::upright::ground_up;
 const SAMPLE: usize = 1 << 18;
 /// Levels a counting pass looks below each cell it splits.
 const COUNT_LEVELS: u32 = 6;
-/// Scratch files written at once, each through its own buffer.
+/// Most scratch files written at once.
 const OPEN_FILES: usize = 256;
+/// Bytes of each scratch file's write buffer.
+const SPILL_BUFFER: usize = 64 << 10;
 /// Memory a group takes while built, in records of its Gaussians: the
 /// group read back, then one cell's copy in curve order with its merged
 /// nodes and breadth-first layout (measured: see the README's scale table).
@@ -77,9 +81,12 @@ pub fn build_streamed(
     listen: &Listener<'_>,
 ) -> Result<u64> {
     let record = RECORD_HEAD + 4 * SplatScene::with_degree(stream.sh_degree()).sh_stride();
+    // A quarter of the budget each for the counters of a counting pass and
+    // the scratch files' buffers (each used while nothing else is held).
     let plan = Plan {
         group: (memory / (RECORDS_PER_GAUSSIAN * record)).max(MIN_GROUP) as u64,
-        open_files: OPEN_FILES,
+        open_files: (memory / 4 / SPILL_BUFFER).clamp(8, OPEN_FILES),
+        count_bytes: memory / 4,
     };
     build_planned(stream, source, path, plan, listen)
 }
@@ -91,6 +98,8 @@ struct Plan {
     group: u64,
     /// Scratch files written in one pass.
     open_files: usize,
+    /// Bytes of counters a counting pass may take.
+    count_bytes: usize,
 }
 
 fn build_planned(
@@ -112,11 +121,20 @@ fn build_planned(
     source.ground_up = ground_up(&survey.sample);
     source.gaussians = stream.len() as u64;
     drop(survey.sample);
+    // Nodes are named by u32s; a hierarchy has fewer than twice its leaves.
+    if survey.drawable >= u32::MAX as u64 / 2 {
+        return Err(Error::input(format!(
+            "{} holds {} drawable Gaussians; a level-of-detail cache holds at most {}",
+            stream.path().display(),
+            survey.drawable,
+            u32::MAX / 2
+        )));
+    }
     let grid = Grid::over(lo, hi);
     let degree = stream.sh_degree();
     let group = plan.group;
 
-    let cells = plan_cells(stream, grid, survey.drawable, group, listen)?;
+    let cells = plan_cells(stream, grid, (survey.drawable, plan), listen)?;
     let groups = group_cells(&cells, group);
     (listen.note)(&format!(
         "{} drawable Gaussians in {} octree cells, {} groups of at most {group}",
@@ -132,8 +150,7 @@ fn build_planned(
         &scratch,
         listen,
     )?;
-    let file_len = stream.file_len();
-    let subtrees = build_groups(grid, (degree, file_len), &cells, &groups, &scratch, listen)?;
+    let subtrees = build_groups(grid, stream, &cells, &groups, &scratch, listen)?;
     let top = top_of(&subtrees, degree);
     let nodes = top.len() as u64 - subtrees.len() as u64
         + subtrees
@@ -245,10 +262,10 @@ fn cell_of(cells: &[Cell], code: u64) -> Option<usize> {
 fn plan_cells(
     stream: &mut PlyStream,
     grid: Grid,
-    drawable: u64,
-    group: u64,
+    (drawable, plan): (u64, Plan),
     listen: &Listener<'_>,
 ) -> Result<Vec<Cell>> {
+    let group = plan.group;
     let mut done = Vec::new();
     let mut open = vec![Cell {
         level: 0,
@@ -268,7 +285,14 @@ fn plan_cells(
             "counting Gaussians below {} octree cell(s)…",
             split.len()
         ));
-        let counts = count_below(stream, grid, &split, listen)?;
+        // Six levels below each cell, fewer where the counters would not
+        // fit their share of the budget (one level at the least).
+        let counters = |levels: u32| split.len() * 4 << (3 * levels);
+        let levels = (1..=COUNT_LEVELS)
+            .rev()
+            .find(|&l| counters(l) <= plan.count_bytes)
+            .unwrap_or(1);
+        let counts = count_below(stream, grid, (&split, levels), listen)?;
         for (cell, counts) in split.iter().zip(&counts) {
             divide(cell.level, cell.start, counts, group, &mut open, &mut done);
         }
@@ -278,9 +302,10 @@ fn plan_cells(
     Ok(done)
 }
 
-/// Levels a counting pass looks below `cell`.
-fn counted_levels(cell: &Cell) -> u32 {
-    COUNT_LEVELS.min(Grid::LEVELS - cell.level)
+/// Levels a counting pass looks below `cell`: `levels`, or down to the
+/// finest.
+fn counted_levels(cell: &Cell, levels: u32) -> u32 {
+    levels.min(Grid::LEVELS - cell.level)
 }
 
 /// One pass counting the drawable Gaussians in each descendant of each of
@@ -288,12 +313,12 @@ fn counted_levels(cell: &Cell) -> u32 {
 fn count_below(
     stream: &mut PlyStream,
     grid: Grid,
-    cells: &[Cell],
+    (cells, levels): (&[Cell], u32),
     listen: &Listener<'_>,
 ) -> Result<Vec<Vec<u32>>> {
     let mut counts: Vec<Vec<u32>> = cells
         .iter()
-        .map(|c| vec![0; 1 << (3 * counted_levels(c))])
+        .map(|c| vec![0; 1 << (3 * counted_levels(c, levels))])
         .collect();
     stream.rewind()?;
     while let Some(chunk) = stream.next_chunk()? {
@@ -304,7 +329,7 @@ fn count_below(
                 let code = grid.code(chunk.position[i]);
                 let k = cell_of(cells, code)?;
                 let cell = cells[k];
-                let shift = 3 * (Grid::LEVELS - cell.level - counted_levels(&cell));
+                let shift = 3 * (Grid::LEVELS - cell.level - counted_levels(&cell, levels));
                 Some((k as u32, ((code - cell.start) >> shift) as u32))
             })
             .collect();
@@ -406,7 +431,7 @@ fn spill(
             .map(|g| {
                 let path = scratch.file(&spill_name(g));
                 File::create(&path)
-                    .map(|f| BufWriter::with_capacity(256 << 10, f))
+                    .map(|f| BufWriter::with_capacity(SPILL_BUFFER, f))
                     .map_err(|e| Error::io("create", &path, e))
             })
             .collect::<Result<Vec<_>>>()?;
@@ -425,9 +450,9 @@ fn spill(
             for (g, i) in hits {
                 record.clear();
                 push_record(&mut record, NodeLink::default(), &member(&chunk, i));
-                files[g]
-                    .write_all(&record)
-                    .map_err(|e| Error::io("write", &scratch.file(&spill_name(g)), e))?;
+                files[g].write_all(&record).map_err(|e| {
+                    Error::io("write", &scratch.file(&spill_name(batch.start + g)), e)
+                })?;
             }
             (listen.progress)(stream.bytes_done(), stream.file_len());
         }
@@ -466,13 +491,14 @@ struct Subtree {
 /// Builds every cell's subtree, group by group.
 fn build_groups(
     grid: Grid,
-    (degree, file_len): (u8, u64),
+    stream: &PlyStream,
     cells: &[Cell],
     groups: &[Range<usize>],
     scratch: &ScratchDir,
     listen: &Listener<'_>,
 ) -> Result<Vec<Subtree>> {
     (listen.note)(&format!("merging {} groups…", groups.len()));
+    let (degree, file_len) = (stream.sh_degree(), stream.file_len());
     let total: u64 = cells.iter().map(|c| c.count).sum();
     let mut built = 0u64;
     let mut subtrees = Vec::with_capacity(cells.len());
@@ -489,6 +515,12 @@ fn build_groups(
         let mut at = 0;
         for cell in &cells[range.clone()] {
             let end = at + order[at..].partition_point(|(code, _)| *code < cell.end());
+            if (end - at) as u64 != cell.count {
+                return Err(Error::input(format!(
+                    "{} changed while its level-of-detail cache was being built",
+                    stream.path().display()
+                )));
+            }
             let layout = cell_layout(&scene, &order[at..end]);
             subtrees.push(write_subtree(&layout, order[at].0, g, &mut out).map_err(fail)?);
             at = end;
@@ -792,8 +824,9 @@ mod tests {
     }
 
     /// Built in groups far smaller than the scene, through several counting
-    /// passes and several spill passes, the cache is byte for byte the one
-    /// the whole scene's build writes: on a scene with a floor, a backdrop
+    /// passes (of fewer levels than six, for the counters' budget) and
+    /// several spill passes, the cache is byte for byte the one the whole
+    /// scene's build writes (the sample for framing is the whole scene here): on a scene with a floor, a backdrop
     /// and floaters, 700 Gaussians on one spot (a cell of the finest level
     /// over the group size) and undrawable ones; and on a single Gaussian.
     #[test]
@@ -836,10 +869,12 @@ mod tests {
         let small = Plan {
             group: 300,
             open_files: 5,
+            count_bytes: 40 << 10,
         };
         let default = Plan {
             group: 1 << 20,
             open_files: OPEN_FILES,
+            count_bytes: 64 << 20,
         };
         for (name, scene, plan) in [("mixed", &scene, small), ("one", &one, default)] {
             let ply = dir.join(format!("{name}.ply"));
@@ -859,6 +894,45 @@ mod tests {
         std::fs::remove_dir_all(&dir).ok();
     }
 
+    /// A file rewritten between the passes (another scene of the same size)
+    /// is refused in one line rather than built from two scenes at once.
+    #[test]
+    fn a_file_changed_during_the_build_is_refused() {
+        let dir =
+            std::env::temp_dir().join(format!("visage-streamed-changed-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let ply = dir.join("moving.ply");
+        crate::io::ply::write_splat_ply(&ply, &synthetic_scene(3_000, 1)).unwrap();
+        let other = dir.join("other.ply");
+        crate::io::ply::write_splat_ply(&other, &synthetic_scene(3_000, 2)).unwrap();
+        let replacement = std::fs::read(&other).unwrap();
+        let mut stream = PlyStream::open(&ply).unwrap().unwrap();
+        let note = |line: &str| {
+            if line.starts_with("sorting") {
+                std::fs::write(&ply, &replacement).unwrap();
+            }
+        };
+        let listen = Listener {
+            note: &note,
+            progress: &|_, _| {},
+        };
+        let plan = Plan {
+            group: 200,
+            open_files: 64,
+            count_bytes: 1 << 20,
+        };
+        let cache = dir.join("moving.lod");
+        let err = build_planned(&mut stream, facts(), &cache, plan, &listen)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("changed while its level-of-detail cache"),
+            "{err}"
+        );
+        assert!(!cache.exists() && scratch_dirs(&dir).is_empty());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
     /// A file with nothing drawable is refused in one line, leaving neither
     /// a cache nor scratch behind.
     #[test]
@@ -874,6 +948,7 @@ mod tests {
         let plan = Plan {
             group: 10,
             open_files: 2,
+            count_bytes: 1 << 10,
         };
         let err = streamed(&ply, &cache, plan, &notes)
             .unwrap_err()
