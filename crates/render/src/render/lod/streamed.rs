@@ -287,7 +287,7 @@ fn plan_cells(
         ));
         // Six levels below each cell, fewer where the counters would not
         // fit their share of the budget (one level at the least).
-        let counters = |levels: u32| split.len() * 4 << (3 * levels);
+        let counters = |levels: u32| (split.len() * 4) << (3 * levels);
         let levels = (1..=COUNT_LEVELS)
             .rev()
             .find(|&l| counters(l) <= plan.count_bytes)
