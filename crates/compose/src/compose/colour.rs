@@ -12,9 +12,10 @@
 //! - **skin**: the ratio of the two sources' mean skin colours, per channel in
 //!   linear RGB (another albedo under the same light), estimated on the
 //!   skin-coloured Gaussians of each source's face and applied to skin-coloured
-//!   Gaussians only, weighted by how skin-like they are. Hair, brows, lips, eyes
-//!   and clothing keep their colours (the thesis's neck turned green trying to
-//!   match a shirt; this cannot).
+//!   Gaussians only, weighted by how skin-like they are, with gains clamped
+//!   to the wider `TRANSFER_GAIN_RANGE`. Hair, brows, lips, eyes and clothing
+//!   keep their colours (the thesis's neck turned green trying to match a
+//!   shirt; this cannot).
 
 use glam::Vec3;
 
@@ -27,8 +28,12 @@ use crate::model::regions::Region;
 
 /// Means darker than this are clamped up before dividing.
 pub const DARK_MEAN: f32 = 0.02;
-/// Allowed per-channel gains.
+/// Allowed per-channel gains of the thesis's correction.
 pub const GAIN_RANGE: (f32, f32) = (0.25, 4.0);
+/// Allowed per-channel gains of the skin transfer: wider, because moving a
+/// dark skin to a light one takes more than 4 in blue (shaded skin of a dark
+/// source came out tan under 4; method §7.6).
+pub const TRANSFER_GAIN_RANGE: (f32, f32) = (0.125, 8.0);
 
 /// Weighted mean DC colour of some Gaussians of a set (thesis weights).
 pub fn weighted_mean_colour(set: &GaussianSet, indices: &[u32]) -> Option<Vec3> {
@@ -378,8 +383,10 @@ fn transfer_gain(rgb: Vec3, lab: Vec3, k: f32, from: &SkinStats, to: &SkinStats)
     let moved = srgb_to_lab(linear_to_srgb(srgb_to_linear(rgb) * ratio));
     let target = lab_to_srgb(lab.lerp(moved, k));
     let current = rgb.clamp(Vec3::ZERO, Vec3::ONE).max(Vec3::splat(DARK_MEAN));
-    (target.max(Vec3::splat(DARK_MEAN)) / current)
-        .clamp(Vec3::splat(GAIN_RANGE.0), Vec3::splat(GAIN_RANGE.1))
+    (target.max(Vec3::splat(DARK_MEAN)) / current).clamp(
+        Vec3::splat(TRANSFER_GAIN_RANGE.0),
+        Vec3::splat(TRANSFER_GAIN_RANGE.1),
+    )
 }
 
 #[cfg(test)]
@@ -538,6 +545,24 @@ mod tests {
         SkinStats::at(srgb_to_lab(rgb))
     }
 
+    /// A dark source's shaded skin on a light base becomes the light skin
+    /// shaded alike in every channel: blue needs a gain past 4 (under the
+    /// thesis's clamp such skin came out tan).
+    #[test]
+    fn a_dark_skin_reaches_a_light_one_in_every_channel() {
+        let dark = stats(Vec3::new(0.36, 0.22, 0.15));
+        let light = stats(Vec3::new(0.88, 0.72, 0.64));
+        let shaded = Vec3::new(0.26, 0.155, 0.10);
+        let g = semantic_skin_gain(shaded, Region::Skin, &dark, &light);
+        assert!(g.z > GAIN_RANGE.1, "{g}");
+        let moved = corrected(shaded, g);
+        // The light skin at the shaded skin's share of the dark skin's light.
+        let share = srgb_to_linear(shaded) / srgb_to_linear(lab_to_srgb(dark.tone));
+        let expected = linear_to_srgb(srgb_to_linear(lab_to_srgb(light.tone)) * share);
+        let off = (srgb_to_lab(moved) - srgb_to_lab(expected)).length();
+        assert!(off < 1.5, "{moved} against {expected}: ΔE {off}");
+    }
+
     fn dc(rgb: Vec3) -> [f32; 3] {
         [rgb_to_dc(rgb.x), rgb_to_dc(rgb.y), rgb_to_dc(rgb.z)]
     }
@@ -682,7 +707,8 @@ mod tests {
                 for region in [Region::Skin, Region::Lips, Region::Nose] {
                     let g = semantic_skin_gain(rgb, region, from, to);
                     assert!(g.is_finite(), "{rgb} {region:?}: {g}");
-                    assert!(g.min_element() >= GAIN_RANGE.0 && g.max_element() <= GAIN_RANGE.1);
+                    let (lo, hi) = TRANSFER_GAIN_RANGE;
+                    assert!(g.min_element() >= lo && g.max_element() <= hi);
                 }
             }
         }
