@@ -30,14 +30,39 @@ pub struct LodArgs {
     json: bool,
 }
 
+/// The progress bar of one cache build's stages.
+fn stage_bar() -> indicatif::ProgressBar {
+    indicatif::ProgressBar::new(0).with_style(
+        indicatif::ProgressStyle::with_template("{spinner} [{bar:30}] {percent:>3}%, {eta} left")
+            .expect("the template is valid")
+            .progress_chars("=> "),
+    )
+}
+
 /// Runs `visage lod`.
 pub fn run(args: &LodArgs) -> Result<()> {
-    let note = |line: &str| eprintln!("visage: {line}");
     let budget = args.memory_budget.unwrap_or_else(default_memory_budget);
     let mut reports = Vec::new();
     for file in &args.files {
-        let (tree, origin, cache) =
-            open_cached(file, args.cache_dir.as_deref(), budget, &note, &|_, _| {})?;
+        // A bar for each stage of a build (hidden when stderr is no
+        // terminal), the stages' notes printed above it.
+        let bar = stage_bar();
+        let note = |line: &str| {
+            let line = format!("visage: {line}");
+            if bar.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                bar.set_position(0);
+                bar.println(line);
+            }
+        };
+        let progress = |done: u64, all: u64| {
+            bar.set_length(all);
+            bar.set_position(done);
+        };
+        let opened = open_cached(file, args.cache_dir.as_deref(), budget, &note, &progress);
+        bar.finish_and_clear();
+        let (tree, origin, cache) = opened?;
         let header = tree.header();
         let (status, why, seconds) = match origin {
             CacheOrigin::Found => ("found", String::new(), 0.0),
