@@ -199,11 +199,13 @@ fn resolved_subject(subject: Subject, workbench: &Workbench) -> Subject {
 }
 
 /// Opens the subject, with a progress bar on standard error while a scene
-/// file loads (big scenes take a while to read from a slow disk).
+/// file loads (big scenes take a while to read from a slow disk) and for
+/// each stage of a cache build; the bar fills the terminal's width, so it
+/// never wraps at 80 columns.
 fn open_with_progress(subject: &Subject, renderer: Backend) -> Result<Workbench> {
     let bar = indicatif::ProgressBar::new(0).with_style(
         indicatif::ProgressStyle::with_template(
-            "{spinner} reading {bytes}/{total_bytes} [{bar:30}] {bytes_per_sec}, {eta} left",
+            "{spinner} [{wide_bar}] {bytes}/{total_bytes}, {eta} left",
         )
         .expect("the template is valid")
         .progress_chars("=> "),
