@@ -15,7 +15,7 @@ use glam::{DMat3, DVec3, Quat, Vec3};
 
 use crate::avatar::binding::quat_from_matrix;
 use crate::model::geometry::symmetric_eigen;
-use crate::scene::splats::MAX_OPACITY;
+use crate::scene::splats::{SplatScene, MAX_OPACITY};
 
 /// One Gaussian as a level of the hierarchy keeps it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -30,6 +30,19 @@ pub struct Member<'a> {
     pub opacity: f32,
     /// SH coefficients, coefficient-major.
     pub sh: &'a [f32],
+}
+
+impl<'a> Member<'a> {
+    /// Gaussian `i` of `scene`.
+    pub fn of(scene: &'a SplatScene, i: usize) -> Member<'a> {
+        Member {
+            position: scene.position[i],
+            rotation: scene.rotation[i],
+            scale: scene.scale[i],
+            opacity: scene.opacity[i],
+            sh: scene.sh_of(i),
+        }
+    }
 }
 
 /// The merged Gaussian (its SH is written into the caller's buffer).

@@ -449,7 +449,7 @@ fn spill(
                 .collect();
             for (g, i) in hits {
                 record.clear();
-                push_record(&mut record, NodeLink::default(), &member(&chunk, i));
+                push_record(&mut record, NodeLink::default(), &Member::of(&chunk, i));
                 files[g].write_all(&record).map_err(|e| {
                     Error::io("write", &scratch.file(&spill_name(batch.start + g)), e)
                 })?;
@@ -462,16 +462,6 @@ fn spill(
         }
     }
     Ok(())
-}
-
-fn member(scene: &SplatScene, i: usize) -> Member<'_> {
-    Member {
-        position: scene.position[i],
-        rotation: scene.rotation[i],
-        scale: scene.scale[i],
-        opacity: scene.opacity[i],
-        sh: scene.sh_of(i),
-    }
 }
 
 /// One cell's subtree, built and waiting in its group's scratch file.
@@ -545,7 +535,7 @@ fn cell_layout(scene: &SplatScene, members: &[(u64, u32)]) -> Layout {
     cell.opacity.reserve(room);
     std::sync::Arc::make_mut(&mut cell.sh).reserve(room * scene.sh_stride());
     for &(_, i) in members {
-        let m = member(scene, i as usize);
+        let m = Member::of(scene, i as usize);
         cell.position.push(m.position);
         cell.rotation.push(m.rotation);
         cell.scale.push(m.scale);
@@ -706,7 +696,6 @@ fn place(
         .truncate(true)
         .open(partial)
         .map_err(fail)?;
-    file.set_len(header.file_len()).map_err(fail)?;
     let record = header.record_bytes();
     let offset = |node: u64| HEADER_BYTES as u64 + node * record as u64;
     let placed = Placement::of(top, subtrees);
@@ -876,9 +865,26 @@ mod tests {
             open_files: OPEN_FILES,
             count_bytes: 64 << 20,
         };
-        for (name, scene, plan) in [("mixed", &scene, small), ("one", &one, default)] {
-            let ply = dir.join(format!("{name}.ply"));
-            crate::io::ply::write_splat_ply(&ply, scene).unwrap();
+        // plyfile's own PLY (tests/data/splat/ring.ply, made by tests/data/splat/make_splat.py).
+        let ring = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/splat/ring.ply");
+        let tiny = Plan {
+            group: 20,
+            open_files: 3,
+            count_bytes: 4 << 10,
+        };
+        for (name, scene, plan) in [
+            ("mixed", Some(&scene), small),
+            ("one", Some(&one), default),
+            ("ring", None, tiny),
+        ] {
+            let ply = match scene {
+                Some(scene) => {
+                    let ply = dir.join(format!("{name}.ply"));
+                    crate::io::ply::write_splat_ply(&ply, scene).unwrap();
+                    ply
+                }
+                None => ring.clone(),
+            };
             let expected = in_memory(&ply, &dir.join("memory.lod"));
             let notes = std::sync::Mutex::new(Vec::new());
             let got = streamed(&ply, &cache, plan, &notes).unwrap();

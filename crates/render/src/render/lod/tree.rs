@@ -32,14 +32,7 @@ struct Arena {
 
 impl Arena {
     fn member(&self, id: u32) -> Member<'_> {
-        let i = id as usize;
-        Member {
-            position: self.scene.position[i],
-            rotation: self.scene.rotation[i],
-            scale: self.scene.scale[i],
-            opacity: self.scene.opacity[i],
-            sh: self.scene.sh_of(i),
-        }
+        Member::of(&self.scene, id as usize)
     }
 
     fn children_of(&self, id: u32) -> &[u32] {
