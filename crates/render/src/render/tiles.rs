@@ -140,15 +140,6 @@ impl TileBins {
     pub fn tile(&self, t: usize) -> &[u32] {
         &self.list[self.ranges[t][0] as usize..self.ranges[t][1] as usize]
     }
-
-    /// `items` in the order of the tile lists (`out[k] = items[list[k]]`), so
-    /// a tile's blend reads its items in sequence rather than jumping through
-    /// memory in depth order: one parallel gather instead of a cache miss
-    /// per entry in the blend loop. Tile `t`'s items are `out[ranges[t]]`.
-    pub fn gather<T: Copy + Send + Sync>(&self, items: &[T], out: &mut Vec<T>) {
-        out.clear();
-        out.par_extend(self.list.par_iter().map(|&i| items[i as usize]));
-    }
 }
 
 /// A pointer the binning threads write disjoint slots through.

@@ -15,6 +15,7 @@
 //! skipped, and a tile stops once every pixel in it is saturated.
 
 mod fastmath;
+mod prefetch;
 mod prepared;
 mod project;
 mod raster;
@@ -49,8 +50,6 @@ pub struct CpuRenderer {
     splats: Vec<Splat>,
     keys: Vec<TileKey>,
     bins: TileBins,
-    /// The splats of each tile's list, in list order.
-    binned: Vec<Splat>,
     /// Timings of the last frame (bind and project are one stage here).
     pub timings: StageTimings,
 }
@@ -116,8 +115,7 @@ impl CpuRenderer {
         timings.sort = ms(t);
 
         let t = Instant::now();
-        self.bins.gather(&self.splats, &mut self.binned);
-        let image = rasterize(&self.binned, &self.bins, (width, height), settings);
+        let image = rasterize(&self.splats, &self.bins, (width, height), settings);
         timings.rasterize = ms(t);
         self.timings = timings;
         Ok(image)
@@ -184,10 +182,10 @@ fn project_all(
 }
 
 /// Blends every tile (one task each: tiles cost very different amounts, each
-/// into its own small buffer) and assembles the image. `binned` holds each
-/// tile's splats in its list's order.
+/// into its own small buffer) and assembles the image; a tile blends
+/// `splats` in the order of its list in `bins`.
 fn rasterize(
-    binned: &[Splat],
+    splats: &[Splat],
     bins: &TileBins,
     (width, height): (u32, u32),
     settings: &RenderSettings,
@@ -200,8 +198,8 @@ fn rasterize(
             blend_tile(
                 tile_origin(tile),
                 (width, height),
-                &binned[bins.ranges[tile as usize][0] as usize
-                    ..bins.ranges[tile as usize][1] as usize],
+                bins.tile(tile as usize),
+                splats,
                 settings.background,
                 settings.early_stop,
             )

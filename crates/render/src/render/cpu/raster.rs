@@ -5,7 +5,10 @@
 //! pixels they reach rather than their whole square; long spans are blended
 //! eight pixels at a time in f32x8 lanes, bit for bit as one by one. The
 //! exponential is a short polynomial accurate to an f32 step or two
-//! (`fastmath.rs`).
+//! (`fastmath.rs`). Splats are read through the tile's list of indices and
+//! fetched a few entries ahead: copying them into list order first cost a
+//! pass over every entry and a second array as large as the splats, and
+//! most entries are then skipped (all their pixels saturated).
 
 use crate::render::image::quantize;
 use crate::render::projection::{MAX_ALPHA, MIN_ALPHA};
@@ -13,6 +16,7 @@ use crate::render::projection::{MAX_ALPHA, MIN_ALPHA};
 use wide::{f32x8, i32x8};
 
 use super::fastmath::{ceil, exp_nonpositive, exp_nonpositive_lanes, floor};
+use super::prefetch::prefetch;
 use super::project::Splat;
 
 /// Tile edge of the CPU rasteriser.
@@ -31,6 +35,10 @@ const LANES: usize = 8;
 /// of what 5 gains at 640×480.
 const LANE_SPAN: u32 = 5;
 
+/// How many entries ahead of the blend a tile's splats are fetched
+/// (measured at 1M, 200×120: 8 saved 6 ms of the blend's 46, 16 saved 7).
+const PREFETCH_AHEAD: usize = 16;
+
 /// The running state of a tile's pixels.
 struct TileState {
     /// Accumulated colour, one plane per channel (so eight pixels of a row
@@ -43,11 +51,12 @@ struct TileState {
     remaining: u32,
 }
 
-/// Blends one tile's splats (front to back); returns its pixels, row-major
-/// (CPU_TILE wide).
+/// Blends one tile's splats (`splats[i]` for each `i` of `list`, front to
+/// back); returns its pixels, row-major (CPU_TILE wide).
 pub(super) fn blend_tile(
     origin: (u32, u32),
     size: (u32, u32),
+    list: &[u32],
     splats: &[Splat],
     background: [f32; 3],
     early_stop: f32,
@@ -61,8 +70,11 @@ pub(super) fn blend_tile(
         remaining: w * h,
     };
     let origin_f = (origin.0 as f32, origin.1 as f32);
-    for splat in splats {
-        blend_splat(&mut state, splat, origin_f, (w, h), early_stop);
+    for (k, &i) in list.iter().enumerate() {
+        if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
+            prefetch(std::slice::from_ref(&splats[ahead as usize]));
+        }
+        blend_splat(&mut state, &splats[i as usize], origin_f, (w, h), early_stop);
         if state.remaining == 0 {
             break;
         }
