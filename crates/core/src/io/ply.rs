@@ -145,7 +145,7 @@ impl Columns {
 }
 
 /// Most header bytes accepted before `end_header`.
-const MAX_HEADER: usize = 1 << 20;
+pub(crate) const MAX_HEADER: usize = 1 << 20;
 
 /// Parses the header; returns format, elements and the body offset.
 pub fn parse_header(bytes: &[u8]) -> super::Result<(PlyFormat, Vec<Element>, usize)> {

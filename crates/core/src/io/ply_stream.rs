@@ -13,7 +13,7 @@ use std::sync::Arc;
 use glam::{Quat, Vec3};
 use rayon::prelude::*;
 
-use super::ply::{parse_header, Element, PlyFormat, ScalarType};
+use super::ply::{parse_header, Element, PlyFormat, ScalarType, MAX_HEADER};
 use super::{FileError, Progress, Result};
 use crate::avatar::gaussians::{sh_coefficients, sh_degree_for, sigmoid};
 use crate::scene::splats::SplatScene;
@@ -99,7 +99,10 @@ impl PlyStream {
     pub fn open(path: &Path) -> Result<Option<PlyStream>> {
         let access = |e| FileError::access("read", path, e);
         let mut file = std::fs::File::open(path).map_err(access)?;
-        let mut head = vec![0u8; 64 << 10];
+        // As much as the general reader accepts: a header of long comments
+        // (editors record their settings there) must not send a file of
+        // any size to the reader that holds it whole.
+        let mut head = vec![0u8; MAX_HEADER + 2];
         let n = read_up_to(&mut file, &mut head).map_err(access)?;
         head.truncate(n);
         let Ok((PlyFormat::BinaryLittleEndian, elements, body)) = parse_header(&head) else {
@@ -385,6 +388,30 @@ mod tests {
         )
         .unwrap();
         assert!(read_fast(&ascii, &|_, _| {}).unwrap().is_none());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A header of long comments (here 300 KiB, in plyfile's ring.ply) still
+    /// takes the fast path, and streams, with the same Gaussians.
+    #[test]
+    fn a_long_commented_header_still_streams() {
+        let ring = std::fs::read(crate::io::test_data("splat/ring.ply")).unwrap();
+        let after_format = ring.windows(4).position(|w| w == b"1.0\n").unwrap() + 4;
+        let mut long = ring[..after_format].to_vec();
+        for k in 0..3_000 {
+            long.extend_from_slice(format!("comment setting {k}: {}\n", "x".repeat(80)).as_bytes());
+        }
+        long.extend_from_slice(&ring[after_format..]);
+        assert!(long.len() > 300 << 10);
+        let dir = std::env::temp_dir().join(format!("visage-ply-comments-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("commented.ply");
+        std::fs::write(&path, &long).unwrap();
+        let stream = PlyStream::open(&path).unwrap().expect("the fast path");
+        assert_eq!(stream.len(), 200);
+        let fast = read_fast(&path, &|_, _| {}).unwrap().unwrap();
+        let general = crate::io::ply::parse_splat_ply(&ring).unwrap();
+        assert_eq!(fast, general);
         std::fs::remove_dir_all(&dir).ok();
     }
 }
