@@ -638,6 +638,9 @@ fn convert_writes_the_synthetic_scene_streamed() {
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert_eq!(err.trim().lines().count(), 1, "{err}");
     }
+    for file in [&streamed, &in_memory, &spz] {
+        std::fs::remove_file(file).ok();
+    }
 }
 
 /// A file that cannot be written is an I/O failure (exit 4), told apart from

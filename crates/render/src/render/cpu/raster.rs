@@ -74,7 +74,13 @@ pub(super) fn blend_tile(
         if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
             prefetch(std::slice::from_ref(&splats[ahead as usize]));
         }
-        blend_splat(&mut state, &splats[i as usize], origin_f, (w, h), early_stop);
+        blend_splat(
+            &mut state,
+            &splats[i as usize],
+            origin_f,
+            (w, h),
+            early_stop,
+        );
         if state.remaining == 0 {
             break;
         }

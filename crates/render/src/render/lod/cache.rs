@@ -472,7 +472,12 @@ pub(super) fn decode_records(bytes: &[u8], degree: u8) -> (Vec<NodeLink>, SplatS
 /// Completes a cache whose records are already at their places in `file`:
 /// writes the header, then hashes the records chunk by chunk (reading them
 /// back) and writes the table after them.
-pub(super) fn finish_in_place(file: &File, header: &Header, path: &Path) -> Result<()> {
+pub(super) fn finish_in_place(
+    file: &File,
+    header: &Header,
+    path: &Path,
+    progress: crate::io::Progress<'_>,
+) -> Result<()> {
     use rayon::prelude::*;
     use std::os::unix::fs::FileExt;
     let fail = |e| Error::io("write", path, e);
@@ -497,6 +502,7 @@ pub(super) fn finish_in_place(file: &File, header: &Header, path: &Path) -> Resu
             table.extend_from_slice(&h);
         }
         at += take as u64;
+        progress(at, records);
     }
     file.write_all_at(&table, header.table_offset())
         .map_err(fail)?;

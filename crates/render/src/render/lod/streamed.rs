@@ -165,8 +165,14 @@ fn build_planned(
         sh_degree: degree,
     };
     (listen.note)(&format!("{nodes} nodes built; placing them…"));
+    let file_len = stream.file_len();
     write_through_partial(path, |partial| {
-        place(&top, &subtrees, &header, &scratch, partial)
+        let placing = Placing {
+            scratch: &scratch,
+            listen,
+            file_len,
+        };
+        place(&top, &subtrees, &header, partial, &placing)
     })?;
     Ok(header.file_len())
 }
@@ -678,6 +684,15 @@ impl Placement {
     }
 }
 
+/// Where [`place`] reads the built subtrees and whom it tells its progress
+/// (as a share of the source's `file_len`, as every stage does).
+#[derive(Clone, Copy)]
+struct Placing<'a> {
+    scratch: &'a ScratchDir,
+    listen: &'a Listener<'a>,
+    file_len: u64,
+}
+
 /// Writes the whole hierarchy into `partial`: the top's nodes, then every
 /// subtree copied from its scratch file level by level, then the header and
 /// the chunk hashes.
@@ -685,9 +700,14 @@ fn place(
     top: &Layout,
     subtrees: &[Subtree],
     header: &Header,
-    scratch: &ScratchDir,
     partial: &Path,
+    placing: &Placing<'_>,
 ) -> Result<()> {
+    let Placing {
+        scratch,
+        listen,
+        file_len,
+    } = *placing;
     let fail = |e| Error::io("write", partial, e);
     let file = OpenOptions::new()
         .read(true)
@@ -711,6 +731,14 @@ fn place(
         file.write_all_at(&bytes, offset(placed.top[i]))
             .map_err(fail)?;
     }
+    // (done, all) of anything, told as that share of the source's size.
+    let tell = |done: u64, all: u64| {
+        let share = done as f64 / all.max(1) as f64;
+        (listen.progress)((share * file_len as f64) as u64, file_len)
+    };
+    let mut written = (0..top.len())
+        .filter(|&i| top.leaf_index(i).is_none())
+        .count() as u64;
     let mut reader: Option<(usize, BufReader<File>)> = None;
     let mut block = vec![0u8; COPY_RECORDS * record];
     for (s, subtree) in subtrees.iter().enumerate() {
@@ -746,11 +774,14 @@ fn place(
                 let at = offset(placed.level_starts[s][level] + copied);
                 file.write_all_at(bytes, at).map_err(fail)?;
                 copied += take as u64;
+                written += take as u64;
             }
         }
+        tell(written, header.nodes);
     }
     drop(reader);
-    finish_in_place(&file, header, partial)
+    (listen.note)("hashing the cache's chunks…");
+    finish_in_place(&file, header, partial, &tell)
 }
 
 #[cfg(test)]
@@ -795,11 +826,23 @@ mod tests {
     ) -> Result<Vec<u8>> {
         let mut stream = PlyStream::open(ply)?.expect("a float32 PLY streams");
         let note = |line: &str| notes.lock().unwrap().push(line.to_string());
+        let heard = std::sync::Mutex::new(Vec::new());
+        let progress = |done, all| heard.lock().unwrap().push((done, all));
         let listen = Listener {
             note: &note,
-            progress: &|_, _| {},
+            progress: &progress,
         };
         build_planned(&mut stream, facts(), out, plan, &listen)?;
+        // Every stage's progress is of the file's size, and the last stage
+        // (hashing) ends at all of it.
+        let heard = heard.into_inner().unwrap();
+        let size = stream.file_len();
+        let wrong = heard
+            .iter()
+            .find(|&&(done, all)| all != size || done > size);
+        assert!(wrong.is_none(), "{wrong:?} of {size}");
+        assert_eq!(heard.last(), Some(&(size, size)));
+        assert!(notes.lock().unwrap().iter().any(|n| n.contains("hashing")));
         Ok(std::fs::read(out).unwrap())
     }
 
