@@ -137,7 +137,7 @@ fn build_planned(
     let cells = plan_cells(stream, grid, (survey.drawable, plan), listen)?;
     let groups = group_cells(&cells, group);
     (listen.note)(&format!(
-        "{} drawable Gaussians in {} octree cells, {} groups of at most {group}",
+        "{} drawable Gaussians, {} octree cells, {} groups of ≤ {group}",
         survey.drawable,
         cells.len(),
         groups.len()
