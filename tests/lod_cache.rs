@@ -110,8 +110,14 @@ fn a_changed_scene_or_a_damaged_cache_is_rebuilt() {
     bytes[(64 << 10) + 100] ^= 0x40;
     std::thread::sleep(std::time::Duration::from_millis(20));
     std::fs::write(&file, &bytes).unwrap();
-    let (_, origin, same) = open_cached(&file, Some(&caches), 1 << 30, &quiet, &|_, _| {}).unwrap();
+    let heard = std::sync::Mutex::new(Vec::new());
+    let progress = |done, all| heard.lock().unwrap().push((done, all));
+    let (_, origin, same) = open_cached(&file, Some(&caches), 1 << 30, &quiet, &progress).unwrap();
     assert_eq!(same, path);
+    // The content was hashed (the time changed) with its progress shown,
+    // to the file's end.
+    let size = bytes.len() as u64;
+    assert!(heard.lock().unwrap().contains(&(size, size)));
     assert_eq!(
         origin_why(&origin),
         "the scene file changed since it was built"
@@ -133,7 +139,9 @@ fn a_changed_scene_or_a_damaged_cache_is_rebuilt() {
     let note = |line: &str| notes.lock().unwrap().push(line.to_string());
     let (_, origin, _) = open_cached(&file, Some(&caches), 1 << 30, &note, &|_, _| {}).unwrap();
     assert!(origin_why(&origin).contains("truncated"));
-    assert!(notes.lock().unwrap()[0].contains("building the level-of-detail cache"));
+    let notes = notes.into_inner().unwrap();
+    assert!(notes[0].starts_with("hashing") && notes[0].contains("truncated"));
+    assert!(notes[1].contains("building the level-of-detail cache"));
     // A damaged header, and a damaged first chunk: refused, rebuilt.
     for at in [20usize, 4096 + 50] {
         let mut cache = std::fs::read(&path).unwrap();

@@ -241,7 +241,7 @@ pub fn open_cached(
         Err(_) => "there is none yet".to_string(),
         Ok(mut file) => match read_header(&mut file) {
             Err(why) => format!("level-of-detail cache {}: {why}", cache.display()),
-            Ok((header, _)) if !still_matches(&header.source, path)? => {
+            Ok((header, _)) if !still_matches(&header.source, path, progress)? => {
                 "the scene file changed since it was built".to_string()
             }
             Ok(_) => match PagedTree::open(&cache, budget) {
@@ -291,18 +291,8 @@ impl Build<'_> {
     /// Builds the cache, streamed where the file allows it; returns its size.
     fn run(&self, note: &dyn Fn(&str), progress: Progress) -> Result<u64> {
         let path = self.path;
-        let facts = SourceFacts {
-            fingerprint: self.fingerprint,
-            content: content_hash(path)?,
-            len: std::fs::metadata(path)
-                .map_err(|e| read_error(path, e))?
-                .len(),
-            modified_ns: modified_ns(path),
-            bounds: Default::default(),
-            ground_up: None,
-            gaussians: 0,
-        };
         if let Some(mut stream) = PlyStream::open(path)? {
+            let facts = self.facts(note, progress)?;
             note(&format!(
                 "building the level-of-detail cache of {} ({}) in passes over the file, within {} MiB…",
                 path.display(),
@@ -313,19 +303,38 @@ impl Build<'_> {
             return build_streamed(&mut stream, facts, self.cache, self.memory, &listen);
         }
         check_memory_for_build(path)?;
-        self.in_memory(facts, note, progress)
+        self.in_memory(note, progress)
+    }
+
+    /// What the cache records of its source: the content hash (a pass over
+    /// the file, noted, its progress shown), size and time; the rest is
+    /// filled in by the build.
+    fn facts(&self, note: &dyn Fn(&str), progress: Progress) -> Result<SourceFacts> {
+        let path = self.path;
+        note(&format!(
+            "hashing {} for its level-of-detail cache ({})…",
+            path.display(),
+            self.why
+        ));
+        Ok(SourceFacts {
+            fingerprint: self.fingerprint,
+            content: content_hash(path, progress)?,
+            len: std::fs::metadata(path)
+                .map_err(|e| read_error(path, e))?
+                .len(),
+            modified_ns: modified_ns(path),
+            bounds: Default::default(),
+            ground_up: None,
+            gaussians: 0,
+        })
     }
 
     /// Reads the whole scene, builds its hierarchy and writes the cache.
-    fn in_memory(
-        &self,
-        facts: SourceFacts,
-        note: &dyn Fn(&str),
-        progress: Progress,
-    ) -> Result<u64> {
+    fn in_memory(&self, note: &dyn Fn(&str), progress: Progress) -> Result<u64> {
         let path = self.path;
         // Read first, so a file that is no scene fails in one line.
         let scene = crate::io::splat::read_scene_with(path, progress)?;
+        let facts = self.facts(note, progress)?;
         let t = Instant::now();
         note(&format!(
             "building the level-of-detail cache of {} ({}): merging {} Gaussians…",
