@@ -4,29 +4,29 @@
 /// Cache line size assumed by the hints.
 const LINE: usize = 64;
 
-/// Asks for every cache line of `items` ahead of its use (a hint; on
+/// Asks for every cache line of `item` ahead of its use (a hint; on
 /// targets other than x86-64, nothing).
 #[inline]
-pub(super) fn prefetch<T>(items: &[T]) {
+pub(super) fn prefetch<T>(item: &T) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let bytes = std::mem::size_of_val(items);
+        let bytes = std::mem::size_of::<T>();
         if bytes == 0 {
             return;
         }
-        let first = items.as_ptr().cast::<i8>();
+        let first = (item as *const T).cast::<i8>();
         let mut offset = 0;
         while offset < bytes {
             // SAFETY: a prefetch only hints at an address, here inside
-            // `items`; it reads nothing the program sees and cannot fault.
+            // `item`; it reads nothing the program sees and cannot fault.
             unsafe { _mm_prefetch(first.add(offset), _MM_HINT_T0) };
             offset += LINE;
         }
         // The last byte's line, which a record not aligned to lines ends on.
-        // SAFETY: as above (`bytes - 1` lies inside `items`).
+        // SAFETY: as above (`bytes - 1` lies inside `item`).
         unsafe { _mm_prefetch(first.add(bytes - 1), _MM_HINT_T0) };
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = items;
+    let _ = item;
 }

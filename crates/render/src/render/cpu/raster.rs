@@ -72,7 +72,7 @@ pub(super) fn blend_tile(
     let origin_f = (origin.0 as f32, origin.1 as f32);
     for (k, &i) in list.iter().enumerate() {
         if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
-            prefetch(std::slice::from_ref(&splats[ahead as usize]));
+            prefetch(&splats[ahead as usize]);
         }
         blend_splat(
             &mut state,

@@ -720,6 +720,8 @@ fn place(
     let offset = |node: u64| HEADER_BYTES as u64 + node * record as u64;
     let placed = Placement::of(top, subtrees);
     let mut bytes = Vec::with_capacity(record);
+    // Nodes written so far, for the progress.
+    let mut written = 0u64;
     for i in 0..top.len() {
         if top.leaf_index(i).is_some() {
             continue;
@@ -730,15 +732,13 @@ fn place(
         push_record(&mut bytes, link, &node);
         file.write_all_at(&bytes, offset(placed.top[i]))
             .map_err(fail)?;
+        written += 1;
     }
     // (done, all) of anything, told as that share of the source's size.
     let tell = |done: u64, all: u64| {
         let share = done as f64 / all.max(1) as f64;
         (listen.progress)((share * file_len as f64) as u64, file_len)
     };
-    let mut written = (0..top.len())
-        .filter(|&i| top.leaf_index(i).is_none())
-        .count() as u64;
     let mut reader: Option<(usize, BufReader<File>)> = None;
     let mut block = vec![0u8; COPY_RECORDS * record];
     for (s, subtree) in subtrees.iter().enumerate() {
