@@ -24,6 +24,8 @@ var<workgroup> batch_centre: array<vec4<f32>, BATCH>;
 var<workgroup> batch_conic: array<vec4<f32>, BATCH>;
 var<workgroup> batch_rgb: array<vec3<f32>, BATCH>;
 var<workgroup> tile_range: vec2<u32>;
+// Pixels of the tile that are finished (saturated or outside the image),
+// counted once each as they finish, so a batch costs no atomics of its own.
 var<workgroup> pixels_done: atomic<u32>;
 var<workgroup> all_done: u32;
 
@@ -43,7 +45,10 @@ fn main(
     let inside = x < camera.size.x && y < camera.size.y;
     if (lane == 0u) {
         tile_range = tile_ranges[tile.y * camera.size.z + tile.x];
-        atomicStore(&pixels_done, 0u);
+        // The pixels past the image's edge are finished from the start.
+        let wide = min(TILE, camera.size.x - tile.x * TILE);
+        let high = min(TILE, camera.size.y - tile.y * TILE);
+        atomicStore(&pixels_done, BATCH - wide * high);
     }
     // The range is the same for the whole tile: loaded once, read uniformly
     // so the batch loop's barriers are in uniform control flow.
@@ -55,24 +60,45 @@ fn main(
     var done = !inside;
     // Where an unsaturated pixel's walk got to.
     var walked = range.x;
+    // The loads run ahead of the blending: a batch's Gaussians are read
+    // while the batch before it blends, and their list entries one batch
+    // earlier still, so neither of the two dependent loads is waited on.
+    var next_centre = vec4<f32>(0.0);
+    var next_conic = vec4<f32>(0.0);
+    var next_rgb = vec3<f32>(0.0);
+    var next_index = 0u;
+    if (range.x + lane < range.y) {
+        let i = tile_list[range.x + lane];
+        next_centre = projected[3u * i];
+        next_conic = projected[3u * i + 1u];
+        next_rgb = projected[3u * i + 2u].xyz;
+    }
+    if (range.x + BATCH + lane < range.y) {
+        next_index = tile_list[range.x + BATCH + lane];
+    }
     for (var start = range.x; start < range.y; start += BATCH) {
-        if (done) {
-            atomicAdd(&pixels_done, 1u);
-        }
-        let k = start + lane;
-        if (k < range.y) {
-            let i = tile_list[k];
-            batch_centre[lane] = projected[3u * i];
-            batch_conic[lane] = projected[3u * i + 1u];
-            batch_rgb[lane] = projected[3u * i + 2u].xyz;
-        }
-        workgroupBarrier();
+        // Every pixel finished in the last batch counted itself before
+        // that batch's closing barrier, so the count is complete here and
+        // a saturated tile loads no more Gaussians.
         if (lane == 0u) {
             all_done = atomicLoad(&pixels_done);
-            atomicStore(&pixels_done, 0u);
         }
         if (workgroupUniformLoad(&all_done) == BATCH) {
             break;
+        }
+        // Past the list's end these are stale and never read.
+        batch_centre[lane] = next_centre;
+        batch_conic[lane] = next_conic;
+        batch_rgb[lane] = next_rgb;
+        workgroupBarrier();
+        if (start + BATCH + lane < range.y) {
+            let i = next_index;
+            next_centre = projected[3u * i];
+            next_conic = projected[3u * i + 1u];
+            next_rgb = projected[3u * i + 2u].xyz;
+        }
+        if (start + 2u * BATCH + lane < range.y) {
+            next_index = tile_list[start + 2u * BATCH + lane];
         }
         if (!done) {
             let count = min(BATCH, range.y - start);
@@ -86,6 +112,7 @@ fn main(
                 let next = transmittance * (1.0 - alpha);
                 if (next < camera.tuning.x) {
                     done = true;
+                    atomicAdd(&pixels_done, 1u);
                     break;
                 }
                 colour += batch_rgb[j] * (alpha * transmittance);
