@@ -1,5 +1,7 @@
 // tiles_emit: one (tile, Gaussian) entry per touched tile, written in depth order;
-// a stable sort by tile then gives every tile its Gaussians front to back.
+// a stable sort by tile then gives every tile its Gaussians front to back. Entries
+// past the room planned for them (`limit`) are dropped: the frame is then binned
+// again with more room (src/render/gpu/binning.rs).
 
 @group(0) @binding(0) var<uniform> params: SortParams;
 @group(0) @binding(1) var<storage, read> keys: array<vec4<u32>>;
@@ -23,8 +25,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
     var at = starts[s];
     for (var ty = r.y; ty <= r.w; ty++) {
         for (var tx = r.x; tx <= r.z; tx++) {
-            tile_keys[at] = ty * params.tiles.x + tx;
-            tile_values[at] = i;
+            if (at < params.limit) {
+                tile_keys[at] = ty * params.tiles.x + tx;
+                tile_values[at] = i;
+            }
             at++;
         }
     }

@@ -8,12 +8,23 @@
 //! 2. A stable LSD radix sort on the top `sort_bits` of the depth, 8 bits a pass
 //!    (`radix_histogram` → prefix sum → `radix_scatter`), so ties keep index order.
 //! 3. `tiles_count` + prefix sum: where each Gaussian's tile entries start, in depth
-//!    order; the total comes back to size the entry buffers (4 bytes read back).
-//! 4. `tiles_emit` writes (tile, Gaussian) entries in depth order; a stable radix
-//!    sort by tile makes each tile's run front to back; `tiles_ranges` finds the runs.
+//!    order, and how many entries there are in all.
+//! 4. `tiles_emit` writes (tile, Gaussian) entries in depth order into the room
+//!    planned for them; a stable radix sort by tile makes each tile's run front to
+//!    back; `tiles_ranges` finds the runs.
+//!
+//! The room for the entries is planned from the last frame's total (read back with
+//! the image), so a frame goes to the device in one piece with no wait in the middle.
+//! The tile sort's and `tiles_ranges`' dispatches cover the room, and their kernels
+//! read the true total from [`GpuBinning::entry_total`] on the GPU, so unused room
+//! costs only idle workgroups. A frame whose entries outgrow the room is told by
+//! [`GpuBinning::settle`] and binned again with room for them; the first frame reads
+//! its total back before the entries are written (4 bytes).
 //!
 //! Every kernel is its own dispatch (no workgroup waits for another), so it runs
 //! on any driver, lavapipe included.
+
+use wgpu::util::DeviceExt;
 
 use super::constants::{DIGITS, SORT_BLOCK as BLOCK};
 use super::device::{element_grid, read_buffer, Growable, MAX_GROUPS};
@@ -35,7 +46,8 @@ struct SortParams {
     count: u32,
     shift: u32,
     blocks: u32,
-    pad: u32,
+    /// `tiles_emit`: the room for entries (those past it are dropped).
+    limit: u32,
     tiles: [u32; 4],
 }
 
@@ -46,7 +58,7 @@ impl SortParams {
             count,
             shift: 0,
             blocks: 0,
-            pad: 0,
+            limit: 0,
             tiles: [0; 4],
         }
     }
@@ -112,6 +124,16 @@ pub(super) struct GpuBinning {
     histogram: Growable,
     sums: Growable,
     total_readback: wgpu::Buffer,
+    /// The last binned frame's entry total (4 bytes), copied into the
+    /// frame's read-back for [`GpuBinning::settle`].
+    pub entry_total: wgpu::Buffer,
+    /// `u32::MAX`: bound as the live count of sorts whose length the CPU knows.
+    no_limit: wgpu::Buffer,
+    /// Room for the next frame's entries, planned from the last frame's
+    /// total; `None` before the first frame and when no room would do.
+    planned_room: Option<u32>,
+    /// The room the last [`GpuBinning::bin`] gave its entries.
+    room: u32,
     /// Per tile: start and end of its run in the sorted entries.
     pub ranges: Growable,
     /// Which of `tiles.values` holds the sorted entries after [`GpuBinning::bin`].
@@ -128,6 +150,7 @@ impl GpuBinning {
     /// Drops every buffer back to a small one (after a failure on the GPU).
     pub fn reset_buffers(&mut self, device: &wgpu::Device) {
         self.forget_bind_groups();
+        self.planned_room = None;
         self.depth.reset(device);
         self.tiles.reset(device);
         for b in [
@@ -195,6 +218,19 @@ impl GpuBinning {
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
+            entry_total: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("entry total"),
+                size: 4,
+                usage: storage | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            no_limit: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("no limit"),
+                contents: bytemuck::bytes_of(&u32::MAX),
+                usage: storage,
+            }),
+            planned_room: None,
+            room: 0,
             ranges: Growable::new(
                 device,
                 "tile ranges",
@@ -218,7 +254,9 @@ impl GpuBinning {
     /// Sorts the `count` Gaussians whose keys `project` wrote by depth (top
     /// `sort_bits` bits) and bins them into the tiles of a `tiles` grid;
     /// with `compact`, the culled ones are left out before the sort (worth
-    /// its extra pass and read-back where most are culled).
+    /// its extra pass and read-back where most are culled). The lists are
+    /// complete only if [`GpuBinning::settle`] says so once the frame's
+    /// [`GpuBinning::entry_total`] is read back.
     #[allow(clippy::too_many_arguments)]
     pub fn bin(
         &mut self,
@@ -283,7 +321,8 @@ impl GpuBinning {
                     groups,
                 );
             }
-            let order = self.encode_radix(device, &mut pass, &depth_sort, &self.depth);
+            let order =
+                self.encode_radix(device, &mut pass, &depth_sort, &self.depth, &self.no_limit);
             let order = &self.depth.values[order].buffer;
             k.tiles_count.dispatch(
                 device,
@@ -299,27 +338,39 @@ impl GpuBinning {
         encoder.copy_buffer_to_buffer(
             &self.sums.buffer,
             u64::from(entry_scan.sums) * 4,
-            &self.total_readback,
+            &self.entry_total,
             0,
             4,
         );
-        queue.submit([encoder.finish()]);
-        let total: Vec<u32> = read_buffer(device, &self.total_readback, 4)?;
-        let entries = total[0];
+        let room = match self.planned_room {
+            Some(room) => room,
+            None => {
+                // No plan: this frame's own total, read back now.
+                encoder.copy_buffer_to_buffer(&self.entry_total, 0, &self.total_readback, 0, 4);
+                queue.submit([encoder.finish()]);
+                encoder = device.create_command_encoder(&Default::default());
+                read_buffer::<u32>(device, &self.total_readback, 4)?[0]
+            }
+        };
+        self.room = room;
         let count = kept;
 
         // Phase 2: entries in depth order, stable sort by tile, tile runs.
-        let mut encoder = device.create_command_encoder(&Default::default());
         encoder.clear_buffer(&self.ranges.buffer, 0, None);
-        if entries > 0 {
-            check_groups(entries, "tile entries", self.max_binding)?;
-            self.tiles.ensure(device, entries);
+        if room > 0 {
+            check_groups(room, "tile entries", self.max_binding)?;
+            self.tiles.ensure(device, room);
             let order = depth_sort.result;
             let tile_bytes = (32 - (tile_count.max(2) - 1).leading_zeros()).div_ceil(8);
-            let tile_sort = self.radix_plan(entries, 0..tile_bytes);
+            let tile_sort = self.radix_plan(room, 0..tile_bytes);
             let per_entry = self.slot(SortParams {
                 tiles: tile_grid,
-                ..SortParams::new(entries)
+                ..SortParams::new(room)
+            });
+            let per_emitter = self.slot(SortParams {
+                tiles: tile_grid,
+                limit: room,
+                ..SortParams::new(kept)
             });
             self.ensure_scratch(device, &tile_sort, &tile_sort.scan);
             self.write_slots(queue);
@@ -330,7 +381,7 @@ impl GpuBinning {
                 k.tiles_emit.dispatch(
                     device,
                     &mut pass,
-                    self.uniform(per_gaussian),
+                    self.uniform(per_emitter),
                     keys,
                     &self.depth.values[order].buffer,
                     &self.entries.buffer,
@@ -338,20 +389,43 @@ impl GpuBinning {
                     &t.values[0].buffer,
                     element_grid(count, self.grid_columns),
                 );
-                let sorted = self.encode_radix(device, &mut pass, &tile_sort, &self.tiles);
+                let sorted = self.encode_radix(
+                    device,
+                    &mut pass,
+                    &tile_sort,
+                    &self.tiles,
+                    &self.entry_total,
+                );
                 k.tiles_ranges.dispatch(
                     device,
                     &mut pass,
                     self.uniform(per_entry),
                     &t.keys[sorted].buffer,
                     &self.ranges.buffer,
-                    element_grid(entries, self.grid_columns),
+                    &self.entry_total,
+                    element_grid(room, self.grid_columns),
                 );
             }
             self.result = tile_sort.result;
         }
         queue.submit([encoder.finish()]);
         Ok(())
+    }
+
+    /// Takes the `total` of entries the last [`GpuBinning::bin`] made (read
+    /// back from [`GpuBinning::entry_total`] after the frame) and plans the
+    /// next frame's room from it; false when they did not fit the room that
+    /// frame gave them, so its lists lack some and it must be binned again.
+    pub fn settle(&mut self, total: u32) -> bool {
+        // An eighth more than the last total, and a floor, so a moving
+        // camera seldom outgrows the room; the unused room costs the tile
+        // sort a little work.
+        let room = total
+            .saturating_add(total / 8)
+            .saturating_add(4096)
+            .min(largest_sort(self.max_binding));
+        self.planned_room = (room >= total).then_some(room);
+        total <= self.room
     }
 
     /// Flags the Gaussians `project` kept, scans the flags in `entries` (each
@@ -448,14 +522,16 @@ impl GpuBinning {
         queue.write_buffer(&self.params, 0, &bytes);
     }
 
-    /// Encodes a radix sort of `kv` (input in buffers 0); returns the buffer
-    /// index holding the result.
+    /// Encodes a radix sort of `kv` (input in buffers 0), of as many of the
+    /// planned elements as `live` (one `u32` on the GPU) says; returns the
+    /// buffer index holding the result.
     fn encode_radix(
         &self,
         device: &wgpu::Device,
         pass: &mut wgpu::ComputePass<'_>,
         plan: &RadixPlan,
         kv: &KeyValues,
+        live: &wgpu::Buffer,
     ) -> usize {
         let k = &self.kernels;
         let mut from = 0;
@@ -466,6 +542,7 @@ impl GpuBinning {
                 self.uniform(slot),
                 &kv.keys[from].buffer,
                 &self.histogram.buffer,
+                live,
                 (plan.blocks, 1),
             );
             self.encode_scan(device, pass, &plan.scan, &self.histogram.buffer);
@@ -478,6 +555,7 @@ impl GpuBinning {
                 &self.histogram.buffer,
                 &kv.keys[1 - from].buffer,
                 &kv.values[1 - from].buffer,
+                live,
                 (plan.blocks, 1),
             );
             from = 1 - from;
@@ -539,13 +617,22 @@ struct RadixPlan {
 /// buffers (4 bytes an element, grown to a power of two, bound whole) must
 /// fit the device's largest storage binding (33.5 million on lavapipe).
 fn check_groups(count: u32, what: &str, max_binding: u64) -> Result<()> {
-    let bytes = (u64::from(count) * 4).next_power_of_two();
-    if count.div_ceil(BLOCK) > MAX_GROUPS || bytes > max_binding {
+    if count > largest_sort(max_binding) {
         return Err(Error::device(format!(
             "{count} {what} are more than the GPU renderer sorts in one frame on this device; try --lod auto or --renderer cpu"
         )));
     }
     Ok(())
+}
+
+/// The most elements one sort takes (see [`check_groups`]).
+fn largest_sort(max_binding: u64) -> u32 {
+    let binding = match max_binding {
+        0 => 0,
+        b => 1u64 << b.ilog2(),
+    };
+    let elements = (binding / 4).min(u64::from(MAX_GROUPS) * u64::from(BLOCK));
+    elements.min(u64::from(u32::MAX)) as u32
 }
 
 #[cfg(test)]
@@ -658,7 +745,7 @@ mod tests {
             let mut encoder = device.create_command_encoder(&Default::default());
             let result = {
                 let mut pass = encoder.begin_compute_pass(&Default::default());
-                b.encode_radix(device, &mut pass, &plan, &b.depth)
+                b.encode_radix(device, &mut pass, &plan, &b.depth, &b.no_limit)
             };
             queue.submit([encoder.finish()]);
             let gpu_keys = read_back(device, queue, &b.depth.keys[result].buffer, n as usize);
@@ -671,6 +758,10 @@ mod tests {
         }
     }
 
+    /// The lists match the CPU's whether the room planned for a frame's
+    /// entries is exact (the first frame), larger than they need (unused
+    /// room sorts first and belongs to no tile), or too small (detected,
+    /// then binned again).
     #[test]
     fn gpu_binning_builds_the_same_lists_as_the_cpu() {
         let renderer = GpuRenderer::new().expect("a wgpu adapter (lavapipe in CI)");
@@ -687,6 +778,7 @@ mod tests {
             (1, (4, 4), 32),
             (0, (4, 4), 32),
         ];
+        let (mut unused_room, mut outgrown) = (false, false);
         for (k, &(n, tiles, bits)) in cases.iter().enumerate() {
             let mut keys = keys(n, tiles, k as u64);
             if n == 1 {
@@ -700,12 +792,26 @@ mod tests {
             let mut cpu = TileBins::default();
             cpu.bin(&keys, tiles, bits);
             for compact in [false, true] {
-                binning
-                    .bin(device, queue, &buffer, n as u32, tiles, bits, compact)
-                    .unwrap();
+                // As a frame does: bin in the room the last total planned,
+                // and again when the entries outgrew it.
+                let mut attempts = 0;
+                loop {
+                    binning
+                        .bin(device, queue, &buffer, n as u32, tiles, bits, compact)
+                        .unwrap();
+                    attempts += 1;
+                    let total = read_back(device, queue, &binning.entry_total, 1)[0];
+                    assert_eq!(total as usize, cpu.list.len(), "case {k}: entry total");
+                    unused_room |= binning.room > total;
+                    if binning.settle(total) {
+                        break;
+                    }
+                    outgrown = true;
+                    assert!(attempts < 2, "case {k}: the second room is too small too");
+                }
                 let tile_count = (tiles.0 * tiles.1) as usize;
                 let ranges = read_back(device, queue, &binning.ranges.buffer, 2 * tile_count);
-                let list = read_back(device, queue, binning.list(), cpu.list.len());
+                let list = read_back(device, queue, binning.list(), binning.room as usize);
                 for t in 0..tile_count {
                     let (a, b) = (ranges[2 * t] as usize, ranges[2 * t + 1] as usize);
                     let gpu_tile = if a < b { &list[a..b] } else { &[][..] };
@@ -717,5 +823,7 @@ mod tests {
                 }
             }
         }
+        // Both ways a planned room goes were taken: too much, and too little.
+        assert!(unused_room && outgrown);
     }
 }

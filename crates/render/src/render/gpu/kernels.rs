@@ -191,9 +191,9 @@ kernels! {
     /// `sort_keys` without the culled Gaussians, placed by the scanned flags.
     CompactKeys = "compact_keys" { keys: read, offsets: read, depth: write, index: write }
     /// Counts each block's keys per digit of one radix pass.
-    RadixHistogram = "radix_histogram" { keys: read, counts: write }
+    RadixHistogram = "radix_histogram" { keys: read, counts: write, live: read }
     /// Moves keys and values to their sorted slots for one radix pass (stable).
-    RadixScatter = "radix_scatter" { keys: read, values: read, offsets: read, keys_out: write, values_out: write }
+    RadixScatter = "radix_scatter" { keys: read, values: read, offsets: read, keys_out: write, values_out: write, live: read }
     /// Prefix sum, step 1: each block's sum.
     ScanReduce = "scan_reduce" { data: read, sums: write }
     /// Prefix sum, step 2: the block sums become offsets (and the total).
@@ -205,7 +205,7 @@ kernels! {
     /// Writes (tile, Gaussian) entries in depth order.
     TilesEmit = "tiles_emit" { keys: read, order: read, starts: read, tiles: write, gaussians: write }
     /// Marks where each tile's run of entries starts and ends.
-    TilesRanges = "tiles_ranges" { tiles: read, ranges: write }
+    TilesRanges = "tiles_ranges" { tiles: read, ranges: write, live: read }
     /// Blends each 16×16 tile front to back.
     Rasterize = "rasterize" { projected: read, ranges: read, list: read, image: write, cut_short: write }
     /// `rasterize` for hardware GPUs: each tile's Gaussians read in batches

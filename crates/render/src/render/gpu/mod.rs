@@ -4,7 +4,7 @@
 //! Stages per frame: upload the triangle frames (the Gaussians only when the
 //! selection changes) → `bind` (local → world) → `project` (cull, 2D covariance,
 //! SH colour, depth, touched tiles) → depth sort and tile binning on the GPU
-//! ([`binning`]: radix sorts, prefix sums; 4 bytes read back) →
+//! ([`binning`]: radix sorts, prefix sums; nothing read back but on the first frame) →
 //! `rasterize` (per 16×16 tile, front to back, early termination) → read back RGBA8.
 
 use std::time::Instant;
@@ -112,6 +112,9 @@ pub struct GpuRenderer {
     bound_frames: Option<Vec<TriangleFrame>>,
     /// Times the bind kernel ran (for tests).
     bind_dispatches: u64,
+    /// Frames drawn a second time because their tile entries outgrew the
+    /// room planned for them (for tests).
+    redrawn_frames: u64,
     /// Timings of the last frame.
     pub timings: StageTimings,
     /// Wait for the device after every stage so `timings` attribute GPU time to
@@ -222,6 +225,7 @@ impl GpuRenderer {
             cut_short,
             bound_frames: None,
             bind_dispatches: 0,
+            redrawn_frames: 0,
             sh_binding_limit: None,
             timings: StageTimings::default(),
             profile_stages: false,
@@ -473,7 +477,16 @@ impl GpuRenderer {
     ) -> Result<RgbImage> {
         let device = self.device.clone();
         let drawn = guarded(&device, "drawing a frame", || {
-            self.render_unguarded(frames, camera, settings, lod_pixels)
+            // A frame whose tile entries outgrew the room the last frame's
+            // total planned for them is drawn again with room for them.
+            match self.render_unguarded(frames, camera, settings, lod_pixels)? {
+                Some(image) => Ok(image),
+                None => {
+                    self.redrawn_frames += 1;
+                    self.render_unguarded(frames, camera, settings, lod_pixels)?
+                        .ok_or_else(|| Error::device("the tile entries outgrew their room twice"))
+                }
+            }
         });
         if matches!(drawn, Err(Error::Device(_))) {
             self.reset_after_failure();
@@ -514,7 +527,7 @@ impl GpuRenderer {
         camera: &Camera,
         settings: &RenderSettings,
         lod_pixels: f32,
-    ) -> Result<RgbImage> {
+    ) -> Result<Option<RgbImage>> {
         let (scene, (width, height)) = super::frame_inputs(self.scene.as_ref(), frames, camera)?;
         let tiles = (width.div_ceil(TILE), height.div_ceil(TILE));
         let mut timings = StageTimings::default();
@@ -603,8 +616,9 @@ impl GpuRenderer {
         let packed_bytes = rgb_bytes.next_multiple_of(4);
         self.image.ensure(&self.device, image_bytes);
         self.packed.ensure(&self.device, packed_bytes);
-        // The image, the count of walks cut short, the counts drawn.
-        let tail_bytes = 12;
+        // The image, the count of walks cut short, the counts drawn, the
+        // tile entries.
+        let tail_bytes = 16;
         self.image_readback
             .ensure(&self.device, packed_bytes + tail_bytes);
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -653,6 +667,13 @@ impl GpuRenderer {
             packed_bytes + 4,
             8,
         );
+        encoder.copy_buffer_to_buffer(
+            &self.binning.entry_total,
+            0,
+            &self.image_readback.buffer,
+            packed_bytes + 12,
+            4,
+        );
         self.queue.submit([encoder.finish()]);
         // Unprofiled, the map below is the one wait for the frame's end (a
         // wait here first cost a second round trip to the device).
@@ -662,7 +683,7 @@ impl GpuRenderer {
 
         // Read back: the packed RGB bytes are the image.
         let mut pixels = vec![0u8; rgb_bytes as usize];
-        let mut tail = [0u32; 3];
+        let mut tail = [0u32; 4];
         let mut copy_ms = 0.0;
         map_and_read(
             &self.device,
@@ -682,7 +703,10 @@ impl GpuRenderer {
                 copy_ms = ms(copy);
             },
         )?;
-        let [cut_short, drawn, leaves] = tail;
+        let [cut_short, drawn, leaves, entries] = tail;
+        if !self.binning.settle(entries) {
+            return Ok(None);
+        }
         self.drawn = (drawn, leaves);
         // Unprofiled, the raster's own end is not seen apart from the map's.
         let until_read = ms(t);
@@ -697,11 +721,11 @@ impl GpuRenderer {
             )));
         }
         self.timings = timings;
-        Ok(RgbImage {
+        Ok(Some(RgbImage {
             width,
             height,
             pixels,
-        })
+        }))
     }
 }
 

@@ -113,15 +113,25 @@ fn kernels_laid_out_in_rows_draw_the_same_image() {
 /// The hardware GPUs' batched rasteriser draws the plain one's image bit
 /// for bit: a dense scene whose pixels saturate mid-batch, tiles cut by
 /// the image's edge (70×50 is not a multiple of 16), tiles with no
-/// Gaussians, lists longer than one batch. lavapipe runs both.
+/// Gaussians, lists longer than one batch; and with an early stop high
+/// enough that whole tiles saturate batches before their lists end (the
+/// tile's stop must wait for its last pixel). lavapipe runs both.
 #[test]
 fn batched_rasteriser_draws_the_plain_image() {
     let scene = crate::scene::synthetic::synthetic_scene(30_000, 4);
     let orbit = scene
         .home_orbit(None, crate::scene::camera::UpAxis::default())
         .unwrap();
-    let settings = RenderSettings::default();
-    for (w, h) in [(70, 50), (160, 120)] {
+    let early = RenderSettings {
+        early_stop: 0.05,
+        ..RenderSettings::default()
+    };
+    for ((w, h), settings) in [
+        ((70, 50), RenderSettings::default()),
+        ((160, 120), RenderSettings::default()),
+        ((70, 50), early),
+        ((160, 120), early),
+    ] {
         let camera = orbit.camera(w, h);
         let draw = |software: bool| {
             let mut r = GpuRenderer::new().unwrap();
@@ -131,8 +141,40 @@ fn batched_rasteriser_draws_the_plain_image() {
                 .unwrap()
         };
         let (plain, batched) = (draw(true), draw(false));
-        assert!(batched == plain, "{w}x{h}");
+        assert!(
+            batched == plain,
+            "{w}x{h}, early stop {}",
+            settings.early_stop
+        );
     }
+}
+
+/// The room for a frame's tile entries is planned from the last frame's:
+/// a frame needing more (a larger image after a small one: twice the
+/// entries, beyond the eighth and the floor planned over them) is drawn
+/// again, the same as a fresh renderer draws it, and the frames after it
+/// fit their room without a second drawing.
+#[test]
+fn a_frame_that_outgrows_its_planned_room_is_drawn_whole() {
+    let scene = crate::scene::synthetic::synthetic_scene(30_000, 2);
+    let orbit = scene
+        .home_orbit(None, crate::scene::camera::UpAxis::default())
+        .unwrap();
+    let settings = RenderSettings::default();
+    let (small, large) = (orbit.camera(320, 240), orbit.camera(1280, 960));
+    let identity = [crate::scene::splats::IDENTITY_FRAME];
+    let mut reused = GpuRenderer::new().unwrap();
+    reused.set_world_scene(&scene).unwrap();
+    reused.render(&identity, &small, &settings).unwrap();
+    assert_eq!(reused.redrawn_frames, 0);
+    let after_small = reused.render(&identity, &large, &settings).unwrap();
+    assert_eq!(reused.redrawn_frames, 1);
+    let again = reused.render(&identity, &large, &settings).unwrap();
+    assert_eq!(reused.redrawn_frames, 1);
+    let mut fresh = GpuRenderer::new().unwrap();
+    fresh.set_world_scene(&scene).unwrap();
+    let expected = fresh.render(&identity, &large, &settings).unwrap();
+    assert!(after_small == expected && again == expected);
 }
 
 #[test]
