@@ -38,6 +38,9 @@ use crate::error::{Error, Result};
 const SLOT: u64 = 256;
 /// Uniform slots per frame.
 const SLOTS: u64 = 32;
+/// Frames after one outgrew its room that are planned with half more room
+/// instead of an eighth (about a second of a moving view).
+const CALM_FRAMES: u32 = 30;
 
 /// `SortParams` in shaders/common.wgsl.
 #[repr(C)]
@@ -133,7 +136,11 @@ pub(super) struct GpuBinning {
     /// total; `None` before the first frame and when no room would do.
     planned_room: Option<u32>,
     /// The room the last [`GpuBinning::bin`] gave its entries.
-    room: u32,
+    pub(super) room: u32,
+    /// The entry total last settled.
+    pub(super) settled_total: u32,
+    /// Frames settled since one outgrew its room.
+    frames_since_outgrown: u32,
     /// Per tile: start and end of its run in the sorted entries.
     pub ranges: Growable,
     /// Which of `tiles.values` holds the sorted entries after [`GpuBinning::bin`].
@@ -231,6 +238,8 @@ impl GpuBinning {
             }),
             planned_room: None,
             room: 0,
+            settled_total: 0,
+            frames_since_outgrown: CALM_FRAMES,
             ranges: Growable::new(
                 device,
                 "tile ranges",
@@ -417,15 +426,26 @@ impl GpuBinning {
     /// next frame's room from it; false when they did not fit the room that
     /// frame gave them, so its lists lack some and it must be binned again.
     pub fn settle(&mut self, total: u32) -> bool {
-        // An eighth more than the last total, and a floor, so a moving
-        // camera seldom outgrows the room; the unused room costs the tile
-        // sort a little work.
+        let fits = total <= self.room;
+        self.settled_total = total;
+        self.frames_since_outgrown = match fits {
+            true => self.frames_since_outgrown.saturating_add(1),
+            false => 0,
+        };
+        // An eighth more than the last total, and a floor, so a turning
+        // camera seldom outgrows the room; half more for a while after a
+        // frame did, so a zoom or a growing window is not drawn twice
+        // frame after frame. Unused room costs only idle workgroups.
+        let extra = match self.frames_since_outgrown < CALM_FRAMES {
+            true => total / 2,
+            false => total / 8,
+        };
         let room = total
-            .saturating_add(total / 8)
+            .saturating_add(extra)
             .saturating_add(4096)
             .min(largest_sort(self.max_binding));
         self.planned_room = (room >= total).then_some(room);
-        total <= self.room
+        fits
     }
 
     /// Flags the Gaussians `project` kept, scans the flags in `entries` (each

@@ -171,6 +171,9 @@ fn a_frame_that_outgrows_its_planned_room_is_drawn_whole() {
     assert_eq!(reused.redrawn_frames, 1);
     let again = reused.render(&identity, &large, &settings).unwrap();
     assert_eq!(reused.redrawn_frames, 1);
+    // After a frame outgrew its room, the next ones get half more.
+    let (room, total) = (reused.binning.room, reused.binning.settled_total);
+    assert!(room >= total + total / 2, "room {room} for {total} entries");
     let mut fresh = GpuRenderer::new().unwrap();
     fresh.set_world_scene(&scene).unwrap();
     let expected = fresh.render(&identity, &large, &settings).unwrap();
