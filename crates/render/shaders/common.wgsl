@@ -68,7 +68,7 @@ struct SortParams {
     count: u32,   // elements in this dispatch
     shift: u32,   // radix pass: bit offset of the digit
     blocks: u32,  // radix pass: workgroup blocks of SORT_BLOCK elements
-    limit: u32,   // tiles_emit: room for entries (those past it are dropped)
+    limit: u32,   // compact_keys, tiles_emit: room for what they write (the rest is dropped)
     tiles: vec4<u32>,  // tiles x, tiles y, unused x2
 }
 

@@ -9,11 +9,13 @@
 @group(0) @binding(3) var<storage, read> starts: array<u32>;
 @group(0) @binding(4) var<storage, read_write> tile_keys: array<u32>;
 @group(0) @binding(5) var<storage, read_write> tile_values: array<u32>;
+// How many of the room's Gaussians there are (the rest of the room is unused).
+@group(0) @binding(6) var<storage, read> live: array<u32>;
 
 @compute @workgroup_size(GROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let s = element_index(id, groups);
-    if (s >= params.count) {
+    if (s >= min(params.count, live[0])) {
         return;
     }
     let i = order[s];

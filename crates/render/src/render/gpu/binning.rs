@@ -4,7 +4,7 @@
 //!
 //! 1. `sort_keys`: (depth bits, Gaussian index) for every Gaussian, culled ones last;
 //!    or, where most are culled (a level-of-detail cut), `cull_flags` + prefix sum
-//!    + `compact_keys`: the kept ones only, their count read back first (4 bytes).
+//!    + `compact_keys`: the kept ones only, in room planned for them.
 //! 2. A stable LSD radix sort on the top `sort_bits` of the depth, 8 bits a pass
 //!    (`radix_histogram` → prefix sum → `radix_scatter`), so ties keep index order.
 //! 3. `tiles_count` + prefix sum: where each Gaussian's tile entries start, in depth
@@ -13,13 +13,14 @@
 //!    planned for them; a stable radix sort by tile makes each tile's run front to
 //!    back; `tiles_ranges` finds the runs.
 //!
-//! The room for the entries is planned from the last frame's total (read back with
-//! the image), so a frame goes to the device in one piece with no wait in the middle.
-//! The tile sort's and `tiles_ranges`' dispatches cover the room, and their kernels
-//! read the true total from [`GpuBinning::entry_total`] on the GPU, so unused room
-//! costs only idle workgroups. A frame whose entries outgrow the room is told by
+//! The room for the kept Gaussians and for the entries is planned from the last
+//! frame's counts ([`Room`]; the counts come back with the image), so a frame goes to
+//! the device in one piece with no wait in the middle. The dispatches after a count
+//! cover its room, and their kernels read the true count from a GPU buffer
+//! ([`GpuBinning::kept_total`], [`GpuBinning::entry_total`]), so unused room costs
+//! only idle workgroups. A frame whose counts outgrow their room is told by
 //! [`GpuBinning::settle`] and binned again with room for them; the first frame reads
-//! its total back before the entries are written (4 bytes).
+//! its counts back before using them (4 bytes each).
 //!
 //! Every kernel is its own dispatch (no workgroup waits for another), so it runs
 //! on any driver, lavapipe included.
@@ -32,15 +33,13 @@ use super::kernels::{
     CompactKeys, CullFlags, RadixHistogram, RadixScatter, ScanApply, ScanReduce, ScanSums,
     SortKeys, TilesCount, TilesEmit, TilesRanges,
 };
+use super::room::Room;
 use crate::error::{Error, Result};
 
 /// Bytes between uniform slots (the largest offset alignment wgpu allows devices to ask).
 const SLOT: u64 = 256;
 /// Uniform slots per frame.
 const SLOTS: u64 = 32;
-/// Frames after one outgrew its room that are planned with half more room
-/// instead of an eighth (about a second of a moving view).
-const CALM_FRAMES: u32 = 30;
 
 /// `SortParams` in shaders/common.wgsl.
 #[repr(C)]
@@ -49,7 +48,8 @@ struct SortParams {
     count: u32,
     shift: u32,
     blocks: u32,
-    /// `tiles_emit`: the room for entries (those past it are dropped).
+    /// `compact_keys`, `tiles_emit`: the room for what they write (what
+    /// would go past it is dropped).
     limit: u32,
     tiles: [u32; 4],
 }
@@ -130,17 +130,16 @@ pub(super) struct GpuBinning {
     /// The last binned frame's entry total (4 bytes), copied into the
     /// frame's read-back for [`GpuBinning::settle`].
     pub entry_total: wgpu::Buffer,
-    /// `u32::MAX`: bound as the live count of sorts whose length the CPU knows.
+    /// The last compacted frame's count of kept Gaussians (4 bytes), likewise.
+    pub kept_total: wgpu::Buffer,
+    /// `u32::MAX`: bound as the live count where the CPU knows the count.
     no_limit: wgpu::Buffer,
-    /// Room for the next frame's entries, planned from the last frame's
-    /// total; `None` before the first frame and when no room would do.
-    planned_room: Option<u32>,
-    /// The room the last [`GpuBinning::bin`] gave its entries.
-    pub(super) room: u32,
-    /// The entry total last settled.
-    pub(super) settled_total: u32,
-    /// Frames settled since one outgrew its room.
-    frames_since_outgrown: u32,
+    /// Room for the tile entries.
+    pub(super) entry_room: Room,
+    /// Room for the Gaussians a compacted frame keeps.
+    pub(super) kept_room: Room,
+    /// Whether the last frame was compacted (so `kept_total` is its count).
+    compacted: bool,
     /// Per tile: start and end of its run in the sorted entries.
     pub ranges: Growable,
     /// Which of `tiles.values` holds the sorted entries after [`GpuBinning::bin`].
@@ -157,7 +156,8 @@ impl GpuBinning {
     /// Drops every buffer back to a small one (after a failure on the GPU).
     pub fn reset_buffers(&mut self, device: &wgpu::Device) {
         self.forget_bind_groups();
-        self.planned_room = None;
+        self.entry_room.forget();
+        self.kept_room.forget();
         self.depth.reset(device);
         self.tiles.reset(device);
         for b in [
@@ -231,15 +231,20 @@ impl GpuBinning {
                 usage: storage | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
+            kept_total: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("kept total"),
+                size: 4,
+                usage: storage | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
             no_limit: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("no limit"),
                 contents: bytemuck::bytes_of(&u32::MAX),
                 usage: storage,
             }),
-            planned_room: None,
-            room: 0,
-            settled_total: 0,
-            frames_since_outgrown: CALM_FRAMES,
+            entry_room: Room::default(),
+            kept_room: Room::default(),
+            compacted: false,
             ranges: Growable::new(
                 device,
                 "tile ranges",
@@ -283,11 +288,23 @@ impl GpuBinning {
         check_groups(count, "Gaussians", self.max_binding)?;
         // Per Gaussian: flags, then (scanned) where each kept one goes.
         self.entries.ensure(device, u64::from(count.max(1)) * 4);
-        let every = self.slot(SortParams::new(count));
+        let mut encoder = device.create_command_encoder(&Default::default());
+        self.compacted = compact;
+        // With `compact`: the room for the kept ones, their true count in
+        // `kept_total` on the GPU.
         let kept = match compact {
-            true => self.count_kept(device, queue, keys, count, every)?,
+            true => self.count_kept(device, queue, &mut encoder, keys, count)?,
             false => count,
         };
+        let live_kept = match compact {
+            true => self.kept_total.clone(),
+            false => self.no_limit.clone(),
+        };
+        let live_kept = &live_kept;
+        let compacting = self.slot(SortParams {
+            limit: kept,
+            ..SortParams::new(count)
+        });
         let tile_grid = [tiles.0, tiles.1, 0, 0];
         let per_gaussian = self.slot(SortParams {
             tiles: tile_grid,
@@ -302,7 +319,6 @@ impl GpuBinning {
         let entry_scan = self.scan_plan(kept);
         self.ensure_scratch(device, &depth_sort, &entry_scan);
         self.write_slots(queue);
-        let mut encoder = device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             let k = &self.kernels;
@@ -312,7 +328,7 @@ impl GpuBinning {
                 k.compact_keys.dispatch(
                     device,
                     &mut pass,
-                    self.uniform(every),
+                    self.uniform(compacting),
                     keys,
                     &self.entries.buffer,
                     &d.keys[0].buffer,
@@ -330,8 +346,7 @@ impl GpuBinning {
                     groups,
                 );
             }
-            let order =
-                self.encode_radix(device, &mut pass, &depth_sort, &self.depth, &self.no_limit);
+            let order = self.encode_radix(device, &mut pass, &depth_sort, &self.depth, live_kept);
             let order = &self.depth.values[order].buffer;
             k.tiles_count.dispatch(
                 device,
@@ -340,6 +355,7 @@ impl GpuBinning {
                 keys,
                 order,
                 &self.entries.buffer,
+                live_kept,
                 groups,
             );
             self.encode_scan(device, &mut pass, &entry_scan, &self.entries.buffer);
@@ -351,17 +367,11 @@ impl GpuBinning {
             0,
             4,
         );
-        let room = match self.planned_room {
+        let room = match self.entry_room.planned() {
             Some(room) => room,
-            None => {
-                // No plan: this frame's own total, read back now.
-                encoder.copy_buffer_to_buffer(&self.entry_total, 0, &self.total_readback, 0, 4);
-                queue.submit([encoder.finish()]);
-                encoder = device.create_command_encoder(&Default::default());
-                read_buffer::<u32>(device, &self.total_readback, 4)?[0]
-            }
+            None => self.read_now(device, queue, &mut encoder, &self.entry_total)?,
         };
-        self.room = room;
+        self.entry_room.given = room;
         let count = kept;
 
         // Phase 2: entries in depth order, stable sort by tile, tile runs.
@@ -396,6 +406,7 @@ impl GpuBinning {
                     &self.entries.buffer,
                     &t.keys[0].buffer,
                     &t.values[0].buffer,
+                    live_kept,
                     element_grid(count, self.grid_columns),
                 );
                 let sorted = self.encode_radix(
@@ -421,48 +432,53 @@ impl GpuBinning {
         Ok(())
     }
 
-    /// Takes the `total` of entries the last [`GpuBinning::bin`] made (read
-    /// back from [`GpuBinning::entry_total`] after the frame) and plans the
-    /// next frame's room from it; false when they did not fit the room that
-    /// frame gave them, so its lists lack some and it must be binned again.
-    pub fn settle(&mut self, total: u32) -> bool {
-        let fits = total <= self.room;
-        self.settled_total = total;
-        self.frames_since_outgrown = match fits {
-            true => self.frames_since_outgrown.saturating_add(1),
-            false => 0,
-        };
-        // An eighth more than the last total, and a floor, so a turning
-        // camera seldom outgrows the room; half more for a while after a
-        // frame did, so a zoom or a growing window is not drawn twice
-        // frame after frame. Unused room costs only idle workgroups.
-        let extra = match self.frames_since_outgrown < CALM_FRAMES {
-            true => total / 2,
-            false => total / 8,
-        };
-        let room = total
-            .saturating_add(extra)
-            .saturating_add(4096)
-            .min(largest_sort(self.max_binding));
-        self.planned_room = (room >= total).then_some(room);
-        fits
+    /// Takes the counts the last [`GpuBinning::bin`] made, read back from
+    /// [`GpuBinning::entry_total`] and [`GpuBinning::kept_total`] after the
+    /// frame, and plans the next frame's room from them; false when they did
+    /// not fit the room that frame gave them, so its lists lack some and it
+    /// must be binned again.
+    pub fn settle(&mut self, entries: u32, kept: u32) -> bool {
+        let largest = largest_sort(self.max_binding);
+        if self.compacted && !self.kept_room.settle(kept, largest) {
+            // The entries of too few Gaussians say nothing of the next
+            // frame's: read them back then.
+            self.entry_room.forget();
+            return false;
+        }
+        self.entry_room.settle(entries, largest)
     }
 
-    /// Flags the Gaussians `project` kept, scans the flags in `entries` (each
-    /// kept one's place among them) and reads back how many there are;
-    /// `every` is a parameter slot for all `count`.
+    /// Submits `encoder` with a copy of `count` (one u32 on the GPU), waits
+    /// for it and returns the count; `encoder` is a new one after.
+    fn read_now(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        count: &wgpu::Buffer,
+    ) -> Result<u32> {
+        encoder.copy_buffer_to_buffer(count, 0, &self.total_readback, 0, 4);
+        let done = std::mem::replace(encoder, device.create_command_encoder(&Default::default()));
+        queue.submit([done.finish()]);
+        Ok(read_buffer::<u32>(device, &self.total_readback, 4)?[0])
+    }
+
+    /// Encodes the flags of the Gaussians `project` kept and their scan in
+    /// `entries` (each kept one's place among them), copies their count to
+    /// `kept_total`, and returns the room for them: planned from the last
+    /// frame's count, or this frame's read back now.
     fn count_kept(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
         keys: &wgpu::Buffer,
         count: u32,
-        every: u64,
     ) -> Result<u32> {
+        let every = self.slot(SortParams::new(count));
         let scan = self.scan_plan(count);
         self.sums.ensure(device, (u64::from(scan.sums) + 1) * 4);
         self.write_slots(queue);
-        let mut encoder = device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             self.kernels.cull_flags.dispatch(
@@ -478,12 +494,16 @@ impl GpuBinning {
         encoder.copy_buffer_to_buffer(
             &self.sums.buffer,
             u64::from(scan.sums) * 4,
-            &self.total_readback,
+            &self.kept_total,
             0,
             4,
         );
-        queue.submit([encoder.finish()]);
-        Ok(read_buffer::<u32>(device, &self.total_readback, 4)?[0])
+        let room = match self.kept_room.planned() {
+            Some(room) => room.min(count),
+            None => self.read_now(device, queue, encoder, &self.kept_total)?,
+        };
+        self.kept_room.given = room;
+        Ok(room)
     }
 
     /// Plans a radix sort of `count` elements over the bytes `bytes` (low to high).
@@ -779,9 +799,9 @@ mod tests {
     }
 
     /// The lists match the CPU's whether the room planned for a frame's
-    /// entries is exact (the first frame), larger than they need (unused
-    /// room sorts first and belongs to no tile), or too small (detected,
-    /// then binned again).
+    /// entries (and, compacted, its kept Gaussians) is exact (the first
+    /// frame), larger than they need, or too small (detected, then binned
+    /// again).
     #[test]
     fn gpu_binning_builds_the_same_lists_as_the_cpu() {
         let renderer = GpuRenderer::new().expect("a wgpu adapter (lavapipe in CI)");
@@ -798,7 +818,9 @@ mod tests {
             (1, (4, 4), 32),
             (0, (4, 4), 32),
         ];
-        let (mut unused_room, mut outgrown) = (false, false);
+        // Whether some room was larger than needed, and which rooms were
+        // outgrown: the entries', the kept Gaussians'.
+        let (mut unused_room, mut outgrown, mut kept_outgrown) = (false, false, false);
         for (k, &(n, tiles, bits)) in cases.iter().enumerate() {
             let mut keys = keys(n, tiles, k as u64);
             if n == 1 {
@@ -811,9 +833,10 @@ mod tests {
             });
             let mut cpu = TileBins::default();
             cpu.bin(&keys, tiles, bits);
+            let visible = keys.iter().filter(|k| k[3] != 0).count();
             for compact in [false, true] {
-                // As a frame does: bin in the room the last total planned,
-                // and again when the entries outgrew it.
+                // As a frame does: bin in the rooms the last counts planned,
+                // and again when the counts outgrew them.
                 let mut attempts = 0;
                 loop {
                     binning
@@ -821,17 +844,30 @@ mod tests {
                         .unwrap();
                     attempts += 1;
                     let total = read_back(device, queue, &binning.entry_total, 1)[0];
-                    assert_eq!(total as usize, cpu.list.len(), "case {k}: entry total");
-                    unused_room |= binning.room > total;
-                    if binning.settle(total) {
+                    let kept = read_back(device, queue, &binning.kept_total, 1)[0];
+                    unused_room |= binning.entry_room.given > total;
+                    kept_outgrown |= compact && kept > binning.kept_room.given;
+                    if binning.settle(total, kept) {
+                        assert_eq!(total as usize, cpu.list.len(), "case {k}: entry total");
+                        if compact {
+                            assert_eq!(kept as usize, visible, "case {k}: kept");
+                        }
                         break;
                     }
                     outgrown = true;
-                    assert!(attempts < 2, "case {k}: the second room is too small too");
+                    assert!(
+                        attempts < 3,
+                        "case {k}: the rooms are too small three times"
+                    );
                 }
                 let tile_count = (tiles.0 * tiles.1) as usize;
                 let ranges = read_back(device, queue, &binning.ranges.buffer, 2 * tile_count);
-                let list = read_back(device, queue, binning.list(), binning.room as usize);
+                let list = read_back(
+                    device,
+                    queue,
+                    binning.list(),
+                    binning.entry_room.given as usize,
+                );
                 for t in 0..tile_count {
                     let (a, b) = (ranges[2 * t] as usize, ranges[2 * t + 1] as usize);
                     let gpu_tile = if a < b { &list[a..b] } else { &[][..] };
@@ -843,7 +879,8 @@ mod tests {
                 }
             }
         }
-        // Both ways a planned room goes were taken: too much, and too little.
-        assert!(unused_room && outgrown);
+        // Every way a planned room goes was taken: too much, too little
+        // for the entries, too little for the kept Gaussians.
+        assert!(unused_room && outgrown && kept_outgrown);
     }
 }

@@ -201,9 +201,9 @@ kernels! {
     /// Prefix sum, step 3: each element becomes its exclusive prefix.
     ScanApply = "scan_apply" { data: write, sums: read }
     /// Counts each Gaussian's tiles.
-    TilesCount = "tiles_count" { keys: read, order: read, counts: write }
+    TilesCount = "tiles_count" { keys: read, order: read, counts: write, live: read }
     /// Writes (tile, Gaussian) entries in depth order.
-    TilesEmit = "tiles_emit" { keys: read, order: read, starts: read, tiles: write, gaussians: write }
+    TilesEmit = "tiles_emit" { keys: read, order: read, starts: read, tiles: write, gaussians: write, live: read }
     /// Marks where each tile's run of entries starts and ends.
     TilesRanges = "tiles_ranges" { tiles: read, ranges: write, live: read }
     /// Blends each 16×16 tile front to back.

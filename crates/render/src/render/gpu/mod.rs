@@ -32,6 +32,7 @@ pub mod constants;
 pub mod device;
 pub mod kernels;
 pub mod lod;
+mod room;
 
 use constants::OPACITY_LITERAL;
 pub use constants::TILE;
@@ -617,8 +618,8 @@ impl GpuRenderer {
         self.image.ensure(&self.device, image_bytes);
         self.packed.ensure(&self.device, packed_bytes);
         // The image, the count of walks cut short, the counts drawn, the
-        // tile entries.
-        let tail_bytes = 16;
+        // tile entries, the Gaussians a cut kept.
+        let tail_bytes = 20;
         self.image_readback
             .ensure(&self.device, packed_bytes + tail_bytes);
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -674,6 +675,13 @@ impl GpuRenderer {
             packed_bytes + 12,
             4,
         );
+        encoder.copy_buffer_to_buffer(
+            &self.binning.kept_total,
+            0,
+            &self.image_readback.buffer,
+            packed_bytes + 16,
+            4,
+        );
         self.queue.submit([encoder.finish()]);
         // Unprofiled, the map below is the one wait for the frame's end (a
         // wait here first cost a second round trip to the device).
@@ -683,7 +691,7 @@ impl GpuRenderer {
 
         // Read back: the packed RGB bytes are the image.
         let mut pixels = vec![0u8; rgb_bytes as usize];
-        let mut tail = [0u32; 4];
+        let mut tail = [0u32; 5];
         let mut copy_ms = 0.0;
         map_and_read(
             &self.device,
@@ -703,8 +711,8 @@ impl GpuRenderer {
                 copy_ms = ms(copy);
             },
         )?;
-        let [cut_short, drawn, leaves, entries] = tail;
-        if !self.binning.settle(entries) {
+        let [cut_short, drawn, leaves, entries, kept] = tail;
+        if !self.binning.settle(entries, kept) {
             return Ok(None);
         }
         self.drawn = (drawn, leaves);

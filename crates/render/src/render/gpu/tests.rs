@@ -172,7 +172,8 @@ fn a_frame_that_outgrows_its_planned_room_is_drawn_whole() {
     let again = reused.render(&identity, &large, &settings).unwrap();
     assert_eq!(reused.redrawn_frames, 1);
     // After a frame outgrew its room, the next ones get half more.
-    let (room, total) = (reused.binning.room, reused.binning.settled_total);
+    let room = &reused.binning.entry_room;
+    let (room, total) = (room.given, room.settled);
     assert!(room >= total + total / 2, "room {room} for {total} entries");
     let mut fresh = GpuRenderer::new().unwrap();
     fresh.set_world_scene(&scene).unwrap();
