@@ -112,16 +112,25 @@ fn a_changed_scene_or_a_damaged_cache_is_rebuilt() {
     std::fs::write(&file, &bytes).unwrap();
     let heard = std::sync::Mutex::new(Vec::new());
     let progress = |done, all| heard.lock().unwrap().push((done, all));
-    let (_, origin, same) = open_cached(&file, Some(&caches), 1 << 30, &quiet, &progress).unwrap();
+    let notes = std::sync::Mutex::new(Vec::new());
+    let note = |line: &str| notes.lock().unwrap().push(line.to_string());
+    let (_, origin, same) = open_cached(&file, Some(&caches), 1 << 30, &note, &progress).unwrap();
     assert_eq!(same, path);
     // The content was hashed (the time changed) with its progress shown,
-    // to the file's end.
+    // to the file's end, once: the rebuild takes the comparison's hash.
     let size = bytes.len() as u64;
     assert!(heard.lock().unwrap().contains(&(size, size)));
     assert_eq!(
         origin_why(&origin),
         "the scene file changed since it was built"
     );
+    let notes = notes.into_inner().unwrap();
+    let hashing: Vec<_> = notes
+        .iter()
+        .filter(|n| n.starts_with("hashing") && n.contains("scene.ply"))
+        .collect();
+    assert_eq!(hashing.len(), 1, "{notes:?}");
+    assert!(hashing[0].contains("whether it changed"), "{notes:?}");
     // Truncated: refused in one line, rebuilt.
     let len = std::fs::metadata(&path).unwrap().len();
     std::fs::OpenOptions::new()

@@ -13,7 +13,7 @@ use crate::io::Progress;
 use crate::render::image::RgbImage;
 use crate::render::lod::cache::{
     cache_dir, cache_path, content_hash, fingerprint, modified_ns, read_error, read_header,
-    still_matches, write_cache, SourceFacts,
+    write_cache, Freshness, SourceFacts,
 };
 use crate::render::lod::{
     build_streamed, cut, layout, Cut, Listener, LodPolicy, LodTree, PagedTree, AUTO_PIXELS,
@@ -236,17 +236,19 @@ pub fn open_cached(
     let fingerprint = fingerprint(path)?;
     let dir = dir.map_or_else(cache_dir, Path::to_path_buf);
     let cache = cache_path(&dir, &fingerprint);
-    // The header decides staleness before any chunk is read.
+    // The header decides staleness before any chunk is read; the content
+    // hash a comparison needed is the rebuild's too.
+    let mut content = None;
     let why = match std::fs::File::open(&cache) {
         Err(_) => "there is none yet".to_string(),
         Ok(mut file) => match read_header(&mut file) {
             Err(why) => format!("level-of-detail cache {}: {why}", cache.display()),
-            Ok((header, _)) if !still_matches(&header.source, path, progress)? => {
-                "the scene file changed since it was built".to_string()
-            }
-            Ok(_) => match PagedTree::open(&cache, budget) {
-                Ok(tree) => return Ok((tree, CacheOrigin::Found, cache)),
-                Err(e) => e.to_string(),
+            Ok((header, _)) => match fresh(&header.source, path, note, progress, &mut content)? {
+                false => "the scene file changed since it was built".to_string(),
+                true => match PagedTree::open(&cache, budget) {
+                    Ok(tree) => return Ok((tree, CacheOrigin::Found, cache)),
+                    Err(e) => e.to_string(),
+                },
             },
         },
     };
@@ -254,6 +256,7 @@ pub fn open_cached(
     let build = Build {
         path,
         fingerprint,
+        content,
         cache: &cache,
         why: &why,
         memory: budget,
@@ -277,10 +280,37 @@ pub fn open_cached(
     ))
 }
 
+/// Whether a cache built from `facts` still describes the file at `path`;
+/// where that takes the file's content hash (its time changed but not its
+/// size), the hash is noted, shown in `progress` and left in `content`.
+fn fresh(
+    facts: &SourceFacts,
+    path: &Path,
+    note: &dyn Fn(&str),
+    progress: Progress,
+    content: &mut Option<[u8; 32]>,
+) -> Result<bool> {
+    match Freshness::of(facts, path)? {
+        Freshness::Fresh => Ok(true),
+        Freshness::Stale => Ok(false),
+        Freshness::ContentToCompare => {
+            note(&format!(
+                "hashing {} to see whether it changed (its time did)…",
+                path.display()
+            ));
+            let (same, hash) = Freshness::of_content(facts, path, progress)?;
+            *content = Some(hash);
+            Ok(same)
+        }
+    }
+}
+
 /// A cache to build.
 struct Build<'a> {
     path: &'a Path,
     fingerprint: [u8; 32],
+    /// The source's content hash, where the staleness check took it.
+    content: Option<[u8; 32]>,
     cache: &'a Path,
     why: &'a str,
     /// Bytes of memory it may take.
@@ -306,19 +336,25 @@ impl Build<'_> {
         self.in_memory(note, progress)
     }
 
-    /// What the cache records of its source: the content hash (a pass over
-    /// the file, noted, its progress shown), size and time; the rest is
-    /// filled in by the build.
+    /// What the cache records of its source: the content hash (the
+    /// staleness check's, or a pass over the file, noted, its progress
+    /// shown), size and time; the rest is filled in by the build.
     fn facts(&self, note: &dyn Fn(&str), progress: Progress) -> Result<SourceFacts> {
         let path = self.path;
-        note(&format!(
-            "hashing {} for its level-of-detail cache ({})…",
-            path.display(),
-            self.why
-        ));
+        let content = match self.content {
+            Some(content) => content,
+            None => {
+                note(&format!(
+                    "hashing {} for its level-of-detail cache ({})…",
+                    path.display(),
+                    self.why
+                ));
+                content_hash(path, progress)?
+            }
+        };
         Ok(SourceFacts {
             fingerprint: self.fingerprint,
-            content: content_hash(path, progress)?,
+            content,
             len: std::fs::metadata(path)
                 .map_err(|e| read_error(path, e))?
                 .len(),

@@ -249,7 +249,7 @@ const FINGERPRINT_WINDOW: u64 = 64 << 10;
 /// spread evenly over it (the first and last included), hashed. Reading
 /// at most 4 MiB keeps opening a 5 GB scene quick; a change that alters
 /// none of those bytes nor the size is caught by the modification time and
-/// the full content hash ([`still_matches`]).
+/// the full content hash ([`Freshness`]).
 pub fn fingerprint(path: &Path) -> Result<[u8; 32]> {
     let mut file = File::open(path).map_err(|e| read_error(path, e))?;
     let len = file.metadata().map_err(|e| read_error(path, e))?.len();
@@ -298,24 +298,46 @@ pub fn modified_ns(path: &Path) -> u64 {
         .map_or(0, |d| d.as_nanos() as u64)
 }
 
-/// Whether a cache built from `facts` still describes the file at `path`:
-/// same size and modification time, or, when the time changed (a copy, a
-/// touch), the same content (`progress` hears how far its hash is).
-pub fn still_matches(
-    facts: &SourceFacts,
-    path: &Path,
-    progress: crate::io::Progress<'_>,
-) -> Result<bool> {
-    let len = std::fs::metadata(path)
-        .map_err(|e| read_error(path, e))?
-        .len();
-    if len != facts.len {
-        return Ok(false);
+/// Whether a cache built from some [`SourceFacts`] still describes its
+/// source file.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Freshness {
+    /// Same size and modification time: it does.
+    Fresh,
+    /// Another size: it does not.
+    Stale,
+    /// Same size, another time (a copy, a touch, or a rewrite of the same
+    /// length): only the content can say ([`Freshness::of_content`]).
+    ContentToCompare,
+}
+
+impl Freshness {
+    /// What the file at `path`'s size and time say of a cache built from
+    /// `facts`.
+    pub fn of(facts: &SourceFacts, path: &Path) -> Result<Self> {
+        let len = std::fs::metadata(path)
+            .map_err(|e| read_error(path, e))?
+            .len();
+        Ok(if len != facts.len {
+            Self::Stale
+        } else if modified_ns(path) == facts.modified_ns {
+            Self::Fresh
+        } else {
+            Self::ContentToCompare
+        })
     }
-    if modified_ns(path) == facts.modified_ns {
-        return Ok(true);
+
+    /// Hashes the file at `path` (`progress` hears how far) and returns
+    /// whether its content is the one `facts` records, and the hash, so a
+    /// rebuild need not read the file for it again.
+    pub fn of_content(
+        facts: &SourceFacts,
+        path: &Path,
+        progress: crate::io::Progress<'_>,
+    ) -> Result<(bool, [u8; 32])> {
+        let content = content_hash(path, progress)?;
+        Ok((content == facts.content, content))
     }
-    Ok(content_hash(path, progress)? == facts.content)
 }
 
 /// Writes a built hierarchy's cache to `path`, through a partial file of
