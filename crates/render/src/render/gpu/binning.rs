@@ -156,8 +156,7 @@ impl GpuBinning {
     /// Drops every buffer back to a small one (after a failure on the GPU).
     pub fn reset_buffers(&mut self, device: &wgpu::Device) {
         self.forget_bind_groups();
-        self.entry_room.forget();
-        self.kept_room.forget();
+        self.forget_rooms();
         self.depth.reset(device);
         self.tiles.reset(device);
         for b in [
@@ -168,6 +167,13 @@ impl GpuBinning {
         ] {
             b.reset(device);
         }
+    }
+
+    /// Forgets the rooms planned from the last frame's counts (a new scene's
+    /// say nothing of them).
+    pub fn forget_rooms(&mut self) {
+        self.entry_room.forget();
+        self.kept_room.forget();
     }
 
     /// Drops the bind groups the kernels keep (so the buffers they bound
@@ -268,9 +274,11 @@ impl GpuBinning {
     /// Sorts the `count` Gaussians whose keys `project` wrote by depth (top
     /// `sort_bits` bits) and bins them into the tiles of a `tiles` grid;
     /// with `compact`, the culled ones are left out before the sort (worth
-    /// its extra pass and read-back where most are culled). The lists are
-    /// complete only if [`GpuBinning::settle`] says so once the frame's
-    /// [`GpuBinning::entry_total`] is read back.
+    /// its extra pass where most are culled). The lists are complete only if
+    /// [`GpuBinning::settle`] says so once the frame's counts are read back.
+    /// A count with no room planned (the first frame, after a failure or a
+    /// new scene, after the kept Gaussians outgrew theirs) is read back
+    /// before it is used.
     #[allow(clippy::too_many_arguments)]
     pub fn bin(
         &mut self,
@@ -441,8 +449,9 @@ impl GpuBinning {
         let largest = largest_sort(self.max_binding);
         if self.compacted && !self.kept_room.settle(kept, largest) {
             // The entries of too few Gaussians say nothing of the next
-            // frame's: read them back then.
-            self.entry_room.forget();
+            // frame's: read them back then, and give the ones after half
+            // more room, as after the entries' own outgrowing.
+            self.entry_room.outgrown();
             return false;
         }
         self.entry_room.settle(entries, largest)

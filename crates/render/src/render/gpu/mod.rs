@@ -4,7 +4,8 @@
 //! Stages per frame: upload the triangle frames (the Gaussians only when the
 //! selection changes) → `bind` (local → world) → `project` (cull, 2D covariance,
 //! SH colour, depth, touched tiles) → depth sort and tile binning on the GPU
-//! ([`binning`]: radix sorts, prefix sums; nothing read back but on the first frame) →
+//! ([`binning`]: radix sorts, prefix sums; counts read back with the image size the
+//! next frame's, [`room`]) →
 //! `rasterize` (per 16×16 tile, front to back, early termination) → read back RGBA8.
 
 use std::time::Instant;
@@ -113,8 +114,8 @@ pub struct GpuRenderer {
     bound_frames: Option<Vec<TriangleFrame>>,
     /// Times the bind kernel ran (for tests).
     bind_dispatches: u64,
-    /// Frames drawn a second time because their tile entries outgrew the
-    /// room planned for them (for tests).
+    /// Frames drawn a second time because their tile entries or kept
+    /// Gaussians outgrew the room planned for them (for tests).
     redrawn_frames: u64,
     /// Timings of the last frame.
     pub timings: StageTimings,
@@ -358,6 +359,8 @@ impl GpuRenderer {
     fn upload(&mut self, local: &[f32], all_sh: &[f32], stored_degree: u8) -> Result<()> {
         self.lod = None;
         self.forget_bind_groups();
+        // The last scene's counts would plan room for another scene's frame.
+        self.binning.forget_rooms();
         let device = self.device.clone();
         let uploaded = guarded(&device, "uploading the Gaussians", || {
             self.upload_unguarded(local, all_sh, stored_degree)
@@ -485,7 +488,9 @@ impl GpuRenderer {
                 None => {
                     self.redrawn_frames += 1;
                     self.render_unguarded(frames, camera, settings, lod_pixels)?
-                        .ok_or_else(|| Error::device("the tile entries outgrew their room twice"))
+                        .ok_or_else(|| {
+                            Error::device("a frame outgrew the room planned for it twice")
+                        })
                 }
             }
         });

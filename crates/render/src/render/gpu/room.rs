@@ -48,6 +48,14 @@ impl Room {
         self.planned = None;
     }
 
+    /// Forgets the plan and counts the frame as one that outgrew its room
+    /// (its count was not known: another count it depends on outgrew its
+    /// own room).
+    pub fn outgrown(&mut self) {
+        self.planned = None;
+        self.frames_since_outgrown = 0;
+    }
+
     /// Takes the frame's `count` (read back after it) and plans the next
     /// frame's room, at most `largest`; false when the count did not fit the
     /// room the frame was given.
