@@ -481,8 +481,8 @@ impl GpuRenderer {
     ) -> Result<RgbImage> {
         let device = self.device.clone();
         let drawn = guarded(&device, "drawing a frame", || {
-            // A frame whose tile entries outgrew the room the last frame's
-            // total planned for them is drawn again with room for them.
+            // A frame whose tile entries or kept Gaussians outgrew the room
+            // the last frame's counts planned is drawn again with room for them.
             match self.render_unguarded(frames, camera, settings, lod_pixels)? {
                 Some(image) => Ok(image),
                 None => {
