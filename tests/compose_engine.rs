@@ -863,13 +863,16 @@ fn affine_deformation_follows_reshaped_triangles_and_only_them() {
 
 /// `shading = "relit"` (method §7.10): an unedited composite keeps every
 /// colour; the base's Gaussians on another face keep their places and
-/// opacities, and where a triangle turned towards the built-in studio key
-/// light its Gaussians brighten, turned away they darken, within the
-/// gain's range; a shape edit rebuilds them.
+/// opacities, and where the surface under a Gaussian turned towards the
+/// built-in studio key light it brightens, turned away it darkens, within
+/// the gain's range — judged where each Gaussian sits, so of two Gaussians
+/// on one triangle the one whose place turned more towards the light comes
+/// out brighter; a shape edit rebuilds them.
 #[test]
-fn relighting_follows_the_turn_and_the_hollows_of_each_triangle() {
+fn relighting_follows_the_turn_and_the_hollows_under_each_gaussian() {
+    use visage::compose::membership::placements;
     use visage::compose::recipe::Shading;
-    use visage::compose::shading::{exposures, RELIGHT_RANGE};
+    use visage::compose::shading::{vertex_exposures, Exposure, RELIGHT_RANGE};
     let e = engine();
     let n = names(e);
     let mut r = Recipe::unedited(&n[0]);
@@ -891,8 +894,16 @@ fn relighting_follows_the_turn_and_the_hollows_of_each_triangle() {
     assert_eq!(a.opacity_logit, b.opacity_logit);
     assert!(b.sh.iter().all(|c| c.is_finite()));
     let model = &e.database().model;
-    let from = exposures(e.source_neutral(0), &model.triangles);
-    let to = exposures(&relit.neutral, &model.triangles);
+    // Each Gaussian's exposure where it sits on its triangle, on the source
+    // and on the composite.
+    let bary = placements(model, a, e.source_neutral(0), &a.binding);
+    let at = |mesh: &[Vec3]| {
+        let vertex = vertex_exposures(mesh, &model.triangles);
+        (0..a.len())
+            .map(|i| Exposure::at(&vertex, model.triangles[a.binding[i] as usize], bary[i]))
+            .collect::<Vec<_>>()
+    };
+    let (from, to) = (at(e.source_neutral(0)), at(&relit.neutral));
     // The built-in captures' key light (avatar/synthetic.rs).
     let key = Vec3::new(0.35, 0.55, 0.76).normalize();
     let brightness = |set: &visage::avatar::gaussians::GaussianSet, i: usize| {
@@ -901,9 +912,10 @@ fn relighting_follows_the_turn_and_the_hollows_of_each_triangle() {
     };
     let (mut towards, mut away, mut changed) = ((0.0f64, 0), (0.0f64, 0), 0);
     let (mut deeper, mut shallower) = ((0.0f64, 0), (0.0f64, 0));
+    let turn = |i: usize| to[i].normal.dot(key) - from[i].normal.dot(key);
+    let (mut agree, mut pairs) = (0, 0);
     for i in 0..a.len() {
-        let t = a.binding[i] as usize;
-        let turn = to[t].normal.dot(key) - from[t].normal.dot(key);
+        let turn = turn(i);
         let (before, after) = (brightness(a, i), brightness(b, i));
         if before != after {
             changed += 1;
@@ -921,7 +933,7 @@ fn relighting_follows_the_turn_and_the_hollows_of_each_triangle() {
             away = (away.0 + ratio, away.1 + 1);
         } else if turn.abs() < 0.02 {
             // Facing the light as before, but in a hollow it was not in.
-            let hollowing = to[t].cavity - from[t].cavity;
+            let hollowing = to[i].cavity - from[i].cavity;
             if hollowing > 0.3 {
                 deeper = (deeper.0 + ratio, deeper.1 + 1);
             } else if hollowing < -0.3 {
@@ -929,6 +941,33 @@ fn relighting_follows_the_turn_and_the_hollows_of_each_triangle() {
             }
         }
     }
+    // Pairs of Gaussians on one triangle whose places turned differently,
+    // outside hollows that changed and the gain's clamp.
+    let mut on_triangle: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
+    for i in 0..a.len() {
+        on_triangle.entry(a.binding[i]).or_default().push(i);
+    }
+    let hollowing = |k: usize| (to[k].cavity - from[k].cavity).abs();
+    let ratio = |k: usize| brightness(b, k) / brightness(a, k);
+    let plain = |k: usize| hollowing(k) < 0.02 && (0.55..1.9).contains(&ratio(k));
+    for members in on_triangle.values() {
+        for (x, &i) in members.iter().enumerate() {
+            for &j in &members[x + 1..] {
+                if (turn(i) - turn(j)).abs() < 0.02 || !plain(i) || !plain(j) {
+                    continue;
+                }
+                pairs += 1;
+                if (ratio(i) > ratio(j)) == (turn(i) > turn(j)) {
+                    agree += 1;
+                }
+            }
+        }
+    }
+    assert!(pairs > 20, "{pairs} pairs");
+    assert!(
+        agree * 10 >= pairs * 9,
+        "{agree} of {pairs} pairs brighter where their place turned towards the light"
+    );
     assert!(
         deeper.1 > 20 && shallower.1 > 20,
         "{deeper:?} {shallower:?}"

@@ -19,7 +19,7 @@ use super::recipe::{
 };
 use super::seams::{SeamField, SeamNeighbours, SEAM_WIDTH};
 use super::selection::{Csr, SelectionTables};
-use super::shading::{exposures, source_light, BakedLight, Exposure};
+use super::shading::{source_light, vertex_exposures, BakedLight, Exposure};
 use super::smoothing::{own_share, split_opacity, BorderTables};
 use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
 use crate::avatar::database::Database;
@@ -47,8 +47,9 @@ pub struct Engine {
     seen: Vec<Vec<Vec3>>,
     /// The light baked into each source's colours, fitted to its skin.
     lights: Vec<Option<BakedLight>>,
-    /// `[source]` → the exposure of each triangle of its neutral mesh.
-    source_exposures: Vec<Vec<Exposure>>,
+    /// `[source]` → the exposure where each Gaussian sits on its parent
+    /// triangle of the source's neutral mesh.
+    gaussian_exposures: Vec<Vec<Exposure>>,
     /// Per-Gaussian skin-transfer gains by (source, colour reference), computed on
     /// first use: the CIELAB transfer costs ~100 ns a Gaussian, applying a gain ~5.
     skin_gains: Mutex<HashMap<GainKey, SharedGains>>,
@@ -102,7 +103,7 @@ pub struct Composite {
     pub blocks: Vec<Block>,
     /// Mean per-channel colour gain applied per region (1 where uncorrected).
     pub colour_gains: [Vec3; Region::COUNT],
-    /// Per source, the relighting gain of each triangle for this
+    /// Per source, the relighting gain of each of its Gaussians for this
     /// composite's shape (empty until relighting first needs it): an edit
     /// of the Gaussians alone reuses them.
     relight_gains: Vec<Vec<Vec3>>,
@@ -170,9 +171,31 @@ impl Engine {
                     .collect()
             })
             .collect();
-        let source_exposures: Vec<Vec<Exposure>> = neutrals
-            .par_iter()
-            .map(|n| exposures(n, &db.model.triangles))
+        // Where each Gaussian sits on its parent triangle, and the exposure
+        // there: what its colour's baked light depends on.
+        let parent_placements: Vec<Vec<[f32; 3]>> = (0..db.sources.len())
+            .into_par_iter()
+            .map(|f| {
+                let set = &db.sources[f].gaussians;
+                placements(&db.model, set, &neutrals[f], &set.binding)
+            })
+            .collect();
+        let gaussian_exposures: Vec<Vec<Exposure>> = (0..db.sources.len())
+            .into_par_iter()
+            .map(|f| {
+                let vertex = vertex_exposures(&neutrals[f], &db.model.triangles);
+                let set = &db.sources[f].gaussians;
+                set.binding
+                    .iter()
+                    .zip(&parent_placements[f])
+                    .map(|(&t, &bary)| {
+                        db.model
+                            .triangles
+                            .get(t as usize)
+                            .map_or_else(Exposure::default, |&tri| Exposure::at(&vertex, tri, bary))
+                    })
+                    .collect()
+            })
             .collect();
         let seen: Vec<Vec<Vec3>> = db
             .sources
@@ -189,7 +212,7 @@ impl Engine {
                 let set = &db.sources[f].gaussians;
                 source_light(
                     set,
-                    &source_exposures[f],
+                    &gaussian_exposures[f],
                     &skin_indices[f],
                     skin[f].as_ref(),
                 )
@@ -203,7 +226,14 @@ impl Engine {
                 .enumerate()
                 .flat_map(|(t, tri)| tri.map(|v| (v as usize, t as u32))),
         );
-        let placements = db.sources.iter().map(|_| Default::default()).collect();
+        let placements = parent_placements
+            .into_iter()
+            .map(|parent| {
+                let known: [OnceLock<Vec<[f32; 3]>>; 2] = Default::default();
+                known[Membership::Parent as usize].get_or_init(|| parent);
+                known
+            })
+            .collect();
         let source_count = db.sources.len();
         Ok(Self {
             db,
@@ -216,7 +246,7 @@ impl Engine {
             skin,
             seen,
             lights,
-            source_exposures,
+            gaussian_exposures,
             skin_gains: Mutex::new(HashMap::new()),
             vertex_triangles,
             placements,
@@ -582,7 +612,7 @@ impl Engine {
                 let exponent = own_exponent[placed[i as usize] as usize];
                 gain_sum +=
                     self.push_corrected(set, f, i, &correction, OpacityEdit::Split(exponent));
-                relight_last(set, relight, f);
+                relight_last(set, relight, f, i);
                 if let Some(seams) = seams.as_mut() {
                     let last = set.len() - 1;
                     seams.blend(self, f, i, set.sh_of_mut(last));
@@ -617,7 +647,7 @@ impl Engine {
                     };
                     for &i in self.tables.triangle(membership, f, t) {
                         self.push_corrected(set, f, i, &correction, edit);
-                        relight_last(set, relight, f);
+                        relight_last(set, relight, f, i);
                     }
                 }
                 if set.len() > start {
@@ -672,8 +702,9 @@ impl Engine {
 
     /// Makes the relighting gains of every source the recipe draws Gaussians
     /// from, for the composite's shape, where they are not made yet: per
-    /// triangle, the source's light for the triangle's smooth normal here
-    /// over that on the source's own neutral (one where it did not turn).
+    /// Gaussian, the source's light for the exposure where it sits on its
+    /// parent triangle here over that on the source's own neutral (one where
+    /// nothing there moved).
     fn relight_gains(&self, recipe: &ResolvedRecipe, composite: &mut Composite) {
         let gains = &mut composite.relight_gains;
         if gains.len() != self.db.sources.len() {
@@ -685,13 +716,20 @@ impl Engine {
             let (Some(light), true) = (self.lights[f], gains[f].is_empty()) else {
                 continue;
             };
-            let to: &Vec<Exposure> =
-                target.get_or_insert_with(|| exposures(&composite.neutral, &model.triangles));
-            gains[f] = self.source_exposures[f]
-                .iter()
-                .zip(to)
-                .map(|(&from, &to)| {
-                    // Unchanged triangles (most, for a small edit) cost a compare.
+            let to: &Vec<Exposure> = target
+                .get_or_insert_with(|| vertex_exposures(&composite.neutral, &model.triangles));
+            let bary = self.placements_of(Membership::Parent, f);
+            let binding = &self.db.sources[f].gaussians.binding;
+            gains[f] = self.gaussian_exposures[f]
+                .par_iter()
+                .zip(bary)
+                .zip(binding)
+                .map(|((&from, &bary), &t)| {
+                    let Some(&tri) = model.triangles.get(t as usize) else {
+                        return Vec3::ONE;
+                    };
+                    let to = Exposure::at(to, tri, bary);
+                    // Unmoved surface (most, for a small edit) costs a compare.
                     if from != to && from.normal != Vec3::ZERO && to.normal != Vec3::ZERO {
                         light.gain(from, to)
                     } else {
@@ -729,17 +767,17 @@ impl Engine {
     }
 }
 
-/// Relights the last Gaussian of `set`, copied from source `f`, by its
-/// triangle's gain in `gains` (`shading = "relit"`, docs/method.md §7.10);
-/// nothing when the source has none (not relit, or no light fitted). Done
-/// as each Gaussian is copied in, while its colour is in the cache.
-fn relight_last(set: &mut GaussianSet, gains: &[Vec<Vec3>], f: usize) {
-    let i = set.len() - 1;
+/// Relights the last Gaussian of `set`, Gaussian `i` of source `f`, by its
+/// gain in `gains` (`shading = "relit"`, docs/method.md §7.10); nothing when
+/// the source has none (not relit, or no light fitted). Done as each
+/// Gaussian is copied in, while its colour is in the cache.
+fn relight_last(set: &mut GaussianSet, gains: &[Vec<Vec3>], f: usize, i: u32) {
     let gain = gains
         .get(f)
-        .and_then(|g| g.get(set.binding[i] as usize))
+        .and_then(|g| g.get(i as usize))
         .copied()
         .unwrap_or(Vec3::ONE);
+    let i = set.len() - 1;
     if gain != Vec3::ONE {
         // The DC coefficients only: the baked diffuse light lives there, the
         // view-dependent bands stay as trained (a few percent of a skin

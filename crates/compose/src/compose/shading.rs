@@ -223,7 +223,7 @@ pub fn source_light(
     let stride = set.sh_stride();
     let samples = indices.iter().filter_map(|&i| {
         let i = i as usize;
-        let exposure = *exposures.get(set.binding[i] as usize)?;
+        let exposure = *exposures.get(i)?;
         let dc = &set.sh[i * stride..i * stride + 3];
         let colour = Vec3::new(dc_to_rgb(dc[0]), dc_to_rgb(dc[1]), dc_to_rgb(dc[2]));
         let likeness = stats.map_or(1.0, |s| skin_likeness(srgb_to_lab(colour), s));
@@ -234,6 +234,39 @@ pub fn source_light(
         ))
     });
     BakedLight::fit(samples)
+}
+
+impl Exposure {
+    /// The exposure at barycentric coordinates `bary` of the triangle with
+    /// corners `tri`, from its corners' (`vertex`, per vertex): normal and
+    /// cavity interpolated as a renderer interpolates them. Zero normal where
+    /// the corners' cancel or a corner is past the mesh.
+    pub fn at(vertex: &[Exposure], tri: [u32; 3], bary: [f32; 3]) -> Exposure {
+        let (mut normal, mut cavity) = (Vec3::ZERO, 0.0);
+        for (&v, &b) in tri.iter().zip(&bary) {
+            let Some(corner) = vertex.get(v as usize) else {
+                return Exposure::default();
+            };
+            normal += b * corner.normal;
+            cavity += b * corner.cavity;
+        }
+        Exposure {
+            normal: normal.normalize_or_zero(),
+            cavity,
+        }
+    }
+}
+
+/// Each vertex's exposure on `mesh`: its area-weighted smooth normal and
+/// cavity depth.
+pub fn vertex_exposures(mesh: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Exposure> {
+    let normals = vertex_normals(mesh, triangles);
+    let depth = cavities(mesh, triangles, &normals);
+    normals
+        .into_iter()
+        .zip(depth)
+        .map(|(normal, cavity)| Exposure { normal, cavity })
+        .collect()
 }
 
 /// Each triangle's exposure on `mesh`: its smooth normal and the mean cavity
@@ -451,6 +484,38 @@ mod tests {
             "a lone degenerate triangle has none"
         );
         assert!(normals.iter().all(|n| n.is_finite()));
+    }
+
+    /// The exposure at a point of a triangle is its corner's at a corner,
+    /// between them a unit normal and the interpolated cavity; corners
+    /// whose normals cancel or that lie past the mesh give a zero normal,
+    /// never NaN.
+    #[test]
+    fn exposure_at_a_point_interpolates_its_corners() {
+        let corner = |x: f32, cavity: f32| Exposure {
+            normal: Vec3::new(x, 0.0, 1.0).normalize(),
+            cavity,
+        };
+        let vertex = [corner(-1.0, 0.0), corner(1.0, 0.6), corner(0.0, 0.3)];
+        let tri = [0, 1, 2];
+        let at_corner = Exposure::at(&vertex, tri, [0.0, 1.0, 0.0]);
+        assert!((at_corner.normal - vertex[1].normal).length() < 1e-6);
+        assert_eq!(at_corner.cavity, vertex[1].cavity);
+        let middle = Exposure::at(&vertex, tri, [0.5, 0.5, 0.0]);
+        assert!((middle.normal - Vec3::Z).length() < 1e-6, "{middle:?}");
+        assert!((middle.cavity - 0.3).abs() < 1e-6);
+        let near_one = Exposure::at(&vertex, tri, [0.1, 0.9, 0.0]);
+        assert!((near_one.normal.length() - 1.0).abs() < 1e-6);
+        assert!(near_one.normal.x > 0.5 && near_one.normal.x < vertex[1].normal.x);
+        let opposed = [facing(Vec3::Z), facing(-Vec3::Z), facing(Vec3::Z)];
+        assert_eq!(
+            Exposure::at(&opposed, tri, [0.5, 0.5, 0.0]).normal,
+            Vec3::ZERO
+        );
+        assert_eq!(
+            Exposure::at(&vertex, [0, 1, 7], [0.3, 0.3, 0.4]),
+            Exposure::default()
+        );
     }
 
     /// Near-black skin (a dark skin in deep shade) shows no light to fit.
