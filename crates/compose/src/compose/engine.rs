@@ -777,12 +777,12 @@ fn relight_last(set: &mut GaussianSet, gains: &[Vec<Vec3>], f: usize, i: u32) {
         .and_then(|g| g.get(i as usize))
         .copied()
         .unwrap_or(Vec3::ONE);
-    let i = set.len() - 1;
     if gain != Vec3::ONE {
+        let last = set.len() - 1;
         // The DC coefficients only: the baked diffuse light lives there, the
         // view-dependent bands stay as trained (a few percent of a skin
         // Gaussian's colour; scaling them too cost as much again as an edit).
-        apply_gain(&mut set.sh_of_mut(i)[..3], gain);
+        apply_gain(&mut set.sh_of_mut(last)[..3], gain);
     }
 }
 

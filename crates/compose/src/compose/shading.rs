@@ -269,24 +269,6 @@ pub fn vertex_exposures(mesh: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Exposure> 
         .collect()
 }
 
-/// Each triangle's exposure on `mesh`: its smooth normal and the mean cavity
-/// depth of its corners.
-pub fn exposures(mesh: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Exposure> {
-    let vertex = vertex_normals(mesh, triangles);
-    let depth = cavities(mesh, triangles, &vertex);
-    triangles
-        .iter()
-        .map(|t| Exposure {
-            normal: t
-                .iter()
-                .map(|&v| vertex[v as usize])
-                .sum::<Vec3>()
-                .normalize_or_zero(),
-            cavity: t.iter().map(|&v| depth[v as usize]).sum::<f32>() / 3.0,
-        })
-        .collect()
-}
-
 /// Per vertex: whether it lies in a hollow, and how squarely — the cosine
 /// of the angle between its umbrella vector (from it to the centroid of its
 /// neighbours, the discrete mean-curvature normal) and its normal, zero
@@ -326,6 +308,15 @@ pub fn cavities(mesh: &[Vec3], triangles: &[[u32; 3]], normals: &[Vec3]) -> Vec<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each triangle's exposure at its centroid.
+    fn triangle_exposures(mesh: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Exposure> {
+        let vertex = vertex_exposures(mesh, triangles);
+        triangles
+            .iter()
+            .map(|&t| Exposure::at(&vertex, t, [1.0 / 3.0; 3]))
+            .collect()
+    }
 
     /// A surface facing `normal` outside any hollow.
     fn facing(normal: Vec3) -> Exposure {
@@ -448,7 +439,7 @@ mod tests {
         let mesh = [Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::X];
         let depth = cavities(&mesh, &[[0, 1, 2]], &[Vec3::Z; 4]);
         assert!(depth.iter().all(|d| *d == 0.0), "{depth:?}");
-        let exposure = exposures(&mesh, &[[0, 1, 2]]);
+        let exposure = triangle_exposures(&mesh, &[[0, 1, 2]]);
         assert!(exposure
             .iter()
             .all(|e| e.cavity.is_finite() && e.normal.is_finite()));
@@ -469,7 +460,7 @@ mod tests {
             Vec3::new(7.0, 0.0, 0.0),
         ];
         let triangles = [[0, 1, 2], [1, 3, 2], [4, 5, 6]];
-        let normals: Vec<Vec3> = exposures(&mesh, &triangles)
+        let normals: Vec<Vec3> = triangle_exposures(&mesh, &triangles)
             .iter()
             .map(|e| e.normal)
             .collect();
