@@ -861,6 +861,151 @@ fn affine_deformation_follows_reshaped_triangles_and_only_them() {
     assert!(!e.update(&mut c, &next_similar).gaussians);
 }
 
+/// `anchor = "nearest"` (method §6.8): a Gaussian that training left over
+/// another triangle than its parent follows that triangle when the blend
+/// reshapes the face — here a nose Gaussian drifted 1.5 mm above a cheek
+/// lands where the cheek's reshaping puts it, not where the nose's would —
+/// while staying bound to its parent. Gaussians on their own triangle,
+/// with a non-finite centre or a binding past the mesh keep their parent;
+/// an unedited composite is unchanged bit for bit; a shape weight of 1.0 on
+/// a very different face leaves no NaN; a shape edit rebuilds them.
+#[test]
+fn anchored_gaussians_follow_the_surface_they_sit_on() {
+    use visage::avatar::binding::{local_to_world, triangle_frames};
+    use visage::compose::membership::anchor_triangles;
+    use visage::compose::recipe::Anchor;
+    let mut db = small_db();
+    let model = db.model.clone();
+    let neutral = db.sources[0].neutral(&model);
+    let frames = triangle_frames(&neutral, &model.triangles);
+    let regions = &model.triangle_regions;
+    let set = &mut db.sources[0].gaussians;
+    let on_nose: Vec<usize> = (0..set.len())
+        .filter(|&i| regions[set.binding[i] as usize] == Region::Nose)
+        .collect();
+    let nose_tip = frames[set.binding[on_nose[0]] as usize].center;
+    let cheek = (0..model.triangles.len())
+        .filter(|&t| regions[t] == Region::Skin)
+        .find(|&t| {
+            let c = frames[t].center;
+            (c - nose_tip).length() > 0.03 && c.z > 0.0
+        })
+        .unwrap();
+    let normal = frames[cheek].rotation.y_axis;
+    let drifted = on_nose[0];
+    let above_cheek = frames[cheek].center + 1.5e-3 * normal;
+    drift_to(set, drifted, &neutral, &model.triangles, above_cheek);
+    set.opacity_logit[drifted] = 3.125;
+    let not_finite = on_nose[1];
+    set.position[not_finite] = Vec3::NAN;
+    let past_mesh = on_nose[2];
+    set.binding[past_mesh] = model.triangles.len() as u32 + 7;
+
+    let anchors = anchor_triangles(&model, set, &neutral);
+    assert_eq!(anchors[drifted], cheek as u32, "follows the cheek under it");
+    assert_eq!(anchors[not_finite], set.binding[not_finite]);
+    assert_eq!(anchors[past_mesh], set.binding[past_mesh]);
+    let elsewhere = (0..set.len())
+        .filter(|&i| anchors[i] != set.binding[i])
+        .count();
+    assert!(
+        elsewhere < set.len() / 50,
+        "built-in Gaussians sit on their triangles: {elsewhere} elsewhere"
+    );
+    let source_world = local_to_world(
+        &frames[set.binding[drifted] as usize],
+        set.position[drifted],
+        set.rotation[drifted],
+        set.log_scale[drifted],
+    );
+    // The binding past the mesh and the NaN centre were for the anchors
+    // above only: databases refuse them on loading.
+    set.binding[past_mesh] = set.binding[on_nose[3]];
+    set.position[not_finite] = set.position[on_nose[3]];
+
+    let e = Engine::new(db).unwrap();
+    let n = names(&e);
+    let compose = |r: &Recipe, anchor: Anchor| {
+        let mut r = r.clone();
+        r.post.anchor = anchor;
+        e.compose(&resolve(&e, &r))
+    };
+    let mut r = Recipe::unedited(&n[0]);
+    let (plain, anchored) = (compose(&r, Anchor::Parent), compose(&r, Anchor::Nearest));
+    assert_eq!(plain.gaussians.position, anchored.gaussians.position);
+    assert_eq!(plain.gaussians.rotation, anchored.gaussians.rotation);
+    assert_eq!(plain.gaussians.log_scale, anchored.gaussians.log_scale);
+
+    // Source 0's Gaussians on source 3's face.
+    all_groups(&mut r, &n[0], &[(&n[3], 1.0)]);
+    let (plain, anchored) = (compose(&r, Anchor::Parent), compose(&r, Anchor::Nearest));
+    let (a, b) = (&plain.gaussians, &anchored.gaussians);
+    assert_eq!(a.len(), b.len());
+    assert_eq!(a.binding, b.binding, "still bound to their parents");
+    assert_eq!(a.opacity_logit, b.opacity_logit);
+    assert_eq!(a.sh, b.sh);
+    assert!(b.position.iter().all(|p| p.is_finite()));
+    assert!(b.rotation.iter().all(|q| q.is_finite()));
+    assert!(b.log_scale.iter().all(|s| s.is_finite()));
+    let moved = (0..a.len())
+        .filter(|&i| a.position[i] != b.position[i])
+        .count();
+    assert!(
+        moved > 0 && moved < a.len() / 20,
+        "{moved} of {} moved",
+        a.len()
+    );
+
+    let target = triangle_frames(&anchored.neutral, &model.triangles);
+    let world_of = |c: &visage::compose::engine::Composite| {
+        let g = &c.gaussians;
+        let i = (0..g.len()).find(|&i| g.opacity_logit[i] == 3.125).unwrap();
+        let w = local_to_world(
+            &target[g.binding[i] as usize],
+            g.position[i],
+            g.rotation[i],
+            g.log_scale[i],
+        );
+        (w, i)
+    };
+    let ((by_anchor, i), (by_parent, _)) = (world_of(&anchored), world_of(&plain));
+    let (from, to) = (&frames[cheek], &target[cheek]);
+    let expected = to.scale / from.scale
+        * (to.rotation * (from.rotation.transpose() * (source_world.position - from.center)))
+        + to.center;
+    assert!(
+        (by_anchor.position - expected).length() < 1e-6,
+        "{} vs {expected}",
+        by_anchor.position
+    );
+    let size = to.scale / from.scale;
+    assert!(
+        (by_anchor.scale - source_world.scale * size)
+            .abs()
+            .max_element()
+            < 1e-6
+    );
+    // The surface under it, not its parent, decides where it goes: the
+    // nose's reshaping would put it elsewhere.
+    assert!(
+        (by_parent.position - expected).length() > 1e-4,
+        "parent {} anchor {expected}",
+        by_parent.position
+    );
+    // Posed, it keeps its place relative to its parent triangle.
+    let mut posed = PosedMesh::default();
+    e.pose(&anchored, 0, &mut posed);
+    let scene = e.scene(&anchored, &posed);
+    assert!(scene.position[i].is_finite());
+
+    // A shape edit rebuilds the Gaussians that follow the shape.
+    let mut next = resolve(&e, &r);
+    next.post.anchor = Anchor::Nearest;
+    next.shape[Group::Nose.index()] = vec![0.5, 0.0, 0.0, 0.5];
+    let mut c = anchored.clone();
+    assert!(e.update(&mut c, &next).gaussians);
+}
+
 /// `shading = "relit"` (method §7.10): an unedited composite keeps every
 /// colour; the base's Gaussians on another face keep their places and
 /// opacities, and where the surface under a Gaussian turned towards the

@@ -207,6 +207,8 @@ fn report(composer: &Composer, timings: &BuildTimings, frame: Option<usize>) -> 
         "colour": format!("{:?}", r.post.colour).to_lowercase(),
         "membership": format!("{:?}", r.post.membership).to_lowercase(),
         "deform": format!("{:?}", r.post.deform).to_lowercase(),
+        "anchor": format!("{:?}", r.post.anchor).to_lowercase(),
+        "shading": format!("{:?}", r.post.shading).to_lowercase(),
         "gaussians": c.gaussians.len(),
         "extra_gaussians": extra_total,
         "extras": extras,
@@ -263,12 +265,14 @@ fn print_text(r: &serde_json::Value) {
         );
     }
     println!(
-        "smoothing {} adds {} Gaussians; colour {}; regions by {}; deform {}; blend residual {:.2e}",
+        "smoothing {} adds {} Gaussians; colour {}; regions by {}; deform {}; anchor {}; shading {}; blend residual {:.2e}",
         r["smoothing"].as_str().unwrap_or(""),
         r["extra_gaussians"],
         r["colour"].as_str().unwrap_or(""),
         r["membership"].as_str().unwrap_or(""),
         r["deform"].as_str().unwrap_or(""),
+        r["anchor"].as_str().unwrap_or(""),
+        r["shading"].as_str().unwrap_or(""),
         r["solve_residual"].as_f64().unwrap_or(0.0)
     );
     let t = &r["timings_ms"];

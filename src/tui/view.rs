@@ -447,12 +447,13 @@ fn composite_sections(vm: &ViewModel) -> Vec<Section> {
         section(
             "post",
             vec![format!(
-                " base {} smoothing {} colour {} regions by {} deform {} shading {}",
+                " base {} smoothing {} colour {} regions by {} deform {} anchor {} shading {}",
                 r.base,
                 lower(&r.post.smoothing),
                 lower(&r.post.colour),
                 lower(&r.post.membership),
                 lower(&r.post.deform),
+                lower(&r.post.anchor),
                 lower(&r.post.shading),
             )],
         ),

@@ -11,8 +11,8 @@ use crate::cli::DbArgs;
 use crate::compose::blend::Blender;
 use crate::compose::engine::{Engine, PosedMesh};
 use crate::compose::recipe::{
-    AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe, Shading,
-    Smoothing,
+    Anchor, AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe,
+    Shading, Smoothing,
 };
 use crate::error::{Error, Result};
 use crate::model::regions::Group;
@@ -117,6 +117,7 @@ pub fn run(args: &EngineBenchArgs) -> Result<()> {
         colour: ColourCorrection::Skin,
         membership: Membership::Place,
         deform: Deform::Similarity,
+        anchor: Anchor::Parent,
         shading: Shading::Kept,
     };
     for &n in &args.sources {

@@ -13,10 +13,17 @@
 //! gives exactly the similarity). In the triangle's local frame the map is
 //! L = (k_f / k_c)·R_cᵀ·F·R_f, the identity for a similarity; positions go
 //! to L·p, covariances to L·Σ·Lᵀ, re-factored into a rotation and scales.
+//!
+//! `anchor = "nearest"` (method §6.8) changes which triangle's reshaping a
+//! Gaussian follows: the triangle of its source's surface nearest its
+//! centre, where training moved it off its parent. It stays bound to its
+//! parent: the moved Gaussian is written back in the parent's frame.
 
 use glam::{DMat3, DVec3, Quat, Vec3};
 
-use crate::avatar::binding::{normalize_quat, quat_from_matrix, triangle_frame};
+use crate::avatar::binding::{
+    local_to_world, normalize_quat, quat_from_matrix, triangle_frame, world_to_local, TriangleFrame,
+};
 use crate::model::geometry::symmetric_eigen;
 
 /// Local maps within this of the identity (largest entry of L − I) are left
@@ -97,6 +104,69 @@ pub fn apply_local_map(
         *rotation = new_rotation;
         *log_scale = new_scale;
     }
+}
+
+/// A Gaussian in the frame of the triangle it follows (its anchor) on its
+/// source's neutral mesh: what `anchor = "nearest"` moves with that triangle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AnchorLocal {
+    /// The triangle it follows.
+    pub anchor: u32,
+    /// Position, rotation and log-scales in the anchor's frame.
+    pub position: Vec3,
+    pub rotation: Quat,
+    pub log_scale: Vec3,
+}
+
+/// Whether a triangle frame has a size to divide by.
+fn sized(frame: &TriangleFrame) -> bool {
+    frame.scale.is_finite() && frame.scale > 0.0
+}
+
+/// A Gaussian stored in its `parent` triangle's frame re-expressed in its
+/// `anchor` triangle's (both on the source's neutral mesh); `None` where
+/// either has no size or the result is not finite.
+pub fn to_anchor(
+    parent: &TriangleFrame,
+    anchor: (u32, &TriangleFrame),
+    position: Vec3,
+    rotation: Quat,
+    log_scale: Vec3,
+) -> Option<AnchorLocal> {
+    if !(sized(parent) && sized(anchor.1)) {
+        return None;
+    }
+    let world = local_to_world(parent, position, rotation, log_scale);
+    let (position, rotation, log_scale) = world_to_local(anchor.1, &world);
+    (position.is_finite() && rotation.is_finite() && log_scale.is_finite()).then_some(AnchorLocal {
+        anchor: anchor.0,
+        position,
+        rotation,
+        log_scale,
+    })
+}
+
+/// The composite's values, in its `parent` triangle's frame, of a Gaussian
+/// that follows its anchor triangle (`anchor`, the composite's frame of
+/// it): the anchor's similarity, and its local `map` first when one is given
+/// (`deform = "affine"`). `None` where either triangle has no size or the
+/// result is not finite: the Gaussian then follows its parent as stored.
+pub fn from_anchor(
+    local: &AnchorLocal,
+    anchor: &TriangleFrame,
+    parent: &TriangleFrame,
+    map: Option<&DMat3>,
+) -> Option<(Vec3, Quat, Vec3)> {
+    if !(sized(parent) && sized(anchor)) {
+        return None;
+    }
+    let (mut p, mut q, mut s) = (local.position, local.rotation, local.log_scale);
+    if let Some(map) = map {
+        apply_local_map(map, &mut p, &mut q, &mut s);
+    }
+    let world = local_to_world(anchor, p, q, s);
+    let (p, q, s) = world_to_local(parent, &world);
+    (p.is_finite() && q.is_finite() && s.is_finite()).then_some((p, q, s))
 }
 
 /// ln √v, floored for a zero (or rounding-negative) variance.
@@ -200,6 +270,109 @@ mod tests {
             world_after.abs_diff_eq(expected, 1e-7),
             "{world_after} {expected}"
         );
+    }
+
+    /// A parent triangle and a neighbour the Gaussian sits over.
+    const NEIGHBOUR: [Vec3; 3] = [
+        Vec3::new(0.01, 0.0, 0.0),
+        Vec3::new(0.02, 0.001, 0.002),
+        Vec3::new(0.012, 0.009, 0.0),
+    ];
+
+    fn frame_of(t: [Vec3; 3]) -> TriangleFrame {
+        triangle_frame(t[0], t[1], t[2])
+    }
+
+    #[test]
+    fn an_anchored_gaussian_moves_with_its_anchor_and_is_stored_on_its_parent() {
+        let (parent, anchor) = (frame_of(TRIANGLE), frame_of(NEIGHBOUR));
+        let (p, q, s) = (
+            Vec3::new(1.2, 0.3, -0.4),
+            Quat::from_euler(glam::EulerRot::XYZ, 0.3, -0.8, 1.1),
+            Vec3::new(-1.0, -2.0, -3.5),
+        );
+        let local = to_anchor(&parent, (5, &anchor), p, q, s).expect("sized triangles");
+        assert_eq!(local.anchor, 5);
+        // Nothing moved: back where it was (to rounding).
+        let (p2, q2, s2) = from_anchor(&local, &anchor, &parent, None).unwrap();
+        assert!(
+            p2.abs_diff_eq(p, 1e-5) && s2.abs_diff_eq(s, 1e-5),
+            "{p2} {s2}"
+        );
+        assert!(q2.dot(q).abs() > 1.0 - 1e-6);
+        // The anchor turned, grew and moved; the parent stayed: the
+        // Gaussian's world values follow the anchor's similarity.
+        let turn = Quat::from_rotation_z(0.4);
+        let moved = NEIGHBOUR.map(|v| turn * (v * 1.5) + Vec3::new(0.0, 0.002, 0.001));
+        let moved_anchor = frame_of(moved);
+        let (p3, q3, s3) = from_anchor(&local, &moved_anchor, &parent, None).unwrap();
+        let before = local_to_world(&parent, p, q, s);
+        let after = local_to_world(&parent, p3, q3, s3);
+        let expected = turn * (before.position * 1.5) + Vec3::new(0.0, 0.002, 0.001);
+        assert!(
+            after.position.abs_diff_eq(expected, 1e-7),
+            "{} {expected}",
+            after.position
+        );
+        assert!(after.scale.abs_diff_eq(before.scale * 1.5, 1e-7));
+        assert!((after.rotation.dot(turn * before.rotation)).abs() > 1.0 - 1e-6);
+        // With the anchor's affine map: a flat anchor stretched 2× along x
+        // stretches the Gaussian's offset along x, and along its normal by
+        // √(area ratio) (method §6.7).
+        let flat = NEIGHBOUR.map(|v| Vec3::new(v.x, v.y, 0.0));
+        let local = to_anchor(&parent, (5, &frame_of(flat)), p, q, s).unwrap();
+        let stretched = flat.map(|v| Vec3::new(v.x * 2.0, v.y, v.z));
+        let map = local_map(flat, stretched).expect("a stretch");
+        let (p4, q4, s4) = from_anchor(&local, &frame_of(stretched), &parent, Some(&map)).unwrap();
+        let after = local_to_world(&parent, p4, q4, s4).position;
+        assert!((after.x - 2.0 * before.position.x).abs() < 1e-6, "{after}");
+        assert!((after.y - before.position.y).abs() < 1e-6, "{after}");
+        assert!(
+            (after.z - 2f32.sqrt() * before.position.z).abs() < 1e-6,
+            "{after}"
+        );
+    }
+
+    #[test]
+    fn anchoring_to_degenerate_triangles_or_extreme_gaussians_is_refused_or_finite() {
+        let (parent, anchor) = (frame_of(TRIANGLE), frame_of(NEIGHBOUR));
+        let flat = frame_of([Vec3::ZERO, Vec3::X, Vec3::X * 2.0]);
+        let point = frame_of([Vec3::ONE; 3]);
+        let nan = frame_of([Vec3::ZERO, Vec3::X, Vec3::NAN]);
+        let (p, q, s) = (Vec3::new(0.1, 0.2, 0.3), Quat::IDENTITY, Vec3::splat(-2.0));
+        for bad in [point, nan] {
+            assert!(to_anchor(&bad, (1, &anchor), p, q, s).is_none());
+            assert!(to_anchor(&parent, (1, &bad), p, q, s).is_none());
+        }
+        let local = to_anchor(&parent, (1, &anchor), p, q, s).unwrap();
+        for bad in [point, nan] {
+            assert!(from_anchor(&local, &bad, &parent, None).is_none());
+            assert!(from_anchor(&local, &anchor, &bad, None).is_none());
+        }
+        // A collinear triangle still has a size: finite, if meaningless.
+        if let Some((p, q, s)) = from_anchor(&local, &flat, &parent, None) {
+            assert!(p.is_finite() && q.is_finite() && s.is_finite());
+        }
+        // Huge coordinates, a zero quaternion, zero and huge scales.
+        let huge = |t: [Vec3; 3]| frame_of(t.map(|v| v * 1e6));
+        let zero_q = Quat::from_xyzw(0.0, 0.0, 0.0, 0.0);
+        for (q, s) in [
+            (zero_q, Vec3::splat(-2.0)),
+            (Quat::IDENTITY, Vec3::splat(-80.0)),
+            (Quat::IDENTITY, Vec3::new(20.0, 0.0, -20.0)),
+        ] {
+            let big = to_anchor(&huge(TRIANGLE), (1, &huge(NEIGHBOUR)), p, q, s);
+            if let Some(local) = big {
+                if let Some((p, q, s)) =
+                    from_anchor(&local, &huge(NEIGHBOUR), &huge(TRIANGLE), None)
+                {
+                    assert!(
+                        p.is_finite() && q.is_finite() && s.is_finite(),
+                        "{p} {q} {s}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -12,11 +12,12 @@ use super::colour::{
     apply_gain, blend_towards, colour_weight, seen_colours, semantic_skin_gain, skin_stats,
     skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
 };
-use super::deform::{apply_local_map, local_map};
 use super::membership::placements;
 use super::recipe::{
-    AnimationMode, ColourCorrection, Deform, Membership, ResolvedRecipe, Shading, Smoothing,
+    Anchor, AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe,
+    Shading, Smoothing,
 };
+use super::reshape::{note_anchor, Anchored, ReshapeSource, Reshaping, SourceAnchors};
 use super::seams::{SeamField, SeamNeighbours, SEAM_WIDTH};
 use super::selection::{Csr, SelectionTables};
 use super::shading::{source_light, vertex_exposures, BakedLight, Exposure};
@@ -63,6 +64,9 @@ pub struct Engine {
     /// `[source]` → each Gaussian's weight in a mean colour (method §7.5),
     /// computed on first use by colour seams.
     colour_weights: Vec<OnceLock<Vec<f32>>>,
+    /// `[source]` → the Gaussians that follow another triangle than their
+    /// parent under `anchor = "nearest"` (method §6.8), computed on first use.
+    anchors: Vec<OnceLock<SourceAnchors>>,
 }
 
 /// What a set of skin-transfer gains depends on: the source, the colour
@@ -101,6 +105,9 @@ pub struct Composite {
     pub gaussians: GaussianSet,
     /// What each range of `gaussians` is.
     pub blocks: Vec<Block>,
+    /// The Gaussians that follow another triangle than their parent
+    /// (`anchor = "nearest"`).
+    anchored: Vec<Anchored>,
     /// Mean per-channel colour gain applied per region (1 where uncorrected).
     pub colour_gains: [Vec3; Region::COUNT],
     /// Per source, the relighting gain of each of its Gaussians for this
@@ -252,6 +259,7 @@ impl Engine {
             placements,
             seam_neighbours: OnceLock::new(),
             colour_weights: (0..source_count).map(|_| OnceLock::new()).collect(),
+            anchors: (0..source_count).map(|_| OnceLock::new()).collect(),
         })
     }
 
@@ -279,6 +287,7 @@ impl Engine {
             residual,
             gaussians: GaussianSet::default(),
             blocks: Vec::new(),
+            anchored: Vec::new(),
             colour_gains: [Vec3::ONE; Region::COUNT],
             relight_gains: Vec::new(),
         };
@@ -298,7 +307,7 @@ impl Engine {
             gaussians: old.gaussians != recipe.gaussians
                 || old.base != recipe.base
                 || old.post != recipe.post
-                || (shape && recipe.post.deform == Deform::Affine)
+                || (shape && Self::follows_reshaping(&recipe.post))
                 || (shape && recipe.post.shading == Shading::Relit),
         };
         if changes.shape {
@@ -598,12 +607,17 @@ impl Engine {
         set.reserve(own_count + own_count / 8);
         let blocks = &mut composite.blocks;
         blocks.clear();
+        let anchored = &mut composite.anchored;
+        anchored.clear();
+        let anchors =
+            |f: usize| (recipe.post.anchor == Anchor::Nearest).then(|| self.anchors_of(f));
         let gains = &mut composite.colour_gains;
         *gains = [Vec3::ONE; Region::COUNT];
         let mut seams = (smoothing == Smoothing::Blend).then(|| SeamColours::new(self, recipe));
         let relight = &composite.relight_gains;
         for region in Region::ALL {
             let f = Self::source_of(recipe, region);
+            let source_anchors = anchors(f);
             let correction = self.correction(recipe, region, f);
             let start = set.len();
             let mut gain_sum = Vec3::ZERO;
@@ -612,6 +626,7 @@ impl Engine {
                 let exponent = own_exponent[placed[i as usize] as usize];
                 gain_sum +=
                     self.push_corrected(set, f, i, &correction, OpacityEdit::Split(exponent));
+                note_anchor(anchored, source_anchors, set, f, i);
                 relight_last(set, relight, f, i);
                 if let Some(seams) = seams.as_mut() {
                     let last = set.len() - 1;
@@ -636,6 +651,7 @@ impl Engine {
                     continue;
                 }
                 let f = Self::source_of(recipe, r);
+                let source_anchors = anchors(f);
                 let correction = self.correction(recipe, p, f);
                 let start = set.len();
                 for &(t, ring) in band {
@@ -647,6 +663,7 @@ impl Engine {
                     };
                     for &i in self.tables.triangle(membership, f, t) {
                         self.push_corrected(set, f, i, &correction, edit);
+                        note_anchor(anchored, source_anchors, set, f, i);
                         relight_last(set, relight, f, i);
                     }
                 }
@@ -661,43 +678,58 @@ impl Engine {
                 }
             }
         }
-        if recipe.post.deform == Deform::Affine {
+        if Self::follows_reshaping(&recipe.post) {
             self.follow_reshaped_triangles(composite);
         }
     }
 
-    /// Maps every Gaussian of the composite whose parent triangle the blend
-    /// reshaped by that triangle's local deformation (method §6.7): from its
-    /// source's neutral triangle to the composite's.
+    /// Whether a recipe's Gaussians depend on how the blend reshaped their
+    /// triangles beyond their parent's rotation and size (method §6.7, §6.8).
+    fn follows_reshaping(post: &PostProcess) -> bool {
+        post.deform == Deform::Affine || post.anchor == Anchor::Nearest
+    }
+
+    /// The Gaussians of source `f` that follow another triangle than their
+    /// parent under `anchor = "nearest"`, in that triangle's frame.
+    fn anchors_of(&self, f: usize) -> &SourceAnchors {
+        self.anchors[f].get_or_init(|| {
+            SourceAnchors::new(
+                &self.db.model,
+                &self.db.sources[f].gaussians,
+                &self.neutrals[f],
+            )
+        })
+    }
+
+    /// Moves the composite's Gaussians with the blend's reshaping of the
+    /// triangles they follow (method §6.7, §6.8).
     fn follow_reshaped_triangles(&self, composite: &mut Composite) {
-        let model = &self.db.model;
-        let corners = |mesh: &[Vec3], t: &[u32; 3]| t.map(|v| mesh[v as usize]);
-        let mut maps: HashMap<usize, Vec<Option<glam::DMat3>>> = HashMap::new();
-        for block in &composite.blocks {
-            maps.entry(block.source).or_insert_with(|| {
-                let source = &self.neutrals[block.source];
-                model
-                    .triangles
-                    .par_iter()
-                    .map(|t| local_map(corners(source, t), corners(&composite.neutral, t)))
-                    .collect()
-            });
-        }
-        let set = &mut composite.gaussians;
-        for block in &composite.blocks {
-            let maps = &maps[&block.source];
-            let range = block.start..block.end;
-            set.position[range.clone()]
-                .par_iter_mut()
-                .zip(&mut set.rotation[range.clone()])
-                .zip(&mut set.log_scale[range.clone()])
-                .zip(&set.binding[range])
-                .for_each(|(((p, q), s), &t)| {
-                    if let Some(Some(map)) = maps.get(t as usize) {
-                        apply_local_map(map, p, q, s);
-                    }
-                });
-        }
+        let post = composite.recipe.post;
+        let mut used = vec![false; self.db.sources.len()];
+        composite.blocks.iter().for_each(|b| used[b.source] = true);
+        let sources: Vec<ReshapeSource> = (0..self.db.sources.len())
+            .map(|f| ReshapeSource {
+                neutral: &self.neutrals[f],
+                gaussians: &self.db.sources[f].gaussians,
+                anchors: (used[f] && post.anchor == Anchor::Nearest).then(|| self.anchors_of(f)),
+            })
+            .collect();
+        let blocks: Vec<(usize, std::ops::Range<usize>)> = composite
+            .blocks
+            .iter()
+            .map(|b| (b.source, b.start..b.end))
+            .collect();
+        let reshaping = Reshaping {
+            triangles: &self.db.model.triangles,
+            target: &composite.neutral,
+            affine: post.deform == Deform::Affine,
+        };
+        reshaping.apply(
+            &sources,
+            &blocks,
+            &composite.anchored,
+            &mut composite.gaussians,
+        );
     }
 
     /// Makes the relighting gains of every source the recipe draws Gaussians

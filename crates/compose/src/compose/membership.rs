@@ -3,7 +3,9 @@
 //! only the region of its parent triangle. Training moves Gaussians: densified
 //! children keep their parent's triangle wherever they drift. Swapping regions
 //! by parent triangle then carries another person's Gaussians into a region
-//! (thesis §7.2, Figure 6.8) — part of the composite's leak.
+//! (thesis §7.2, Figure 6.8) — part of the composite's leak. The same
+//! nearest triangles say which triangle's reshaping such a Gaussian follows
+//! (`anchor = "nearest"`, method §6.8).
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -19,33 +21,60 @@ use crate::model::nearest::{barycentric, TriangleGrid};
 /// a border does not flicker between two regions.
 pub const PLACE_MARGIN: f32 = 1e-3;
 
+/// How much nearer (metres of template space) another triangle must be to a
+/// Gaussian's centre than its parent for the Gaussian to follow that
+/// triangle's reshaping (`anchor = "nearest"`, docs/method.md §6.8): a
+/// Gaussian on its own triangle, to rounding, keeps its parent.
+pub const ANCHOR_MARGIN: f32 = 1e-4;
+
 /// The triangle each Gaussian of `set` counts for by place, on the source's
 /// `neutral` mesh: the triangle nearest its centre when that is another
 /// region's and more than [`PLACE_MARGIN`] nearer than its parent triangle,
 /// otherwise its parent. Gaussians with a non-finite centre (or a binding
 /// past the mesh) keep their parent.
 pub fn place_triangles(model: &HeadModel, set: &GaussianSet, neutral: &[Vec3]) -> Vec<u32> {
-    let frames = triangle_frames(neutral, &model.triangles);
     let regions = &model.triangle_regions;
+    nearer_triangles(model, set, neutral, PLACE_MARGIN, |parent, t| {
+        regions.get(parent as usize) != regions.get(t as usize)
+    })
+}
+
+/// The triangle whose reshaping each Gaussian of `set` follows under
+/// `anchor = "nearest"`: the triangle of the source's `neutral` mesh nearest
+/// its centre when that is more than [`ANCHOR_MARGIN`] nearer than its
+/// parent, otherwise its parent. Gaussians with a non-finite centre (or a
+/// binding past the mesh) keep their parent.
+pub fn anchor_triangles(model: &HeadModel, set: &GaussianSet, neutral: &[Vec3]) -> Vec<u32> {
+    nearer_triangles(model, set, neutral, ANCHOR_MARGIN, |_, _| true)
+}
+
+/// Per Gaussian of `set`: the triangle of `neutral` nearest its centre when
+/// `accept(parent, nearest)` and it is more than `margin` nearer than the
+/// parent triangle, otherwise the parent.
+fn nearer_triangles(
+    model: &HeadModel,
+    set: &GaussianSet,
+    neutral: &[Vec3],
+    margin: f32,
+    accept: impl Fn(u32, u32) -> bool + Sync,
+) -> Vec<u32> {
+    let frames = triangle_frames(neutral, &model.triangles);
     let grid = TriangleGrid::new(neutral, &model.triangles);
     (0..set.len())
         .into_par_iter()
         .map(|i| {
             let parent = set.binding[i];
-            let (Some(centre), Some(&own)) = (
-                neutral_centre(&frames, set, i),
-                regions.get(parent as usize),
-            ) else {
+            let Some(centre) = neutral_centre(&frames, set, i) else {
                 return parent;
             };
             // Within the margin of its parent nothing can be a margin nearer:
             // most Gaussians of a trained source stop here.
             let to_parent = grid.distance(parent, centre);
-            if to_parent.is_nan() || to_parent <= PLACE_MARGIN {
+            if to_parent.is_nan() || to_parent <= margin {
                 return parent;
             }
-            match grid.nearest_within(centre, to_parent - PLACE_MARGIN) {
-                Some((t, d)) if regions[t as usize] != own && to_parent > d + PLACE_MARGIN => t,
+            match grid.nearest_within(centre, to_parent - margin) {
+                Some((t, d)) if accept(parent, t) && to_parent > d + margin => t,
                 _ => parent,
             }
         })

@@ -9,6 +9,7 @@ pub mod engine;
 pub mod membership;
 pub mod random;
 pub mod recipe;
+pub mod reshape;
 pub mod rules;
 pub mod seams;
 pub mod selection;

@@ -99,6 +99,21 @@ pub enum Deform {
     Affine,
 }
 
+/// Which triangle's reshaping moves a Gaussian (docs/method.md §6.8). A
+/// Gaussian stays bound to its parent triangle either way (posing, export).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Anchor {
+    /// GaussianAvatars and the thesis: its parent triangle, wherever
+    /// training moved it.
+    #[default]
+    Parent,
+    /// The triangle of its source's surface nearest its centre: a Gaussian
+    /// that training moved over another triangle follows the surface it
+    /// shows, not the one it was first made on.
+    Nearest,
+}
+
 /// What a source's baked light does where the blend turned its triangles
 /// (docs/method.md §7.10).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -149,6 +164,9 @@ pub struct PostProcess {
     /// How Gaussians follow a reshaped triangle.
     #[serde(skip_serializing_if = "is_default_deform")]
     pub deform: Deform,
+    /// Which triangle's reshaping a Gaussian follows.
+    #[serde(skip_serializing_if = "is_default_anchor")]
+    pub anchor: Anchor,
     /// Whether colours are relit for their triangles' new normals.
     #[serde(skip_serializing_if = "is_default_shading")]
     pub shading: Shading,
@@ -162,6 +180,7 @@ impl PostProcess {
         colour: ColourCorrection::Thesis,
         membership: Membership::Parent,
         deform: Deform::Similarity,
+        anchor: Anchor::Parent,
         shading: Shading::Kept,
     };
     /// The post-processing that measured best against ground truth
@@ -172,6 +191,7 @@ impl PostProcess {
         colour: ColourCorrection::Semantic,
         membership: Membership::Place,
         deform: Deform::Similarity,
+        anchor: Anchor::Nearest,
         shading: Shading::Relit,
     };
 }
@@ -184,12 +204,16 @@ fn is_default_deform(d: &Deform) -> bool {
     *d == Deform::default()
 }
 
+fn is_default_anchor(a: &Anchor) -> bool {
+    *a == Anchor::default()
+}
+
 fn is_default_shading(s: &Shading) -> bool {
     *s == Shading::default()
 }
 
-/// Prints like a derived `Debug`, leaving `membership` and `deform` out while
-/// they are the defaults: state hashes (which hash the recipe's `Debug` text) of recorded
+/// Prints like a derived `Debug`, leaving `membership`, `deform`, `anchor`
+/// and `shading` out while they are the defaults: state hashes (which hash the recipe's `Debug` text) of recorded
 /// sessions stay what they were before the field existed.
 impl std::fmt::Debug for PostProcess {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -201,6 +225,9 @@ impl std::fmt::Debug for PostProcess {
         }
         if self.deform != Deform::default() {
             d.field("deform", &self.deform);
+        }
+        if self.anchor != Anchor::default() {
+            d.field("anchor", &self.anchor);
         }
         if self.shading != Shading::default() {
             d.field("shading", &self.shading);

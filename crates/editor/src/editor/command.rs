@@ -13,7 +13,7 @@ use std::iter::Peekable;
 use std::str::SplitWhitespace;
 
 use crate::compose::recipe::{
-    AnimationMode, ColourCorrection, Deform, Membership, Shading, Smoothing,
+    Anchor, AnimationMode, ColourCorrection, Deform, Membership, Shading, Smoothing,
 };
 use crate::model::regions::Group;
 use crate::render::lod::LodPolicy;
@@ -501,6 +501,13 @@ impl Named for Deform {
     const WORDS: &'static [&'static str] = &["similarity", "affine"];
 }
 
+impl Named for Anchor {
+    const NAMES: &'static [(Self, &'static str)] =
+        &[(Anchor::Parent, "parent"), (Anchor::Nearest, "nearest")];
+    const LABEL: &'static str = "anchor";
+    const WORDS: &'static [&'static str] = &["parent", "nearest"];
+}
+
 impl Named for Shading {
     const NAMES: &'static [(Self, &'static str)] =
         &[(Shading::Kept, "kept"), (Shading::Relit, "relit")];
@@ -732,6 +739,10 @@ commands! {
     /// Set (or with `None`, toggle) how Gaussians follow a reshaped triangle.
     Deform(choice: Option<Deform> as Choice<Deform>)
         => "deform", "[similarity|affine]", "Gaussians follow a reshaped triangle's size or its whole stretch", PostProcessing, edit;
+    /// Set (or with `None`, toggle) which triangle's reshaping a Gaussian
+    /// follows: its parent's, or that of the surface nearest it.
+    Anchor(choice: Option<Anchor> as Choice<Anchor>)
+        => "anchor", "[parent|nearest]", "Gaussians follow their parent triangle or the surface nearest them when the shape changes", PostProcessing, edit;
     /// Set (or with `None`, toggle) whether colours are relit for their
     /// triangles' new normals.
     Shading(choice: Option<Shading> as Choice<Shading>)
@@ -898,6 +909,8 @@ mod tests {
             "membership",
             "deform affine",
             "deform",
+            "anchor nearest",
+            "anchor",
             "shading relit",
             "shading",
             "motion talk",

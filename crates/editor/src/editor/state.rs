@@ -4,7 +4,8 @@
 use std::collections::BTreeMap;
 
 use crate::compose::recipe::{
-    AnimationMode, ColourCorrection, Deform, GroupEdit, Membership, Recipe, Shading, Smoothing,
+    Anchor, AnimationMode, ColourCorrection, Deform, GroupEdit, Membership, Recipe, Shading,
+    Smoothing,
 };
 use crate::model::regions::Group;
 use crate::pipeline::workbench::DebugView;
@@ -411,6 +412,12 @@ impl EditorState {
                 post.deform = d.unwrap_or(match post.deform {
                     Deform::Similarity => Deform::Affine,
                     Deform::Affine => Deform::Similarity,
+                })
+            }
+            Command::Anchor(a) => {
+                post.anchor = a.unwrap_or(match post.anchor {
+                    Anchor::Parent => Anchor::Nearest,
+                    Anchor::Nearest => Anchor::Parent,
                 })
             }
             Command::Shading(s) => {

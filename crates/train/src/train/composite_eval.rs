@@ -306,6 +306,7 @@ fn steps(recipe: &Recipe) -> Vec<(&'static str, Recipe)> {
         membership: recipe.post.membership,
         // How Gaussians follow the blended shape belongs to the +shape step.
         deform: recipe.post.deform,
+        anchor: recipe.post.anchor,
         shading: recipe.post.shading,
     };
     let mut shape = recipe.clone();
