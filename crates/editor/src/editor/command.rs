@@ -742,7 +742,7 @@ commands! {
     /// Set (or with `None`, toggle) which triangle's reshaping a Gaussian
     /// follows: its parent's, or that of the surface nearest it.
     Anchor(choice: Option<Anchor> as Choice<Anchor>)
-        => "anchor", "[parent|nearest]", "Gaussians follow their parent triangle or the surface nearest them when the shape changes", PostProcessing, edit;
+        => "anchor", "[parent|nearest]", "follow the parent triangle or the nearest surface when reshaped", PostProcessing, edit;
     /// Set (or with `None`, toggle) whether colours are relit for their
     /// triangles' new normals.
     Shading(choice: Option<Shading> as Choice<Shading>)
