@@ -811,6 +811,21 @@ fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
     assert!(halfway > 5, "{halfway} Gaussians at the border");
 }
 
+/// `b` holds `a`'s Gaussians — the same count, bindings, opacities and
+/// colours — moved to finite places, rotations and scales.
+fn assert_same_gaussians_moved_finitely(
+    a: &visage::avatar::gaussians::GaussianSet,
+    b: &visage::avatar::gaussians::GaussianSet,
+) {
+    assert_eq!(a.len(), b.len());
+    assert_eq!(a.binding, b.binding, "still bound to their parents");
+    assert_eq!(a.opacity_logit, b.opacity_logit);
+    assert_eq!(a.sh, b.sh);
+    assert!(b.position.iter().all(|p| p.is_finite()));
+    assert!(b.rotation.iter().all(|q| q.is_finite()));
+    assert!(b.log_scale.iter().all(|s| s.is_finite()));
+}
+
 /// `deform = "affine"` (method §6.7): Gaussians follow their triangles'
 /// whole reshaping. Where no triangle changes shape nothing moves; a shape
 /// weight of 1.0 on a very different face moves Gaussians but not their
@@ -834,13 +849,7 @@ fn affine_deformation_follows_reshaped_triangles_and_only_them() {
     r.post.deform = Deform::Affine;
     let affine = e.compose(&resolve(e, &r));
     let (a, b) = (&similar.gaussians, &affine.gaussians);
-    assert_eq!(a.len(), b.len());
-    assert_eq!(a.binding, b.binding);
-    assert_eq!(a.opacity_logit, b.opacity_logit);
-    assert_eq!(a.sh, b.sh);
-    assert!(b.position.iter().all(|p| p.is_finite()));
-    assert!(b.rotation.iter().all(|q| q.is_finite()));
-    assert!(b.log_scale.iter().all(|s| s.is_finite()));
+    assert_same_gaussians_moved_finitely(a, b);
     let moved = (0..a.len())
         .filter(|&i| a.log_scale[i] != b.log_scale[i])
         .count();
@@ -940,13 +949,7 @@ fn anchored_gaussians_follow_the_surface_they_sit_on() {
     all_groups(&mut r, &n[0], &[(&n[3], 1.0)]);
     let (plain, anchored) = (compose(&r, Anchor::Parent), compose(&r, Anchor::Nearest));
     let (a, b) = (&plain.gaussians, &anchored.gaussians);
-    assert_eq!(a.len(), b.len());
-    assert_eq!(a.binding, b.binding, "still bound to their parents");
-    assert_eq!(a.opacity_logit, b.opacity_logit);
-    assert_eq!(a.sh, b.sh);
-    assert!(b.position.iter().all(|p| p.is_finite()));
-    assert!(b.rotation.iter().all(|q| q.is_finite()));
-    assert!(b.log_scale.iter().all(|s| s.is_finite()));
+    assert_same_gaussians_moved_finitely(a, b);
     let moved = (0..a.len())
         .filter(|&i| a.position[i] != b.position[i])
         .count();
