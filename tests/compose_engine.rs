@@ -747,12 +747,52 @@ fn paint(set: &mut visage::avatar::gaussians::GaussianSet, rgb: f32) {
 /// Colour seams (`smoothing = "blend"`, method §7.8) between a white base and
 /// a black nose: nothing but colour changes; half and half at the border,
 /// the own colour a seam's half-width away; never outside the two colours.
+/// A Gaussian 2 cm wide on the nose's border is narrowed to the seam's
+/// reach, one as wide far from any border keeps its size.
 #[test]
 fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
-    use visage::compose::seams::{SeamField, SEAM_WIDTH};
+    use visage::avatar::binding::triangle_frames;
+    use visage::compose::seams::{SeamField, SEAM_REACH, SEAM_WIDTH};
     let mut db = small_db();
     paint(&mut db.sources[0].gaussians, 1.0);
     paint(&mut db.sources[1].gaussians, 0.0);
+    // Two huge Gaussians: one on the nose's border, one on the face far
+    // from it, each 2 cm along every axis and marked by its opacity.
+    let model = db.model.clone();
+    let looks: Vec<u32> = model
+        .triangle_regions
+        .iter()
+        .map(|&r| u32::from(r == Region::Nose))
+        .collect();
+    let field = SeamField::new(&model, &looks);
+    let (to_nose, to_face) = (field.distances(1).unwrap(), field.distances(0).unwrap());
+    let nearest = |d: &[f32], t: u32| {
+        model.triangles[t as usize]
+            .iter()
+            .map(|&v| d[v as usize])
+            .fold(f32::MAX, f32::min)
+    };
+    let frames = triangle_frames(&db.sources[0].neutral(&model), &model.triangles);
+    let mut plant = |f: usize, wanted: &dyn Fn(u32) -> bool, marker: f32| {
+        let set = &mut db.sources[f].gaussians;
+        let i = (0..set.len()).find(|&i| wanted(set.binding[i])).unwrap();
+        let k = frames[set.binding[i] as usize].scale;
+        set.log_scale[i] = Vec3::splat((0.02 / k).ln());
+        set.opacity_logit[i] = marker;
+    };
+    let regions = &model.triangle_regions;
+    plant(
+        1,
+        &|t| regions[t as usize] == Region::Nose && nearest(to_face, t) < 1e-3,
+        2.5,
+    );
+    // Distances are capped at half a seam width: at the cap, far from it.
+    let far_from_nose = |t: u32| nearest(to_nose, t) >= SEAM_WIDTH / 2.0;
+    plant(
+        0,
+        &|t| regions[t as usize] == Region::Skin && far_from_nose(t),
+        2.75,
+    );
     let e = Engine::new(db).unwrap();
     let n = names(&e);
     let mut r = Recipe::unedited(&n[0]);
@@ -761,24 +801,44 @@ fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
     r.post.smoothing = Smoothing::Blend;
     let blended = e.compose(&resolve(&e, &r));
     let (a, b) = (&off.gaussians, &blended.gaussians);
-    // No extras, and every Gaussian keeps its place, shape and opacity.
+    // No extras, and every Gaussian keeps its place, orientation and opacity;
+    // only the one too wide for its seam changes size.
     assert_eq!(off.blocks, blended.blocks);
     assert_eq!(a.binding, b.binding);
     assert_eq!(a.position, b.position);
     assert_eq!(a.rotation, b.rotation);
-    assert_eq!(a.log_scale, b.log_scale);
     assert_eq!(a.opacity_logit, b.opacity_logit);
+    let marked = |m: f32| (0..a.len()).find(|&i| a.opacity_logit[i] == m).unwrap();
+    let (on_border, far) = (marked(2.5), marked(2.75));
+    let size = |i: usize| frames[b.binding[i] as usize].scale;
+    let widest = |s: Vec3, i: usize| s.max_element().exp() * size(i);
+    assert!((widest(a.log_scale[on_border], on_border) - 0.02).abs() < 1e-6);
+    let narrowed = widest(b.log_scale[on_border], on_border);
+    assert!(
+        (narrowed - SEAM_REACH).abs() < 1e-6,
+        "{narrowed} m on the border"
+    );
+    assert!((widest(b.log_scale[far], far) - 0.02).abs() < 1e-6);
+    // Any other Gaussian resized was wider than the reach, near the other
+    // source, and is now exactly as wide as the reach.
+    let mut resized = 0;
+    for block in &blended.blocks {
+        let other = if block.source == 0 { to_nose } else { to_face };
+        for i in (block.start..block.end).filter(|&i| a.log_scale[i] != b.log_scale[i]) {
+            assert!(
+                b.log_scale[i].cmple(a.log_scale[i]).all(),
+                "Gaussian {i} grew"
+            );
+            assert!((widest(b.log_scale[i], i) - SEAM_REACH).abs() < 1e-6);
+            // Near the other source (the triangle it counts for may be a
+            // neighbour of its parent, hence a seam's width, not half).
+            assert!(nearest(other, b.binding[i]) < SEAM_WIDTH);
+            resized += 1;
+        }
+    }
+    assert!(resized >= 1 && resized < a.len() / 20, "{resized} resized");
     // Colours: the nose's black moves towards white, the face's white towards
     // black, by at most half.
-    let model = &e.database().model;
-    let looks: Vec<u32> = model
-        .triangle_regions
-        .iter()
-        .map(|&r| u32::from(r == Region::Nose))
-        .collect();
-    let field = SeamField::new(model, &looks);
-    let to_nose = field.distances(1).unwrap();
-    let to_face = field.distances(0).unwrap();
     let (mut moved, mut halfway) = (0, 0);
     for block in &blended.blocks {
         let own_white = block.source == 0;
@@ -802,7 +862,7 @@ fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
             if shift > 0.45 {
                 halfway += 1;
             }
-            if near >= SEAM_WIDTH {
+            if near >= SEAM_WIDTH / 2.0 {
                 assert_eq!(shift, 0.0, "far from the border");
             }
         }

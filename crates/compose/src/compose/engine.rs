@@ -18,7 +18,7 @@ use super::recipe::{
     Shading, Smoothing,
 };
 use super::reshape::{note_anchor, Anchored, ReshapeSource, Reshaping, SourceAnchors};
-use super::seams::{SeamField, SeamNeighbours, SEAM_WIDTH};
+use super::seams::{limit_reach, SeamField, SeamNeighbours, SEAM_WIDTH};
 use super::selection::{Csr, SelectionTables};
 use super::shading::{source_light, vertex_exposures, BakedLight, Exposure};
 use super::smoothing::{own_share, split_opacity, BorderTables};
@@ -615,6 +615,9 @@ impl Engine {
         *gains = [Vec3::ONE; Region::COUNT];
         let mut seams = (smoothing == Smoothing::Blend).then(|| SeamColours::new(self, recipe));
         let relight = &composite.relight_gains;
+        // Own Gaussians near another source's triangles: their reach is
+        // limited once they sit on the composite's shape.
+        let mut at_seams: Vec<u32> = Vec::new();
         for region in Region::ALL {
             let f = Self::source_of(recipe, region);
             let source_anchors = anchors(f);
@@ -630,7 +633,9 @@ impl Engine {
                 relight_last(set, relight, f, i);
                 if let Some(seams) = seams.as_mut() {
                     let last = set.len() - 1;
-                    seams.blend(self, f, i, set.sh_of_mut(last));
+                    if seams.blend(self, f, i, set.sh_of_mut(last)) {
+                        at_seams.push(last as u32);
+                    }
                 }
             }
             let n = set.len() - start;
@@ -681,6 +686,13 @@ impl Engine {
         if Self::follows_reshaping(&recipe.post) {
             self.follow_reshaped_triangles(composite);
         }
+        let triangles = &self.db.model.triangles;
+        limit_reach(
+            &mut composite.gaussians,
+            &at_seams,
+            &composite.neutral,
+            triangles,
+        );
     }
 
     /// Whether a recipe's Gaussians depend on how the blend reshaped their
@@ -871,17 +883,18 @@ impl<'a> SeamColours<'a> {
     }
 
     /// Blends the SH of source `f`'s Gaussian `i` (already corrected) towards
-    /// the nearest other source's local colour by the seam weight.
-    fn blend(&mut self, engine: &Engine, f: usize, i: u32, sh: &mut [f32]) {
+    /// the nearest other source's local colour by the seam weight; whether
+    /// it sits near another source's triangles at all.
+    fn blend(&mut self, engine: &Engine, f: usize, i: u32, sh: &mut [f32]) -> bool {
         let membership = self.recipe.post.membership;
         let t = engine.tables.counted_triangles(membership, f)[i as usize];
         if !self.near[t as usize] {
-            return;
+            return false;
         }
         let tri = engine.db.model.triangles[t as usize];
         let bary = engine.placements_of(membership, f)[i as usize];
         let Some(seam) = self.field.blend_at(tri, bary, f as u32) else {
-            return;
+            return true;
         };
         let mut sum = Vec3::ZERO;
         let mut total = 0.0;
@@ -894,6 +907,7 @@ impl<'a> SeamColours<'a> {
         if total > 0.0 {
             blend_towards(sh, sum / total, seam.weight);
         }
+        true
     }
 
     /// Source `s`'s local colour at vertex `v`: the mean colour of its

@@ -9,11 +9,20 @@ use std::collections::HashMap;
 
 use glam::{IVec3, Vec3};
 
+use crate::avatar::gaussians::GaussianSet;
+
 use crate::model::geometry::smoothstep;
 use crate::model::head::HeadModel;
 
 /// Width of a seam across a border, in template metres (half on each side).
 pub const SEAM_WIDTH: f32 = 0.01;
+
+/// The largest standard deviation (metres, on the composite) a Gaussian
+/// within half a seam width of another source's triangles keeps under colour
+/// seams (docs/method.md §7.8): a wider one reaches across the seam and paints
+/// its colour onto the other source's surface, where the truth shows the other
+/// source (a beard trained onto the lips' Gaussians drawn over a clean chin).
+pub const SEAM_REACH: f32 = 0.4 * SEAM_WIDTH;
 
 /// Per-vertex template distances to the triangles of each source a surface
 /// shows, capped at half the seam width.
@@ -189,6 +198,36 @@ impl SeamField {
                 weight: seam_weight(d),
             })
     }
+}
+
+/// Limits the Gaussians `indices` of `set` (the composite's, bound to the
+/// triangles of `mesh`) to [`SEAM_REACH`] along every axis: each axis's
+/// log-scale, in its parent triangle's units, is at most ln(reach / size).
+pub fn limit_reach(set: &mut GaussianSet, indices: &[u32], mesh: &[Vec3], triangles: &[[u32; 3]]) {
+    // Per triangle, computed on first use: a few Gaussians share each.
+    let mut limit = vec![f32::NAN; triangles.len()];
+    for &g in indices {
+        let g = g as usize;
+        let t = set.binding[g] as usize;
+        let Some(tri) = triangles.get(t) else {
+            continue;
+        };
+        if limit[t].is_nan() {
+            let [a, b, c] = tri.map(|v| mesh[v as usize]);
+            limit[t] = (SEAM_REACH / triangle_size(a, b, c)).ln();
+        }
+        if limit[t].is_finite() {
+            set.log_scale[g] = set.log_scale[g].min(Vec3::splat(limit[t]));
+        }
+    }
+}
+
+/// A triangle's size k as its frame defines it (method §3.1): half of its
+/// first edge's length plus its height over that edge.
+fn triangle_size(a: Vec3, b: Vec3, c: Vec3) -> f32 {
+    let (e1, e2) = (b - a, c - a);
+    let base = e1.length();
+    0.5 * (base + e1.cross(e2).length() / base)
 }
 
 #[cfg(test)]
