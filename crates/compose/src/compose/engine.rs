@@ -722,7 +722,6 @@ impl Engine {
         let sources: Vec<ReshapeSource> = (0..self.db.sources.len())
             .map(|f| ReshapeSource {
                 neutral: &self.neutrals[f],
-                gaussians: &self.db.sources[f].gaussians,
                 anchors: (used[f] && post.anchor == Anchor::Nearest).then(|| self.anchors_of(f)),
             })
             .collect();

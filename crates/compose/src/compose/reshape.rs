@@ -90,8 +90,6 @@ pub fn note_anchor(
 pub struct ReshapeSource<'a> {
     /// Its neutral mesh.
     pub neutral: &'a [Vec3],
-    /// Its Gaussians as stored.
-    pub gaussians: &'a GaussianSet,
     /// Its anchored Gaussians, where the composite follows anchors and
     /// draws on this source.
     pub anchors: Option<&'a SourceAnchors>,

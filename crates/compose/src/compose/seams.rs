@@ -9,6 +9,7 @@ use std::collections::HashMap;
 
 use glam::{IVec3, Vec3};
 
+use crate::avatar::binding::triangle_frame;
 use crate::avatar::gaussians::GaussianSet;
 
 use crate::model::geometry::smoothstep;
@@ -214,20 +215,12 @@ pub fn limit_reach(set: &mut GaussianSet, indices: &[u32], mesh: &[Vec3], triang
         };
         if limit[t].is_nan() {
             let [a, b, c] = tri.map(|v| mesh[v as usize]);
-            limit[t] = (SEAM_REACH / triangle_size(a, b, c)).ln();
+            limit[t] = (SEAM_REACH / triangle_frame(a, b, c).scale).ln();
         }
         if limit[t].is_finite() {
             set.log_scale[g] = set.log_scale[g].min(Vec3::splat(limit[t]));
         }
     }
-}
-
-/// A triangle's size k as its frame defines it (method §3.1): half of its
-/// first edge's length plus its height over that edge.
-fn triangle_size(a: Vec3, b: Vec3, c: Vec3) -> f32 {
-    let (e1, e2) = (b - a, c - a);
-    let base = e1.length();
-    0.5 * (base + e1.cross(e2).length() / base)
 }
 
 #[cfg(test)]
