@@ -175,6 +175,10 @@ pub struct SkinStats {
     /// pull it far less. What the transfer from one skin to another moves
     /// between (method §7.6).
     pub tone: Vec3,
+    /// The chromaticity of the source's hair (linear RGB over its sum), where
+    /// it has a hair region: what a hairline's skin is told apart from by
+    /// colour alone, whatever its shading ([`hairline_skin_likeness`]).
+    pub hair: Option<Vec3>,
 }
 
 /// How skin-like a colour is, given the source's skin statistics (1 = typical
@@ -228,8 +232,46 @@ pub fn skin_stats(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Optio
             None => break,
         }
     }
-    Some(SkinStats { mean, tone })
+    Some(SkinStats {
+        mean,
+        tone,
+        hair: None,
+    })
 }
+
+/// The chromaticity of the Gaussians `indices` of a set (a source's hair
+/// region), each of display colour `colours[i]`: their opacity-weighted mean
+/// colour in linear RGB over its sum, or `None` where they show too little
+/// colour to have one (an empty region, black or broken colours).
+pub fn hair_chromaticity(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Option<Vec3> {
+    let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
+    for &i in indices {
+        let i = i as usize;
+        let (Some(&rgb), Some(&logit)) = (colours.get(i), set.opacity_logit.get(i)) else {
+            continue;
+        };
+        let (linear, a) = (
+            srgb_to_linear(rgb.clamp(Vec3::ZERO, Vec3::ONE)),
+            sigmoid(logit),
+        );
+        if linear.is_finite() && a.is_finite() {
+            sum += a * linear;
+            total += a;
+        }
+    }
+    (total > 1e-6).then(|| sum / total).and_then(chromaticity)
+}
+
+/// A linear colour over the sum of its channels: what shading (a common
+/// factor) leaves alone. `None` for colours too dark or broken to have one.
+fn chromaticity(linear: Vec3) -> Option<Vec3> {
+    let sum = linear.x + linear.y + linear.z;
+    (sum > CHROMATICITY_FLOOR && linear.is_finite()).then(|| linear / sum)
+}
+
+/// The least linear brightness (sum of channels) whose chromaticity is read:
+/// below it, a colour is noise about black.
+const CHROMATICITY_FLOOR: f32 = 3e-3;
 
 /// Steps of the mean shift that finds a skin's tone ([`SkinStats::tone`]):
 /// it has settled by then (10 steps moved the bench by 0.002 dB).
@@ -241,7 +283,13 @@ impl SkinStats {
         SkinStats {
             mean: lab,
             tone: lab,
+            hair: None,
         }
+    }
+
+    /// The same statistics told the source's hair chromaticity.
+    pub fn beside_hair(self, hair: Option<Vec3>) -> SkinStats {
+        SkinStats { hair, ..self }
     }
 }
 
@@ -341,11 +389,45 @@ pub fn semantic_skin_gain(rgb: Vec3, region: Region, from: &SkinStats, to: &Skin
         // Lightness counted fully: a brown iris in shade is a dark skin's
         // hue and chroma, but far darker than the lid skin over the rim.
         smoothstep(14.0, 8.0, (lab - from.mean).length())
+    } else if region == Region::Remainder {
+        hairline_skin_likeness(rgb, lab, from)
     } else {
         strict_skin_likeness(lab, from)
     };
     transfer_gain(rgb, lab, k, from, to)
 }
+
+/// How surely a colour of the hairline's region (the remainder: temples,
+/// sideburns, the sides of the head) is skin: the strict likeness, or more
+/// where its chromaticity lies nearer the source's skin tone's than its
+/// hair's (method §7.7). Shading darkens skin there (round the ears, under
+/// the hair) far enough for the strict likeness to keep part of the source's
+/// tone, but leaves its chromaticity; hair differs in chromaticity unless it
+/// is the skin's own hue, and then the strict likeness alone decides.
+pub fn hairline_skin_likeness(rgb: Vec3, lab: Vec3, stats: &SkinStats) -> f32 {
+    let strict = strict_skin_likeness(lab, stats);
+    let skin = chromaticity(srgb_to_linear(lab_to_srgb(stats.tone)));
+    let colour = chromaticity(srgb_to_linear(rgb.clamp(Vec3::ZERO, Vec3::ONE)));
+    let (Some(hair), Some(skin), Some(colour)) = (stats.hair, skin, colour) else {
+        return strict;
+    };
+    let apart = skin.distance(hair);
+    // NaN (a broken hair colour) fails this too.
+    if apart.is_nan() || apart <= HAIR_APART {
+        return strict;
+    }
+    // +1 at the skin's chromaticity, −1 at the hair's, 0 half way.
+    let side = (colour.distance(hair) - colour.distance(skin)) / apart;
+    strict.max(smoothstep(-HAIRLINE_MARGIN, HAIRLINE_MARGIN, side))
+}
+
+/// How far apart (chromaticity distance) a source's skin and hair must be for
+/// chromaticity to tell them apart.
+const HAIR_APART: f32 = 0.02;
+
+/// The soft margin of [`hairline_skin_likeness`]'s side, in units of the
+/// skin-to-hair distance (0.2 and 0.5 measured the same as 0.3).
+const HAIRLINE_MARGIN: f32 = 0.3;
 
 /// Regions that are skin but for small details (face, nose, ears, neck, the
 /// eye sockets — the lids round the eyeball — and the eye regions — lids,
@@ -685,6 +767,73 @@ mod tests {
             let pink = Vec3::new(0.62, 0.30, 0.30);
             assert_eq!(semantic_skin_gain(pink, region, &from, &to), Vec3::ONE);
         }
+    }
+
+    /// femi's case (random-04): light skin under grey hair, moved to a dark
+    /// skin. At the hairline, skin in shade takes the other skin in that
+    /// shade (the strict likeness left part of its own tone), grey hair and a
+    /// grey-streaked Gaussian keep theirs; a source whose hair is its skin's
+    /// own hue, or which has none, is judged by the strict likeness alone.
+    #[test]
+    fn hairline_skin_is_told_from_hair_by_chromaticity() {
+        let light = Vec3::new(0.82, 0.64, 0.5);
+        let dark = Vec3::new(0.31, 0.2, 0.14);
+        let grey = Vec3::new(0.56, 0.55, 0.54);
+        let hair = |rgb: Vec3| chromaticity(srgb_to_linear(rgb));
+        let from = stats(light).beside_hair(hair(grey));
+        let to = stats(dark);
+        let moved_in_shade = |shade: f32| {
+            srgb_to_lab(linear_to_srgb(
+                srgb_to_linear(dark) * srgb_to_linear(light * shade) / srgb_to_linear(light),
+            ))
+        };
+        for shade in [1.0, 0.6, 0.4] {
+            let skin = light * shade;
+            let got = corrected(
+                skin,
+                semantic_skin_gain(skin, Region::Remainder, &from, &to),
+            );
+            let want = moved_in_shade(shade);
+            assert!((srgb_to_lab(got) - want).length() < 1.0, "{shade}: {got}");
+        }
+        // Without the hair's chromaticity, deep shade kept part of the tone.
+        let deep = light * 0.4;
+        let strict = corrected(
+            deep,
+            semantic_skin_gain(deep, Region::Remainder, &stats(light), &to),
+        );
+        assert!(
+            (srgb_to_lab(strict) - moved_in_shade(0.4)).length() > 3.0,
+            "{strict}"
+        );
+        // Grey hair, lit or shaded, stays; so does a Gaussian more grey than skin.
+        for rgb in [grey, grey * 0.5, grey.lerp(light, 0.3)] {
+            let gain = semantic_skin_gain(rgb, Region::Remainder, &from, &to);
+            assert_eq!(gain, Vec3::ONE, "{rgb}");
+        }
+        // Only the hairline's region reads chromaticity: a lip in shade does not move.
+        assert_eq!(
+            semantic_skin_gain(deep, Region::Lips, &from, &to),
+            Vec3::ONE
+        );
+        // Hair of the skin's own hue, no hair, black and broken colours: the
+        // strict likeness, bounded and finite.
+        for hair_of in [hair(light), None, Some(Vec3::NAN)] {
+            let from = stats(light).beside_hair(hair_of);
+            for rgb in [
+                deep,
+                Vec3::ZERO,
+                Vec3::splat(1e-4),
+                Vec3::NAN,
+                Vec3::INFINITY,
+            ] {
+                let gain = semantic_skin_gain(rgb, Region::Remainder, &from, &to);
+                let strict = semantic_skin_gain(rgb, Region::Remainder, &stats(light), &to);
+                assert!(gain.is_finite(), "{hair_of:?} {rgb}: {gain}");
+                assert_eq!(gain, strict, "{hair_of:?} {rgb}");
+            }
+        }
+        assert_eq!(hair_chromaticity(&GaussianSet::default(), &[], &[]), None);
     }
 
     #[test]

@@ -9,8 +9,9 @@ use rayon::prelude::*;
 
 use super::blend::{Blender, SparseRhs};
 use super::colour::{
-    apply_gain, blend_towards, colour_weight, seen_colours, semantic_skin_gain, skin_stats,
-    skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
+    apply_gain, blend_towards, colour_weight, hair_chromaticity, seen_colours, semantic_skin_gain,
+    skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats,
+    SKIN_REFERENCE_REGIONS,
 };
 use super::membership::placements;
 use super::recipe::{
@@ -211,7 +212,12 @@ impl Engine {
             .collect();
         let skin: Vec<Option<SkinStats>> = (0..db.sources.len())
             .into_par_iter()
-            .map(|f| skin_stats(&db.sources[f].gaussians, &seen[f], &skin_indices[f]))
+            .map(|f| {
+                let set = &db.sources[f].gaussians;
+                let hair = tables.region(Membership::Parent, f, Region::Hair);
+                skin_stats(set, &seen[f], &skin_indices[f])
+                    .map(|s| s.beside_hair(hair_chromaticity(set, &seen[f], hair)))
+            })
             .collect();
         let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
             .into_par_iter()
