@@ -752,6 +752,7 @@ fn paint(set: &mut visage::avatar::gaussians::GaussianSet, rgb: f32) {
 #[test]
 fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
     use visage::avatar::binding::triangle_frames;
+    use visage::compose::membership::{footprint_triangles, FOOTPRINT_MAJORITY};
     use visage::compose::seams::{SeamField, SEAM_REACH, SEAM_WIDTH};
     let mut db = small_db();
     paint(&mut db.sources[0].gaussians, 1.0);
@@ -792,6 +793,22 @@ fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
         0,
         &|t| regions[t as usize] == Region::Skin && far_from_nose(t),
         2.75,
+    );
+    // Where the planted nose Gaussian paints: 2 cm either way reaches
+    // well past the nose, over the face that source 0 shows.
+    let nose_source = &db.sources[1];
+    let footprints =
+        footprint_triangles(&model, &nose_source.gaussians, &nose_source.neutral(&model));
+    let planted = (0..nose_source.gaussians.len())
+        .find(|&i| nose_source.gaussians.opacity_logit[i] == 2.5)
+        .unwrap();
+    let over_face = footprints[planted]
+        .iter()
+        .filter(|&&t| t != u32::MAX && looks[t as usize] == 0)
+        .count();
+    assert!(
+        over_face >= FOOTPRINT_MAJORITY,
+        "{over_face} points over the face"
     );
     let e = Engine::new(db).unwrap();
     let n = names(&e);
@@ -837,16 +854,29 @@ fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
         }
     }
     assert!(resized >= 1 && resized < a.len() / 20, "{resized} resized");
+    // It paints mostly over the face, so it takes the face's white in the
+    // share of its footprint there.
+    let shift_of = |i: usize| dc_to_rgb(b.sh_of(i)[0]);
+    let planted_shift = shift_of(on_border);
+    assert!(
+        (planted_shift - over_face as f32 / 4.0).abs() < 1e-4,
+        "{planted_shift} with {over_face} of 4 points over the face"
+    );
     // Colours: the nose's black moves towards white, the face's white towards
-    // black, by at most half.
-    let (mut moved, mut halfway) = (0, 0);
+    // black, by at most half at its centre, or by the share of a footprint
+    // that lies mostly over the other source (three or four quarters).
+    let (mut moved, mut halfway, mut by_footprint) = (0, 0, 0);
     for block in &blended.blocks {
         let own_white = block.source == 0;
         for i in block.start..block.end {
             let rgb = dc_to_rgb(b.sh_of(i)[0]);
             assert!((-1e-5..=1.0 + 1e-5).contains(&rgb), "{rgb}");
             let shift = if own_white { 1.0 - rgb } else { rgb };
-            assert!(shift <= 0.5 + 1e-4, "more than half: {shift}");
+            if shift > 0.5 + 1e-4 {
+                let share = [0.75, 1.0].iter().any(|s| (shift - s).abs() < 1e-4);
+                assert!(share, "more than half, not a footprint's share: {shift}");
+                by_footprint += 1;
+            }
             let tri = model.triangles[b.binding[i] as usize];
             let other = if own_white { to_nose } else { to_face };
             let near = tri
@@ -869,6 +899,48 @@ fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
     }
     assert!(moved > 50, "{moved} Gaussians moved");
     assert!(halfway > 5, "{halfway} Gaussians at the border");
+    assert!(
+        by_footprint >= 1 && by_footprint < moved / 4,
+        "{by_footprint} of {moved} moved by their footprint"
+    );
+}
+
+/// Where a Gaussian paints: its footprint's four points lie on or beside a
+/// small Gaussian's own triangle, and a Gaussian whose centre, scale
+/// (overflowing included) or rotation is broken has none.
+#[test]
+fn a_footprint_is_found_for_sound_gaussians_and_refused_for_broken_ones() {
+    use glam::Quat;
+    use visage::compose::membership::footprint_triangles;
+    let mut db = small_db();
+    let model = db.model.clone();
+    let neutral = db.sources[0].neutral(&model);
+    let set = &mut db.sources[0].gaussians;
+    let small = 0;
+    set.log_scale[small] = Vec3::splat(-8.0);
+    let (nan_scale, zero_turn, nan_place, huge) = (1, 2, 3, 4);
+    set.log_scale[nan_scale] = Vec3::new(f32::NAN, 0.0, 0.0);
+    set.rotation[zero_turn] = Quat::from_xyzw(0.0, 0.0, 0.0, 0.0);
+    set.position[nan_place] = Vec3::splat(f32::NAN);
+    set.log_scale[huge] = Vec3::splat(200.0);
+    let footprints = footprint_triangles(&model, set, &neutral);
+    assert_eq!(footprints.len(), set.len());
+    let parent = set.binding[small];
+    let shares_a_corner = |t: u32| {
+        let (a, b) = (
+            model.triangles[t as usize],
+            model.triangles[parent as usize],
+        );
+        a.iter().any(|v| b.contains(v))
+    };
+    assert!(
+        footprints[small].iter().all(|&t| shares_a_corner(t)),
+        "{:?}",
+        footprints[small]
+    );
+    for broken in [nan_scale, zero_turn, nan_place, huge] {
+        assert_eq!(footprints[broken], [u32::MAX; 4], "Gaussian {broken}");
+    }
 }
 
 /// `b` holds `a`'s Gaussians — the same count, bindings, opacities and

@@ -13,7 +13,7 @@ use super::colour::{
     skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats,
     SKIN_REFERENCE_REGIONS,
 };
-use super::membership::placements;
+use super::membership::{footprint_triangles, placements, FOOTPRINT_MAJORITY};
 use super::recipe::{
     Anchor, AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe,
     Shading, Smoothing,
@@ -65,6 +65,9 @@ pub struct Engine {
     /// `[source]` → each Gaussian's weight in a mean colour (method §7.5),
     /// computed on first use by colour seams.
     colour_weights: Vec<OnceLock<Vec<f32>>>,
+    /// `[source]` → where each Gaussian paints, computed on first use by
+    /// colour seams.
+    footprints: Vec<OnceLock<SourceFootprints>>,
     /// `[source]` → the Gaussians that follow another triangle than their
     /// parent under `anchor = "nearest"` (method §6.8), computed on first use.
     anchors: Vec<OnceLock<SourceAnchors>>,
@@ -265,6 +268,7 @@ impl Engine {
             placements,
             seam_neighbours: OnceLock::new(),
             colour_weights: (0..source_count).map(|_| OnceLock::new()).collect(),
+            footprints: (0..source_count).map(|_| OnceLock::new()).collect(),
             anchors: (0..source_count).map(|_| OnceLock::new()).collect(),
         })
     }
@@ -489,6 +493,30 @@ impl Engine {
                 &self.neutrals[f],
                 counted,
             )
+        })
+    }
+
+    /// Where each Gaussian of source `f` paints.
+    fn footprints_of(&self, f: usize) -> &SourceFootprints {
+        self.footprints[f].get_or_init(|| {
+            let set = &self.db.sources[f].gaussians;
+            let points = footprint_triangles(&self.db.model, set, &self.neutrals[f]);
+            let group = |t: u32| {
+                let regions = &self.db.model.triangle_regions;
+                regions.get(t as usize).map(|r| r.group())
+            };
+            let (parent, place) = (
+                &set.binding,
+                self.tables.counted_triangles(Membership::Place, f),
+            );
+            let crossing = (0..set.len())
+                .map(|i| {
+                    let own = group(parent[i]);
+                    group(place[i]) != own
+                        || points[i].iter().any(|&t| t != u32::MAX && group(t) != own)
+                })
+                .collect();
+            SourceFootprints { points, crossing }
         })
     }
 
@@ -841,6 +869,8 @@ fn relight_last(set: &mut GaussianSet, gains: &[Vec<Vec3>], f: usize, i: u32) {
 struct SeamColours<'a> {
     recipe: &'a ResolvedRecipe,
     field: SeamField,
+    /// Per triangle: the source it wears.
+    looks: Vec<u32>,
     /// Per triangle: whether a corner is within half a seam width of
     /// another source than the one it wears.
     near: Vec<bool>,
@@ -881,6 +911,7 @@ impl<'a> SeamColours<'a> {
         Self {
             recipe,
             field,
+            looks,
             near,
             vertex_colour,
             corrections: HashMap::new(),
@@ -895,6 +926,9 @@ impl<'a> SeamColours<'a> {
         let t = engine.tables.counted_triangles(membership, f)[i as usize];
         if !self.near[t as usize] {
             return false;
+        }
+        if self.blend_by_footprint(engine, f, i, sh) {
+            return true;
         }
         let tri = engine.db.model.triangles[t as usize];
         let bary = engine.placements_of(membership, f)[i as usize];
@@ -912,6 +946,50 @@ impl<'a> SeamColours<'a> {
         if total > 0.0 {
             blend_towards(sh, sum / total, seam.weight);
         }
+        true
+    }
+
+    /// A Gaussian whose footprint lies mostly over one other source's
+    /// triangles (at least `FOOTPRINT_MAJORITY` of its four points) paints
+    /// mostly where the truth shows that source: it takes that source's
+    /// colour there, in the share of its points that lie there. Whether it
+    /// did.
+    fn blend_by_footprint(&mut self, engine: &Engine, f: usize, i: u32, sh: &mut [f32]) -> bool {
+        let footprints = engine.footprints_of(f);
+        if !footprints.crossing[i as usize] {
+            return false;
+        }
+        let points = footprints.points[i as usize];
+        let wearing = |t: u32| self.looks.get(t as usize).copied();
+        let others = points.map(|t| wearing(t).filter(|&s| s != f as u32));
+        let Some(other) = others
+            .iter()
+            .flatten()
+            .copied()
+            .max_by_key(|&s| others.iter().filter(|&&o| o == Some(s)).count())
+        else {
+            return false;
+        };
+        let count = others.iter().filter(|&&o| o == Some(other)).count();
+        if count < FOOTPRINT_MAJORITY {
+            return false;
+        }
+        let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
+        for (&t, o) in points.iter().zip(others) {
+            if o != Some(other) {
+                continue;
+            }
+            for v in engine.db.model.triangles[t as usize] {
+                if let Some(c) = self.colour_at(engine, other as usize, v) {
+                    sum += c;
+                    total += 1.0;
+                }
+            }
+        }
+        if total == 0.0 {
+            return false;
+        }
+        blend_towards(sh, sum / total, count as f32 / points.len() as f32);
         true
     }
 
@@ -952,6 +1030,16 @@ impl<'a> SeamColours<'a> {
         self.vertex_colour[k][v as usize] = Some(colour);
         colour
     }
+}
+
+/// Where each Gaussian of one source paints (`footprint_triangles`).
+struct SourceFootprints {
+    /// Per Gaussian: the triangles its footprint's four points lie on.
+    points: Vec<[u32; 4]>,
+    /// Per Gaussian: whether it may paint over another group than its own —
+    /// a point, or the triangle it counts for by place, in another group
+    /// than its parent's. Only these can lie over another source.
+    crossing: Vec<bool>,
 }
 
 /// A colour correction for a block of Gaussians.

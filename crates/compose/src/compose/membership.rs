@@ -7,7 +7,7 @@
 //! nearest triangles say which triangle's reshaping such a Gaussian follows
 //! (`anchor = "nearest"`, method §6.8).
 
-use glam::Vec3;
+use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
 use crate::avatar::binding::{triangle_frames, TriangleFrame};
@@ -77,6 +77,60 @@ fn nearer_triangles(
                 Some((t, d)) if accept(parent, t) && to_parent > d + margin => t,
                 _ => parent,
             }
+        })
+        .collect()
+}
+
+/// How far out, in standard deviations, a Gaussian's footprint is looked at
+/// ([`footprint_triangles`]): two hold 95 % of its weight along an axis.
+pub const FOOTPRINT_SIGMAS: f32 = 2.0;
+
+/// How many of a Gaussian's four footprint points must lie over one other
+/// source's triangles for a colour seam to give it that source's colour
+/// there (docs/method.md §7.8).
+pub const FOOTPRINT_MAJORITY: usize = 3;
+
+/// Where each Gaussian of `set` paints (docs/method.md §7.8): the triangles of
+/// the source's `neutral` mesh nearest the four points [`FOOTPRINT_SIGMAS`]
+/// standard deviations out either way along its two longest axes, at the
+/// size training gave it. `u32::MAX` for a point no triangle is near, and for every
+/// point of a Gaussian whose centre, scale or rotation is not finite (or
+/// whose binding is past the mesh).
+pub fn footprint_triangles(
+    model: &HeadModel,
+    set: &GaussianSet,
+    neutral: &[Vec3],
+) -> Vec<[u32; 4]> {
+    let frames = triangle_frames(neutral, &model.triangles);
+    let grid = TriangleGrid::new(neutral, &model.triangles);
+    (0..set.len())
+        .into_par_iter()
+        .map(|i| {
+            let mut points = [u32::MAX; 4];
+            let (Some(frame), Some(centre)) = (
+                frames.get(set.binding[i] as usize),
+                neutral_centre(&frames, set, i),
+            ) else {
+                return points;
+            };
+            let deviation = frame.scale * set.log_scale[i].exp();
+            let turn = frame.rotation * Mat3::from_quat(set.rotation[i].normalize());
+            if !(centre.is_finite() && deviation.is_finite() && turn.is_finite()) {
+                return points;
+            }
+            let mut axes = [
+                deviation.x * turn.x_axis,
+                deviation.y * turn.y_axis,
+                deviation.z * turn.z_axis,
+            ];
+            axes.sort_by(|a, b| b.length_squared().total_cmp(&a.length_squared()));
+            let outs = [axes[0], -axes[0], axes[1], -axes[1]];
+            for (point, out) in points.iter_mut().zip(outs) {
+                if let Some((t, _)) = grid.nearest(centre + FOOTPRINT_SIGMAS * out) {
+                    *point = t;
+                }
+            }
+            points
         })
         .collect()
 }
