@@ -65,9 +65,9 @@ pub struct Engine {
     /// `[source]` → each Gaussian's weight in a mean colour (method §7.5),
     /// computed on first use by colour seams.
     colour_weights: Vec<OnceLock<Vec<f32>>>,
-    /// `[source]` → where each Gaussian paints, computed on first use by
-    /// colour seams.
-    footprints: Vec<OnceLock<SourceFootprints>>,
+    /// `[source]` → the triangles each Gaussian's footprint reaches
+    /// (`footprint_triangles`), computed on first use by colour seams.
+    footprints: Vec<OnceLock<Vec<[u32; 4]>>>,
     /// `[source]` → the Gaussians that follow another triangle than their
     /// parent under `anchor = "nearest"` (method §6.8), computed on first use.
     anchors: Vec<OnceLock<SourceAnchors>>,
@@ -496,27 +496,11 @@ impl Engine {
         })
     }
 
-    /// Where each Gaussian of source `f` paints.
-    fn footprints_of(&self, f: usize) -> &SourceFootprints {
+    /// The triangles each Gaussian of source `f`'s footprint reaches.
+    fn footprints_of(&self, f: usize) -> &[[u32; 4]] {
         self.footprints[f].get_or_init(|| {
             let set = &self.db.sources[f].gaussians;
-            let points = footprint_triangles(&self.db.model, set, &self.neutrals[f]);
-            let group = |t: u32| {
-                let regions = &self.db.model.triangle_regions;
-                regions.get(t as usize).map(|r| r.group())
-            };
-            let (parent, place) = (
-                &set.binding,
-                self.tables.counted_triangles(Membership::Place, f),
-            );
-            let crossing = (0..set.len())
-                .map(|i| {
-                    let own = group(parent[i]);
-                    group(place[i]) != own
-                        || points[i].iter().any(|&t| t != u32::MAX && group(t) != own)
-                })
-                .collect();
-            SourceFootprints { points, crossing }
+            footprint_triangles(&self.db.model, set, &self.neutrals[f])
         })
     }
 
@@ -955,25 +939,19 @@ impl<'a> SeamColours<'a> {
     /// colour there, in the share of its points that lie there. Whether it
     /// did.
     fn blend_by_footprint(&mut self, engine: &Engine, f: usize, i: u32, sh: &mut [f32]) -> bool {
-        let footprints = engine.footprints_of(f);
-        if !footprints.crossing[i as usize] {
-            return false;
-        }
-        let points = footprints.points[i as usize];
+        let points = engine.footprints_of(f)[i as usize];
         let wearing = |t: u32| self.looks.get(t as usize).copied();
         let others = points.map(|t| wearing(t).filter(|&s| s != f as u32));
-        let Some(other) = others
+        let count = |s: u32| others.iter().filter(|&&o| o == Some(s)).count();
+        // A majority of the four holds the first or the second point.
+        let Some((other, count)) = others[..2]
             .iter()
             .flatten()
-            .copied()
-            .max_by_key(|&s| others.iter().filter(|&&o| o == Some(s)).count())
+            .map(|&s| (s, count(s)))
+            .find(|&(_, n)| n >= FOOTPRINT_MAJORITY)
         else {
             return false;
         };
-        let count = others.iter().filter(|&&o| o == Some(other)).count();
-        if count < FOOTPRINT_MAJORITY {
-            return false;
-        }
         let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
         for (&t, o) in points.iter().zip(others) {
             if o != Some(other) {
@@ -1030,16 +1008,6 @@ impl<'a> SeamColours<'a> {
         self.vertex_colour[k][v as usize] = Some(colour);
         colour
     }
-}
-
-/// Where each Gaussian of one source paints (`footprint_triangles`).
-struct SourceFootprints {
-    /// Per Gaussian: the triangles its footprint's four points lie on.
-    points: Vec<[u32; 4]>,
-    /// Per Gaussian: whether it may paint over another group than its own —
-    /// a point, or the triangle it counts for by place, in another group
-    /// than its parent's. Only these can lie over another source.
-    crossing: Vec<bool>,
 }
 
 /// A colour correction for a block of Gaussians.
