@@ -12,7 +12,7 @@ use visage::compose::blend::Blender;
 use visage::compose::colour::{weighted_mean_colour, GAIN_RANGE};
 use visage::compose::engine::{Engine, PosedMesh};
 use visage::compose::recipe::{
-    AnimationMode, ColourCorrection, GroupEdit, Recipe, ResolvedRecipe, Smoothing,
+    AnimationMode, ColourCorrection, GroupEdit, PostProcess, Recipe, ResolvedRecipe, Smoothing,
 };
 use visage::compose::state_hash;
 use visage::model::builtin::build_head;
@@ -591,6 +591,55 @@ fn the_full_composite_has_no_nan_and_is_reproducible() {
         state_hash(e.database(), &resolved),
         state_hash(e.database(), &other)
     );
+}
+
+#[test]
+fn a_composite_is_the_same_on_any_number_of_threads_and_after_any_edit() {
+    // Own Gaussians are copied in chunks on all threads, into a set whose
+    // earlier contents an edit reuses: neither may show in the result.
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups
+        .insert("eyes".into(), edit(&n[1], &[(&n[1], 0.5), (&n[0], 0.5)]));
+    r.groups
+        .insert("mouth".into(), edit(&n[2], &[(&n[2], 1.0)]));
+    r.groups.insert("hair".into(), edit(&n[3], &[(&n[3], 1.0)]));
+    r.groups.insert("nose".into(), edit(&n[1], &[]));
+    r.post = PostProcess::BEST;
+    let best = resolve(e, &r);
+    let mut other = best.clone();
+    other.gaussians = [1; Group::COUNT];
+    let in_pool = |threads: usize, recipe: &ResolvedRecipe| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| e.compose(recipe))
+    };
+    let one = in_pool(1, &best);
+    let parts = one.blocks.iter().filter(|b| b.end > b.start).count();
+    assert!(parts >= 5, "the recipe draws on several sources: {parts}");
+    for threads in [2, 3] {
+        let many = in_pool(threads, &best);
+        assert_eq!(many.gaussians, one.gaussians, "{threads} threads");
+        assert_eq!(many.blocks, one.blocks);
+        assert_eq!(many.colour_gains, one.colour_gains);
+    }
+    for before in [&other, &best] {
+        let mut edited = e.compose(before);
+        e.update(&mut edited, &best);
+        assert_eq!(edited.gaussians, one.gaussians);
+        assert_eq!(edited.blocks, one.blocks);
+    }
+    // A cross-fade appends extras after the own Gaussians; back to colour
+    // seams they are gone.
+    let mut crossfade = best.clone();
+    crossfade.post.smoothing = Smoothing::Crossfade;
+    let mut edited = e.compose(&crossfade);
+    assert!(edited.gaussians.len() > one.gaussians.len());
+    e.update(&mut edited, &best);
+    assert_eq!(edited.gaussians, one.gaussians);
 }
 
 /// Moves Gaussian `i` of `set` so its centre sits at `world` on the mesh

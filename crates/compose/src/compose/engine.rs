@@ -9,17 +9,18 @@ use rayon::prelude::*;
 
 use super::blend::{Blender, SparseRhs};
 use super::colour::{
-    apply_gain, blend_towards, colour_weight, hair_chromaticity, seen_colours, semantic_skin_gain,
-    skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats,
-    SKIN_REFERENCE_REGIONS,
+    apply_gain, colour_weight, hair_chromaticity, seen_colours, semantic_skin_gain, skin_stats,
+    skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
 };
-use super::membership::{footprint_triangles, placements, FOOTPRINT_MAJORITY};
+use super::correction::{Correction, SharedGains};
+use super::membership::{footprint_triangles, placements};
 use super::recipe::{
     Anchor, AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe,
     Shading, Smoothing,
 };
 use super::reshape::{note_anchor, Anchored, ReshapeSource, Reshaping, SourceAnchors};
-use super::seams::{limit_reach, SeamField, SeamNeighbours, SEAM_WIDTH};
+use super::seam_colours::{SeamColours, SeamSources};
+use super::seams::{limit_reach, SeamNeighbours};
 use super::selection::{Csr, SelectionTables};
 use super::shading::{source_light, vertex_exposures, BakedLight, Exposure};
 use super::smoothing::{own_share, split_opacity, BorderTables};
@@ -27,7 +28,7 @@ use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
 use crate::avatar::database::Database;
 use crate::avatar::gaussians::{logit, sigmoid, GaussianSet};
 use crate::error::Result;
-use crate::model::head::{Joint, Pose};
+use crate::model::head::{HeadModel, Joint, Pose};
 use crate::model::regions::Region;
 use crate::scene::splats::SplatScene;
 
@@ -76,9 +77,6 @@ pub struct Engine {
 /// What a set of skin-transfer gains depends on: the source, the colour
 /// reference and, for the semantic transfer, the membership its regions follow.
 type GainKey = (usize, usize, Option<Membership>);
-
-/// Per-Gaussian colour gains shared between composites.
-type SharedGains = Arc<Vec<Vec3>>;
 
 /// What one range of a composite's Gaussians is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -612,94 +610,74 @@ impl Engine {
                 }
             }
         }
-        let own_count: usize = Region::ALL
-            .iter()
-            .map(|&r| {
-                self.tables
-                    .region(membership, Self::source_of(recipe, r), r)
-                    .len()
-            })
-            .sum();
+        let anchors =
+            |f: usize| (recipe.post.anchor == Anchor::Nearest).then(|| self.anchors_of(f));
+        let mut own = Vec::with_capacity(Region::COUNT);
+        let mut own_count = 0;
+        for region in Region::ALL {
+            let f = Self::source_of(recipe, region);
+            let indices = self.tables.region(membership, f, region);
+            own.push(OwnBlock {
+                region,
+                source: f,
+                indices,
+                correction: self.correction(recipe, region, f),
+                anchors: anchors(f),
+                start: own_count,
+            });
+            own_count += indices.len();
+        }
         let set = &mut composite.gaussians;
-        set.clear(degree);
-        set.reserve(own_count + own_count / 8);
+        set.resize(own_count, degree);
+        set.reserve(own_count / 8);
+        let seams = (smoothing == Smoothing::Blend).then(|| {
+            let looks = self
+                .db
+                .model
+                .triangle_regions
+                .iter()
+                .map(|&r| Self::source_of(recipe, r) as u32)
+                .collect();
+            SeamColours::new(self, recipe, looks)
+        });
+        let copying = CopyOwn {
+            blocks: &own,
+            membership,
+            own_exponent: &own_exponent,
+            seams: seams.as_ref(),
+            relight: &composite.relight_gains,
+        };
+        let copied = self.copy_own(&copying, set);
         let blocks = &mut composite.blocks;
         blocks.clear();
         let anchored = &mut composite.anchored;
         anchored.clear();
-        let anchors =
-            |f: usize| (recipe.post.anchor == Anchor::Nearest).then(|| self.anchors_of(f));
         let gains = &mut composite.colour_gains;
         *gains = [Vec3::ONE; Region::COUNT];
-        let mut seams = (smoothing == Smoothing::Blend).then(|| SeamColours::new(self, recipe));
-        let relight = &composite.relight_gains;
         // Own Gaussians near another source's triangles: their reach is
         // limited once they sit on the composite's shape.
         let mut at_seams: Vec<u32> = Vec::new();
-        for region in Region::ALL {
-            let f = Self::source_of(recipe, region);
-            let source_anchors = anchors(f);
-            let correction = self.correction(recipe, region, f);
-            let start = set.len();
-            let mut gain_sum = Vec3::ZERO;
-            let placed = self.tables.counted_triangles(membership, f);
-            for &i in self.tables.region(membership, f, region) {
-                let exponent = own_exponent[placed[i as usize] as usize];
-                gain_sum +=
-                    self.push_corrected(set, f, i, &correction, OpacityEdit::Split(exponent));
-                note_anchor(anchored, source_anchors, set, f, i);
-                relight_last(set, relight, f, i);
-                if let Some(seams) = seams.as_mut() {
-                    let last = set.len() - 1;
-                    if seams.blend(self, f, i, set.sh_of_mut(last)) {
-                        at_seams.push(last as u32);
-                    }
-                }
-            }
-            let n = set.len() - start;
+        let mut gain_sums = vec![Vec3::ZERO; own.len()];
+        for chunk in copied {
+            gain_sums[chunk.block] += chunk.gain_sum;
+            anchored.extend(chunk.anchored);
+            at_seams.extend(chunk.at_seams);
+        }
+        for (block, gain_sum) in own.iter().zip(gain_sums) {
+            let n = block.indices.len();
             if n > 0 {
-                gains[region.index()] = gain_sum / n as f32;
+                gains[block.region.index()] = gain_sum / n as f32;
             }
             blocks.push(Block {
-                region,
-                source: f,
+                region: block.region,
+                source: block.source,
                 extra_from: None,
-                start,
-                end: set.len(),
+                start: block.start,
+                end: block.start + n,
             });
         }
         if matches!(smoothing, Smoothing::Thesis | Smoothing::Crossfade) {
-            for (&(r, p), band) in self.borders.pairs() {
-                if !differs(r, p) {
-                    continue;
-                }
-                let f = Self::source_of(recipe, r);
-                let source_anchors = anchors(f);
-                let correction = self.correction(recipe, p, f);
-                let start = set.len();
-                for &(t, ring) in band {
-                    let edit = match smoothing {
-                        Smoothing::Thesis if ring == 1 => OpacityEdit::Scale(0.5),
-                        Smoothing::Crossfade => OpacityEdit::Split(1.0 - own_share(ring)),
-                        // Colour seams add no Gaussians.
-                        _ => continue,
-                    };
-                    for &i in self.tables.triangle(membership, f, t) {
-                        self.push_corrected(set, f, i, &correction, edit);
-                        note_anchor(anchored, source_anchors, set, f, i);
-                        relight_last(set, relight, f, i);
-                    }
-                }
-                if set.len() > start {
-                    blocks.push(Block {
-                        region: p,
-                        source: f,
-                        extra_from: Some(r),
-                        start,
-                        end: set.len(),
-                    });
-                }
-            }
+            self.add_border_extras(recipe, composite);
         }
         if Self::follows_reshaping(&recipe.post) {
             self.follow_reshaped_triangles(composite);
@@ -711,6 +689,46 @@ impl Engine {
             &composite.neutral,
             triangles,
         );
+    }
+
+    /// Appends the border extras of the thesis's smoothing and of the
+    /// cross-fade: each source's Gaussians of the border rings on the other
+    /// side of a border, with part of their opacity.
+    fn add_border_extras(&self, recipe: &ResolvedRecipe, composite: &mut Composite) {
+        let smoothing = recipe.post.smoothing;
+        let membership = recipe.post.membership;
+        let set = &mut composite.gaussians;
+        for (&(r, p), band) in self.borders.pairs() {
+            let f = Self::source_of(recipe, r);
+            if f == Self::source_of(recipe, p) {
+                continue;
+            }
+            let anchors = (recipe.post.anchor == Anchor::Nearest).then(|| self.anchors_of(f));
+            let correction = self.correction(recipe, p, f);
+            let start = set.len();
+            for &(t, ring) in band {
+                let edit = match smoothing {
+                    Smoothing::Thesis if ring == 1 => OpacityEdit::Scale(0.5),
+                    Smoothing::Crossfade => OpacityEdit::Split(1.0 - own_share(ring)),
+                    _ => continue,
+                };
+                for &i in self.tables.triangle(membership, f, t) {
+                    self.push_corrected(set, f, i, &correction, edit);
+                    let last = set.len() - 1;
+                    note_anchor(&mut composite.anchored, anchors, last, f, i);
+                    relight_sh(set.sh_of_mut(last), &composite.relight_gains, f, i);
+                }
+            }
+            if set.len() > start {
+                composite.blocks.push(Block {
+                    region: p,
+                    source: f,
+                    extra_from: Some(r),
+                    start,
+                    end: set.len(),
+                });
+            }
+        }
     }
 
     /// Whether a recipe's Gaussians depend on how the blend reshaped their
@@ -802,7 +820,7 @@ impl Engine {
     }
 
     /// Copies Gaussian `i` of source `f` into `set` with a colour correction and an
-    /// opacity edit; returns the colour gain used.
+    /// opacity edit.
     fn push_corrected(
         &self,
         set: &mut GaussianSet,
@@ -810,221 +828,171 @@ impl Engine {
         i: u32,
         correction: &Correction,
         opacity: OpacityEdit,
-    ) -> Vec3 {
+    ) {
         let src = &self.db.sources[f].gaussians;
         let i = i as usize;
-        let opacity_logit = match opacity {
-            OpacityEdit::Split(e) if e >= 1.0 => src.opacity_logit[i],
-            OpacityEdit::Split(e) => logit(split_opacity(sigmoid(src.opacity_logit[i]), e)),
-            OpacityEdit::Scale(s) => logit(sigmoid(src.opacity_logit[i]) * s),
-        };
+        set.push_from(src, i, opacity.apply(src.opacity_logit[i]));
         let gain = correction.gain(i);
-        set.push_from(src, i, opacity_logit);
         if gain != Vec3::ONE {
             let last = set.len() - 1;
             apply_gain(set.sh_of_mut(last), gain);
         }
-        gain
+    }
+
+    /// Copies every region's own Gaussians into `set` (sized for them), in
+    /// chunks on all threads: each corrected, cross-faded, relit and blended
+    /// across colour seams as `copying` says. The chunks' findings, in order.
+    fn copy_own(&self, copying: &CopyOwn, set: &mut GaussianSet) -> Vec<ChunkCopied> {
+        let mut chunks = Vec::new();
+        for (b, block) in copying.blocks.iter().enumerate() {
+            for (c, indices) in block.indices.chunks(COPY_CHUNK).enumerate() {
+                chunks.push((b, indices, block.start + c * COPY_CHUNK));
+            }
+        }
+        let ends: Vec<usize> = chunks.iter().map(|&(_, ind, at)| at + ind.len()).collect();
+        let ranges = set.ranges_mut(&ends);
+        chunks
+            .into_par_iter()
+            .zip(ranges)
+            .map_init(
+                || copying.seams.map(SeamColours::cache),
+                |cache, ((b, indices, start), mut range)| {
+                    let mut copied = ChunkCopied {
+                        block: b,
+                        gain_sum: Vec3::ZERO,
+                        anchored: Vec::new(),
+                        at_seams: Vec::new(),
+                    };
+                    let block = &copying.blocks[b];
+                    let f = block.source;
+                    let src = &self.db.sources[f].gaussians;
+                    let placed = self.tables.counted_triangles(copying.membership, f);
+                    for (at, &i) in (start..).zip(indices) {
+                        let exponent = copying.own_exponent[placed[i as usize] as usize];
+                        let opacity =
+                            OpacityEdit::Split(exponent).apply(src.opacity_logit[i as usize]);
+                        range.set_from(at, src, i as usize, opacity);
+                        let sh = range.sh_of_mut(at);
+                        let gain = block.correction.gain(i as usize);
+                        if gain != Vec3::ONE {
+                            apply_gain(sh, gain);
+                        }
+                        copied.gain_sum += gain;
+                        note_anchor(&mut copied.anchored, block.anchors, at, f, i);
+                        relight_sh(sh, copying.relight, f, i);
+                        if let (Some(seams), Some(cache)) = (copying.seams, cache.as_mut()) {
+                            if seams.blend(self, cache, f, i, sh) {
+                                copied.at_seams.push(at as u32);
+                            }
+                        }
+                    }
+                    copied
+                },
+            )
+            .collect()
     }
 }
 
-/// Relights the last Gaussian of `set`, Gaussian `i` of source `f`, by its
-/// gain in `gains` (`shading = "relit"`, docs/method.md §7.10); nothing when
-/// the source has none (not relit, or no light fitted). Done as each
-/// Gaussian is copied in, while its colour is in the cache.
-fn relight_last(set: &mut GaussianSet, gains: &[Vec<Vec3>], f: usize, i: u32) {
+/// Gaussians one task copies when a composite's own Gaussians are copied in
+/// parallel: large enough that a task's start-up and its seam cache are
+/// paid back, small enough that two cores share a region.
+const COPY_CHUNK: usize = 4096;
+
+/// One region's own Gaussians as a composite copies them.
+struct OwnBlock<'e> {
+    region: Region,
+    source: usize,
+    /// The source's Gaussians counted for the region.
+    indices: &'e [u32],
+    correction: Correction,
+    /// The source's anchored Gaussians, under `anchor = "nearest"`.
+    anchors: Option<&'e SourceAnchors>,
+    /// Where the first lands in the composite.
+    start: usize,
+}
+
+/// How a composite's own Gaussians are copied.
+struct CopyOwn<'e> {
+    blocks: &'e [OwnBlock<'e>],
+    membership: Membership,
+    /// Per triangle: the cross-fade's opacity exponent of own Gaussians
+    /// counted for it (1 where it keeps them whole).
+    own_exponent: &'e [f32],
+    seams: Option<&'e SeamColours<'e>>,
+    /// Per source, per Gaussian: its relighting gain (empty where not relit).
+    relight: &'e [Vec<Vec3>],
+}
+
+/// What copying one chunk found beside the Gaussians themselves.
+struct ChunkCopied {
+    /// The chunk's block in [`CopyOwn::blocks`].
+    block: usize,
+    /// The sum of its Gaussians' colour gains.
+    gain_sum: Vec3,
+    /// Its Gaussians that follow another triangle than their parent.
+    anchored: Vec<Anchored>,
+    /// Its Gaussians near another source's triangles.
+    at_seams: Vec<u32>,
+}
+
+/// Relights the SH `sh` of Gaussian `i` of source `f` by its gain in `gains`
+/// (`shading = "relit"`, docs/method.md §7.10); nothing when the source has
+/// none (not relit, or no light fitted). Done as each Gaussian is copied in,
+/// while its colour is in the cache.
+fn relight_sh(sh: &mut [f32], gains: &[Vec<Vec3>], f: usize, i: u32) {
     let gain = gains
         .get(f)
         .and_then(|g| g.get(i as usize))
         .copied()
         .unwrap_or(Vec3::ONE);
     if gain != Vec3::ONE {
-        let last = set.len() - 1;
         // The DC coefficients only: the baked diffuse light lives there, the
         // view-dependent bands stay as trained (a few percent of a skin
         // Gaussian's colour; scaling them too cost as much again as an edit).
-        apply_gain(&mut set.sh_of_mut(last)[..3], gain);
+        apply_gain(&mut sh[..3], gain);
     }
 }
 
-/// Colour seams of one composite (`smoothing = "blend"`, docs/method.md
-/// §7.8): every own Gaussian within half a seam width of another source's
-/// triangles moves its colour towards that source's local colour there.
-struct SeamColours<'a> {
-    recipe: &'a ResolvedRecipe,
-    field: SeamField,
-    /// Per triangle: the source it wears.
-    looks: Vec<u32>,
-    /// Per triangle: whether a corner is within half a seam width of
-    /// another source than the one it wears.
-    near: Vec<bool>,
-    /// Per source shown (as `field.sources()`), per vertex: that source's
-    /// local colour, corrected as the composite corrects it, filled on demand.
-    vertex_colour: Vec<Vec<Option<Option<Vec3>>>>,
-    /// Colour corrections by (source, region), made on demand.
-    corrections: HashMap<(usize, Region), Correction>,
-}
-
-impl<'a> SeamColours<'a> {
-    fn new(engine: &Engine, recipe: &'a ResolvedRecipe) -> Self {
-        let model = &engine.db.model;
-        let looks: Vec<u32> = model
-            .triangle_regions
-            .iter()
-            .map(|&r| Engine::source_of(recipe, r) as u32)
-            .collect();
-        let neighbours = engine
-            .seam_neighbours
-            .get_or_init(|| SeamNeighbours::new(&model.template));
-        let field = SeamField::with_neighbours(model, neighbours, &looks);
-        // A triangle none of whose corners is near another source is
-        // untouched: the interpolated distance cannot be nearer than the
-        // nearest corner.
-        let near = model
-            .triangles
-            .iter()
-            .zip(&looks)
-            .map(|(tri, &own)| {
-                field.sources().iter().filter(|&&s| s != own).any(|&s| {
-                    let d = field.distances(s).unwrap_or_default();
-                    tri.iter().any(|&v| d[v as usize] < SEAM_WIDTH / 2.0)
-                })
-            })
-            .collect();
-        let vertex_colour = vec![vec![None; model.vertex_count()]; field.sources().len()];
-        Self {
-            recipe,
-            field,
-            looks,
-            near,
-            vertex_colour,
-            corrections: HashMap::new(),
-        }
+impl SeamSources for Engine {
+    fn model(&self) -> &HeadModel {
+        &self.db.model
     }
 
-    /// Blends the SH of source `f`'s Gaussian `i` (already corrected) towards
-    /// the nearest other source's local colour by the seam weight; whether
-    /// it sits near another source's triangles at all.
-    fn blend(&mut self, engine: &Engine, f: usize, i: u32, sh: &mut [f32]) -> bool {
-        let membership = self.recipe.post.membership;
-        let t = engine.tables.counted_triangles(membership, f)[i as usize];
-        if !self.near[t as usize] {
-            return false;
-        }
-        if self.blend_by_footprint(engine, f, i, sh) {
-            return true;
-        }
-        let tri = engine.db.model.triangles[t as usize];
-        let bary = engine.placements_of(membership, f)[i as usize];
-        let Some(seam) = self.field.blend_at(tri, bary, f as u32) else {
-            return true;
-        };
-        let mut sum = Vec3::ZERO;
-        let mut total = 0.0;
-        for (k, &v) in tri.iter().enumerate() {
-            if let Some(c) = self.colour_at(engine, seam.other as usize, v) {
-                sum += bary[k] * c;
-                total += bary[k];
-            }
-        }
-        if total > 0.0 {
-            blend_towards(sh, sum / total, seam.weight);
-        }
-        true
+    fn seam_neighbours(&self) -> &SeamNeighbours {
+        self.seam_neighbours
+            .get_or_init(|| SeamNeighbours::new(&self.db.model.template))
     }
 
-    /// A Gaussian whose footprint lies mostly over one other source's
-    /// triangles (at least `FOOTPRINT_MAJORITY` of its four points) paints
-    /// mostly where the truth shows that source: it takes that source's
-    /// colour there, in the share of its points that lie there. Whether it
-    /// did.
-    fn blend_by_footprint(&mut self, engine: &Engine, f: usize, i: u32, sh: &mut [f32]) -> bool {
-        let points = engine.footprints_of(f)[i as usize];
-        let wearing = |t: u32| self.looks.get(t as usize).copied();
-        let others = points.map(|t| wearing(t).filter(|&s| s != f as u32));
-        let count = |s: u32| others.iter().filter(|&&o| o == Some(s)).count();
-        // A majority of the four holds the first or the second point.
-        let Some((other, count)) = others[..2]
-            .iter()
-            .flatten()
-            .map(|&s| (s, count(s)))
-            .find(|&(_, n)| n >= FOOTPRINT_MAJORITY)
-        else {
-            return false;
-        };
-        let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
-        for (&t, o) in points.iter().zip(others) {
-            if o != Some(other) {
-                continue;
-            }
-            for v in engine.db.model.triangles[t as usize] {
-                if let Some(c) = self.colour_at(engine, other as usize, v) {
-                    sum += c;
-                    total += 1.0;
-                }
-            }
-        }
-        if total == 0.0 {
-            return false;
-        }
-        blend_towards(sh, sum / total, count as f32 / points.len() as f32);
-        true
+    fn counted_triangles(&self, membership: Membership, source: usize) -> &[u32] {
+        self.tables.counted_triangles(membership, source)
     }
 
-    /// Source `s`'s local colour at vertex `v`: the mean colour of its
-    /// Gaussians counted for the triangles around `v`, each weighted by its
-    /// opacity and size (method §7.5) and by its barycentric share of `v`.
-    fn colour_at(&mut self, engine: &Engine, s: usize, v: u32) -> Option<Vec3> {
-        let k = self.field.sources().binary_search(&(s as u32)).ok()?;
-        if let Some(known) = self.vertex_colour[k][v as usize] {
-            return known;
-        }
-        let membership = self.recipe.post.membership;
-        let bary = engine.placements_of(membership, s);
-        let weights = engine.colour_weights_of(s);
-        let model = &engine.db.model;
-        let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
-        for &t in engine.vertex_triangles.row(v as usize) {
-            let corner = model.triangles[t as usize].iter().position(|&u| u == v);
-            let Some(corner) = corner else { continue };
-            let region = model.triangle_regions[t as usize];
-            let correction = self
-                .corrections
-                .entry((s, region))
-                .or_insert_with(|| engine.correction(self.recipe, region, s));
-            for &j in engine.tables.triangle(membership, s, t) {
-                let j = j as usize;
-                let w = weights[j] * bary[j][corner];
-                if w <= 0.0 {
-                    continue;
-                }
-                // As the cameras saw it: the colour the seam blends
-                // towards is the colour the other side shows.
-                sum += w * engine.seen[s][j] * correction.gain(j);
-                total += w;
-            }
-        }
-        let colour = (total > 0.0 && sum.is_finite()).then(|| sum / total);
-        self.vertex_colour[k][v as usize] = Some(colour);
-        colour
+    fn triangle_gaussians(&self, membership: Membership, source: usize, triangle: u32) -> &[u32] {
+        self.tables.triangle(membership, source, triangle)
     }
-}
 
-/// A colour correction for a block of Gaussians.
-enum Correction {
-    None,
-    Gain(Vec3),
-    PerGaussian(SharedGains),
-}
+    fn placements(&self, membership: Membership, source: usize) -> &[[f32; 3]] {
+        self.placements_of(membership, source)
+    }
 
-impl Correction {
-    /// The gain of Gaussian `i` of the block's source.
-    fn gain(&self, i: usize) -> Vec3 {
-        match self {
-            Correction::None => Vec3::ONE,
-            Correction::Gain(g) => *g,
-            Correction::PerGaussian(g) => g[i],
-        }
+    fn footprints(&self, source: usize) -> &[[u32; 4]] {
+        self.footprints_of(source)
+    }
+
+    fn colour_weights(&self, source: usize) -> &[f32] {
+        self.colour_weights_of(source)
+    }
+
+    fn seen(&self, source: usize) -> &[Vec3] {
+        &self.seen[source]
+    }
+
+    fn triangles_around(&self, v: u32) -> &[u32] {
+        self.vertex_triangles.row(v as usize)
+    }
+
+    fn correction(&self, recipe: &ResolvedRecipe, region: Region, source: usize) -> Correction {
+        Engine::correction(self, recipe, region, source)
     }
 }
 
@@ -1035,4 +1003,15 @@ enum OpacityEdit {
     Split(f32),
     /// α' = s·α.
     Scale(f32),
+}
+
+impl OpacityEdit {
+    /// The edited opacity logit of a Gaussian whose logit is `logit`.
+    fn apply(self, logit_in: f32) -> f32 {
+        match self {
+            OpacityEdit::Split(e) if e >= 1.0 => logit_in,
+            OpacityEdit::Split(e) => logit(split_opacity(sigmoid(logit_in), e)),
+            OpacityEdit::Scale(s) => logit(sigmoid(logit_in) * s),
+        }
+    }
 }

@@ -4,6 +4,7 @@
 pub mod blend;
 pub mod colour;
 pub mod composition;
+pub mod correction;
 pub mod deform;
 pub mod engine;
 pub mod membership;
@@ -11,6 +12,7 @@ pub mod random;
 pub mod recipe;
 pub mod reshape;
 pub mod rules;
+pub mod seam_colours;
 pub mod seams;
 pub mod selection;
 pub mod shading;

@@ -64,13 +64,13 @@ pub struct Anchored {
     slot: u32,
 }
 
-/// Notes the last Gaussian of `set`, Gaussian `i` of source `f`, in
+/// Notes the composite's Gaussian `at`, Gaussian `i` of source `f`, in
 /// `anchored` when `anchors` (the source's, under `anchor = "nearest"`) has
 /// it follow another triangle than its parent.
 pub fn note_anchor(
     anchored: &mut Vec<Anchored>,
     anchors: Option<&SourceAnchors>,
-    set: &GaussianSet,
+    at: usize,
     f: usize,
     i: u32,
 ) {
@@ -79,7 +79,7 @@ pub fn note_anchor(
     };
     if slot != u32::MAX {
         anchored.push(Anchored {
-            at: (set.len() - 1) as u32,
+            at: at as u32,
             source: f as u32,
             slot,
         });

@@ -127,6 +127,48 @@ impl GaussianSet {
         self.sh.reserve(additional * self.sh_stride());
     }
 
+    /// Sets the number of Gaussians to `n` with SH degree `sh_degree`, for
+    /// filling through [`GaussianSet::ranges_mut`]. Gaussians kept keep
+    /// their values and new ones are zero, so every one must be written;
+    /// shrinking, or growing within the allocations, costs nothing per
+    /// Gaussian already there.
+    pub fn resize(&mut self, n: usize, sh_degree: u8) {
+        if sh_degree != self.sh_degree {
+            self.clear(sh_degree);
+        }
+        self.binding.resize(n, 0);
+        self.position.resize(n, Vec3::ZERO);
+        self.rotation.resize(n, Quat::IDENTITY);
+        self.log_scale.resize(n, Vec3::ZERO);
+        self.opacity_logit.resize(n, 0.0);
+        self.sh.resize(n * self.sh_stride(), 0.0);
+    }
+
+    /// Mutable views of the consecutive ranges `0..ends[0]`, `ends[0]..ends[1]`,
+    /// …, for writing disjoint parts of the set in parallel. `ends` must
+    /// ascend and end at most at `len()`.
+    pub fn ranges_mut(&mut self, ends: &[usize]) -> Vec<GaussianRange<'_>> {
+        let stride = self.sh_stride();
+        let mut rest = GaussianRange {
+            start: 0,
+            binding: &mut self.binding,
+            position: &mut self.position,
+            rotation: &mut self.rotation,
+            log_scale: &mut self.log_scale,
+            opacity_logit: &mut self.opacity_logit,
+            sh: &mut self.sh,
+            stride,
+        };
+        let mut ranges = Vec::with_capacity(ends.len());
+        for &end in ends {
+            let n = end - rest.start;
+            let (head, tail) = rest.split_at(n);
+            ranges.push(head);
+            rest = tail;
+        }
+        ranges
+    }
+
     /// Appends Gaussian `i` of `other` with a new opacity logit. SH beyond this
     /// set's degree are dropped; missing ones are zero.
     pub fn push_from(&mut self, other: &GaussianSet, i: usize, opacity_logit: f32) {
@@ -182,6 +224,90 @@ impl GaussianSet {
     }
 }
 
+/// A mutable view of consecutive Gaussians of a [`GaussianSet`], made by
+/// [`GaussianSet::ranges_mut`]; indices are the set's own.
+pub struct GaussianRange<'a> {
+    start: usize,
+    binding: &'a mut [u32],
+    position: &'a mut [Vec3],
+    rotation: &'a mut [Quat],
+    log_scale: &'a mut [Vec3],
+    opacity_logit: &'a mut [f32],
+    sh: &'a mut [f32],
+    stride: usize,
+}
+
+impl<'a> GaussianRange<'a> {
+    /// The set's index of the view's first Gaussian.
+    pub fn start(&self) -> usize {
+        self.start
+    }
+
+    /// Number of Gaussians in the view.
+    pub fn len(&self) -> usize {
+        self.binding.len()
+    }
+
+    /// True when the view holds no Gaussian.
+    pub fn is_empty(&self) -> bool {
+        self.binding.is_empty()
+    }
+
+    /// Writes Gaussian `i` of `other` at the set's index `at` with a new
+    /// opacity logit. SH beyond the set's degree are dropped; missing ones
+    /// are zero.
+    pub fn set_from(&mut self, at: usize, other: &GaussianSet, i: usize, opacity_logit: f32) {
+        let k = at - self.start;
+        self.binding[k] = other.binding[i];
+        self.position[k] = other.position[i];
+        self.rotation[k] = other.rotation[i];
+        self.log_scale[k] = other.log_scale[i];
+        self.opacity_logit[k] = opacity_logit;
+        let sh = other.sh_of(i);
+        let take = sh.len().min(self.stride);
+        let to = self.sh_of_mut(at);
+        to[..take].copy_from_slice(&sh[..take]);
+        to[take..].fill(0.0);
+    }
+
+    /// Mutable SH coefficients of the Gaussian at the set's index `at`.
+    pub fn sh_of_mut(&mut self, at: usize) -> &mut [f32] {
+        let k = at - self.start;
+        &mut self.sh[k * self.stride..(k + 1) * self.stride]
+    }
+
+    /// The first `n` Gaussians and the rest.
+    fn split_at(self, n: usize) -> (GaussianRange<'a>, GaussianRange<'a>) {
+        let (b0, b1) = self.binding.split_at_mut(n);
+        let (p0, p1) = self.position.split_at_mut(n);
+        let (r0, r1) = self.rotation.split_at_mut(n);
+        let (l0, l1) = self.log_scale.split_at_mut(n);
+        let (o0, o1) = self.opacity_logit.split_at_mut(n);
+        let (s0, s1) = self.sh.split_at_mut(n * self.stride);
+        let head = GaussianRange {
+            start: self.start,
+            binding: b0,
+            position: p0,
+            rotation: r0,
+            log_scale: l0,
+            opacity_logit: o0,
+            sh: s0,
+            stride: self.stride,
+        };
+        let tail = GaussianRange {
+            start: self.start + n,
+            binding: b1,
+            position: p1,
+            rotation: r1,
+            log_scale: l1,
+            opacity_logit: o1,
+            sh: s1,
+            stride: self.stride,
+        };
+        (head, tail)
+    }
+}
+
 /// Logistic sigmoid.
 pub fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
@@ -203,6 +329,51 @@ mod tests {
             assert_eq!(sh_degree_for(sh_coefficients(d)), Some(d));
         }
         assert_eq!(sh_degree_for(5), None);
+    }
+
+    /// A set of `n` Gaussians of degree `d` whose every value tells which it is.
+    fn numbered(n: usize, d: u8, base: f32) -> GaussianSet {
+        let mut set = GaussianSet::with_degree(d);
+        for i in 0..n {
+            let x = base + i as f32;
+            let sh: Vec<f32> = (0..set.sh_stride()).map(|k| x + 0.01 * k as f32).collect();
+            set.push(
+                i as u32,
+                Vec3::splat(x),
+                Quat::from_xyzw(x, 0.0, 0.0, 1.0),
+                -Vec3::splat(x),
+                x,
+                &sh,
+            );
+        }
+        set
+    }
+
+    #[test]
+    fn ranges_written_in_any_order_equal_the_same_gaussians_pushed() {
+        for (from_degree, to_degree) in [(1, 1), (3, 1), (0, 2)] {
+            let source = numbered(9, from_degree, 10.0);
+            let order = [4usize, 0, 8, 2, 7, 1, 5, 3, 6];
+            let mut pushed = GaussianSet::with_degree(to_degree);
+            for &i in &order {
+                pushed.push_from(&source, i, -(i as f32));
+            }
+            // Reused: stale values of another degree and length first.
+            let mut filled = numbered(12, 3, 100.0);
+            filled.resize(order.len(), to_degree);
+            let mut ranges = filled.ranges_mut(&[2, 2, 6, 9]);
+            assert_eq!(
+                ranges.iter().map(|r| r.len()).collect::<Vec<_>>(),
+                [2, 0, 4, 3]
+            );
+            for range in ranges.iter_mut().rev() {
+                let start = range.start();
+                for (at, &i) in order.iter().enumerate().skip(start).take(range.len()) {
+                    range.set_from(at, &source, i, -(i as f32));
+                }
+            }
+            assert_eq!(filled, pushed, "degree {from_degree} into {to_degree}");
+        }
     }
 
     #[test]
