@@ -12,6 +12,7 @@ use super::colour::{
     apply_gain, colour_weight, hair_chromaticity, seen_colours, semantic_skin_gain, skin_stats,
     skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
 };
+use super::copying::{copy_own, relight_sh, CopyOwn, OpacityEdit, OwnBlock};
 use super::correction::{Correction, SharedGains};
 use super::membership::{footprint_triangles, placements};
 use super::recipe::{
@@ -19,14 +20,14 @@ use super::recipe::{
     Shading, Smoothing,
 };
 use super::reshape::{note_anchor, Anchored, ReshapeSource, Reshaping, SourceAnchors};
-use super::seam_colours::{SeamColours, SeamSources};
+use super::seam_colours::{SeamColours, SourceTables};
 use super::seams::{limit_reach, SeamNeighbours};
 use super::selection::{Csr, SelectionTables};
 use super::shading::{source_light, vertex_exposures, BakedLight, Exposure};
-use super::smoothing::{own_share, split_opacity, BorderTables};
+use super::smoothing::{own_share, BorderTables};
 use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
 use crate::avatar::database::Database;
-use crate::avatar::gaussians::{logit, sigmoid, GaussianSet};
+use crate::avatar::gaussians::GaussianSet;
 use crate::error::Result;
 use crate::model::head::{HeadModel, Joint, Pose};
 use crate::model::regions::Region;
@@ -647,7 +648,7 @@ impl Engine {
             seams: seams.as_ref(),
             relight: &composite.relight_gains,
         };
-        let copied = self.copy_own(&copying, set);
+        let copied = copy_own(self, &copying, set);
         let blocks = &mut composite.blocks;
         blocks.clear();
         let anchored = &mut composite.anchored;
@@ -838,124 +839,15 @@ impl Engine {
             apply_gain(set.sh_of_mut(last), gain);
         }
     }
-
-    /// Copies every region's own Gaussians into `set` (sized for them), in
-    /// chunks on all threads: each corrected, cross-faded, relit and blended
-    /// across colour seams as `copying` says. The chunks' findings, in order.
-    fn copy_own(&self, copying: &CopyOwn, set: &mut GaussianSet) -> Vec<ChunkCopied> {
-        let mut chunks = Vec::new();
-        for (b, block) in copying.blocks.iter().enumerate() {
-            for (c, indices) in block.indices.chunks(COPY_CHUNK).enumerate() {
-                chunks.push((b, indices, block.start + c * COPY_CHUNK));
-            }
-        }
-        let ends: Vec<usize> = chunks.iter().map(|&(_, ind, at)| at + ind.len()).collect();
-        let ranges = set.ranges_mut(&ends);
-        chunks
-            .into_par_iter()
-            .zip(ranges)
-            .map_init(
-                || copying.seams.map(SeamColours::cache),
-                |cache, ((b, indices, start), mut range)| {
-                    let mut copied = ChunkCopied {
-                        block: b,
-                        gain_sum: Vec3::ZERO,
-                        anchored: Vec::new(),
-                        at_seams: Vec::new(),
-                    };
-                    let block = &copying.blocks[b];
-                    let f = block.source;
-                    let src = &self.db.sources[f].gaussians;
-                    let placed = self.tables.counted_triangles(copying.membership, f);
-                    for (at, &i) in (start..).zip(indices) {
-                        let exponent = copying.own_exponent[placed[i as usize] as usize];
-                        let opacity =
-                            OpacityEdit::Split(exponent).apply(src.opacity_logit[i as usize]);
-                        range.set_from(at, src, i as usize, opacity);
-                        let sh = range.sh_of_mut(at);
-                        let gain = block.correction.gain(i as usize);
-                        if gain != Vec3::ONE {
-                            apply_gain(sh, gain);
-                        }
-                        copied.gain_sum += gain;
-                        note_anchor(&mut copied.anchored, block.anchors, at, f, i);
-                        relight_sh(sh, copying.relight, f, i);
-                        if let (Some(seams), Some(cache)) = (copying.seams, cache.as_mut()) {
-                            if seams.blend(self, cache, f, i, sh) {
-                                copied.at_seams.push(at as u32);
-                            }
-                        }
-                    }
-                    copied
-                },
-            )
-            .collect()
-    }
 }
 
-/// Gaussians one task copies when a composite's own Gaussians are copied in
-/// parallel: large enough that a task's start-up and its seam cache are
-/// paid back, small enough that two cores share a region.
-const COPY_CHUNK: usize = 4096;
-
-/// One region's own Gaussians as a composite copies them.
-struct OwnBlock<'e> {
-    region: Region,
-    source: usize,
-    /// The source's Gaussians counted for the region.
-    indices: &'e [u32],
-    correction: Correction,
-    /// The source's anchored Gaussians, under `anchor = "nearest"`.
-    anchors: Option<&'e SourceAnchors>,
-    /// Where the first lands in the composite.
-    start: usize,
-}
-
-/// How a composite's own Gaussians are copied.
-struct CopyOwn<'e> {
-    blocks: &'e [OwnBlock<'e>],
-    membership: Membership,
-    /// Per triangle: the cross-fade's opacity exponent of own Gaussians
-    /// counted for it (1 where it keeps them whole).
-    own_exponent: &'e [f32],
-    seams: Option<&'e SeamColours<'e>>,
-    /// Per source, per Gaussian: its relighting gain (empty where not relit).
-    relight: &'e [Vec<Vec3>],
-}
-
-/// What copying one chunk found beside the Gaussians themselves.
-struct ChunkCopied {
-    /// The chunk's block in [`CopyOwn::blocks`].
-    block: usize,
-    /// The sum of its Gaussians' colour gains.
-    gain_sum: Vec3,
-    /// Its Gaussians that follow another triangle than their parent.
-    anchored: Vec<Anchored>,
-    /// Its Gaussians near another source's triangles.
-    at_seams: Vec<u32>,
-}
-
-/// Relights the SH `sh` of Gaussian `i` of source `f` by its gain in `gains`
-/// (`shading = "relit"`, docs/method.md §7.10); nothing when the source has
-/// none (not relit, or no light fitted). Done as each Gaussian is copied in,
-/// while its colour is in the cache.
-fn relight_sh(sh: &mut [f32], gains: &[Vec<Vec3>], f: usize, i: u32) {
-    let gain = gains
-        .get(f)
-        .and_then(|g| g.get(i as usize))
-        .copied()
-        .unwrap_or(Vec3::ONE);
-    if gain != Vec3::ONE {
-        // The DC coefficients only: the baked diffuse light lives there, the
-        // view-dependent bands stay as trained (a few percent of a skin
-        // Gaussian's colour; scaling them too cost as much again as an edit).
-        apply_gain(&mut sh[..3], gain);
-    }
-}
-
-impl SeamSources for Engine {
+impl SourceTables for Engine {
     fn model(&self) -> &HeadModel {
         &self.db.model
+    }
+
+    fn gaussians(&self, source: usize) -> &GaussianSet {
+        &self.db.sources[source].gaussians
     }
 
     fn seam_neighbours(&self) -> &SeamNeighbours {
@@ -993,25 +885,5 @@ impl SeamSources for Engine {
 
     fn correction(&self, recipe: &ResolvedRecipe, region: Region, source: usize) -> Correction {
         Engine::correction(self, recipe, region, source)
-    }
-}
-
-/// How a copied Gaussian's opacity changes.
-#[derive(Clone, Copy, Debug)]
-enum OpacityEdit {
-    /// α' = 1 − (1 − α)^e (1 leaves it unchanged).
-    Split(f32),
-    /// α' = s·α.
-    Scale(f32),
-}
-
-impl OpacityEdit {
-    /// The edited opacity logit of a Gaussian whose logit is `logit`.
-    fn apply(self, logit_in: f32) -> f32 {
-        match self {
-            OpacityEdit::Split(e) if e >= 1.0 => logit_in,
-            OpacityEdit::Split(e) => logit(split_opacity(sigmoid(logit_in), e)),
-            OpacityEdit::Scale(s) => logit(sigmoid(logit_in) * s),
-        }
     }
 }

@@ -4,6 +4,7 @@
 pub mod blend;
 pub mod colour;
 pub mod composition;
+pub mod copying;
 pub mod correction;
 pub mod deform;
 pub mod engine;

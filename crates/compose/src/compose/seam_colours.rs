@@ -18,13 +18,17 @@ use super::correction::Correction;
 use super::membership::FOOTPRINT_MAJORITY;
 use super::recipe::{Membership, ResolvedRecipe};
 use super::seams::{SeamField, SeamNeighbours, SEAM_WIDTH};
+use crate::avatar::gaussians::GaussianSet;
 use crate::model::head::HeadModel;
 use crate::model::regions::Region;
 
-/// What colour seams read of the sources (the engine's per-source tables).
-pub trait SeamSources: Sync {
+/// What copying a composite's Gaussians and its colour seams read of the
+/// sources: the engine's per-source tables.
+pub trait SourceTables: Sync {
     /// The head model every source shares.
     fn model(&self) -> &HeadModel;
+    /// The Gaussians of `source`.
+    fn gaussians(&self, source: usize) -> &GaussianSet;
     /// The template's seam neighbourhoods.
     fn seam_neighbours(&self) -> &SeamNeighbours;
     /// Per Gaussian of `source`: the triangle it counts for under `membership`.
@@ -71,7 +75,7 @@ pub struct SeamCache {
 impl<'a> SeamColours<'a> {
     /// The seams of the composite `recipe` makes: triangle `t` wears
     /// `looks[t]`, the source of the group its region belongs to.
-    pub fn new(sources: &impl SeamSources, recipe: &'a ResolvedRecipe, looks: Vec<u32>) -> Self {
+    pub fn new(sources: &impl SourceTables, recipe: &'a ResolvedRecipe, looks: Vec<u32>) -> Self {
         let model = sources.model();
         let field = SeamField::with_neighbours(model, sources.seam_neighbours(), &looks);
         // A triangle none of whose corners is near another source is
@@ -109,7 +113,7 @@ impl<'a> SeamColours<'a> {
     /// it sits near another source's triangles at all.
     pub fn blend(
         &self,
-        sources: &impl SeamSources,
+        sources: &impl SourceTables,
         cache: &mut SeamCache,
         f: usize,
         i: u32,
@@ -149,7 +153,7 @@ impl<'a> SeamColours<'a> {
     /// did.
     fn blend_by_footprint(
         &self,
-        sources: &impl SeamSources,
+        sources: &impl SourceTables,
         cache: &mut SeamCache,
         f: usize,
         i: u32,
@@ -192,7 +196,7 @@ impl<'a> SeamColours<'a> {
     /// opacity and size (method §7.5) and by its barycentric share of `v`.
     fn colour_at(
         &self,
-        sources: &impl SeamSources,
+        sources: &impl SourceTables,
         cache: &mut SeamCache,
         s: usize,
         v: u32,
