@@ -12,7 +12,8 @@ use visage::compose::blend::Blender;
 use visage::compose::colour::{weighted_mean_colour, GAIN_RANGE};
 use visage::compose::engine::{Engine, PosedMesh};
 use visage::compose::recipe::{
-    AnimationMode, ColourCorrection, GroupEdit, PostProcess, Recipe, ResolvedRecipe, Smoothing,
+    AnimationMode, ColourCorrection, GroupEdit, PostProcess, Recipe, ResolvedRecipe, SkinSource,
+    Smoothing,
 };
 use visage::compose::state_hash;
 use visage::model::builtin::build_head;
@@ -640,6 +641,81 @@ fn a_composite_is_the_same_on_any_number_of_threads_and_after_any_edit() {
     assert!(edited.gaussians.len() > one.gaussians.len());
     e.update(&mut edited, &best);
     assert_eq!(edited.gaussians, one.gaussians);
+}
+
+#[test]
+fn skin_from_the_base_takes_over_swapped_skin_only_where_the_base_shapes_it() {
+    let e = engine();
+    let n = names(e);
+    let (base, other) = (0, 1);
+    let compose = |shape: &[(&str, f64)], skin: SkinSource| {
+        let mut r = Recipe::unedited(&n[base]);
+        r.post = PostProcess {
+            skin,
+            ..PostProcess::BEST
+        };
+        for group in ["nose", "mouth"] {
+            r.groups.insert(group.into(), edit(&n[other], shape));
+        }
+        e.compose(&resolve(e, &r))
+    };
+    let source_gaussians = &e.database().sources[other].gaussians;
+    // The source's own shape (the base's weight 0): nothing changes, to the bit.
+    let own_shape = [(n[other].as_str(), 1.0)];
+    let kept = compose(&own_shape, SkinSource::Source);
+    let same = compose(&own_shape, SkinSource::Base);
+    assert_eq!(same.gaussians, kept.gaussians);
+    assert_eq!(same.blocks, kept.blocks);
+    // The base's shape: the base's skin shows in the swapped regions and
+    // the source's skin gives way, its lips do not.
+    let base_shape = [(n[base].as_str(), 1.0)];
+    let before = compose(&base_shape, SkinSource::Source);
+    let after = compose(&base_shape, SkinSource::Base);
+    after
+        .gaussians
+        .validate(e.database().model.triangle_count())
+        .unwrap();
+    assert!(after.gaussians.opacity_logit.iter().all(|x| x.is_finite()));
+    let block = |c: &visage::compose::engine::Composite, region: Region, source: usize| {
+        c.blocks
+            .iter()
+            .find(|b| b.region == region && b.source == source && b.extra_from.is_none())
+            .copied()
+    };
+    let base_nose = block(&after, Region::Nose, base).expect("the base's skin on the nose");
+    assert!(base_nose.end - base_nose.start > 20, "{base_nose:?}");
+    assert!(block(&before, Region::Nose, base).is_none());
+    let opacity_sum = |c: &visage::compose::engine::Composite,
+                       b: visage::compose::engine::Block| {
+        (b.start..b.end)
+            .map(|i| sigmoid(c.gaussians.opacity_logit[i]))
+            .sum::<f32>()
+    };
+    let nose_before = block(&before, Region::Nose, other).unwrap();
+    let nose_after = block(&after, Region::Nose, other).unwrap();
+    assert!(
+        opacity_sum(&after, nose_after) < 0.5 * opacity_sum(&before, nose_before),
+        "the source's nose skin gives way"
+    );
+    // Lips are no skin: the source's lip Gaussians keep their opacity.
+    let lips = block(&after, Region::Lips, other).unwrap();
+    let full = (lips.start..lips.end)
+        .filter(|&i| {
+            let from = source_gaussians
+                .opacity_logit
+                .iter()
+                .zip(&source_gaussians.position)
+                .any(|(&o, &p)| {
+                    o == after.gaussians.opacity_logit[i] && p == after.gaussians.position[i]
+                });
+            from
+        })
+        .count();
+    assert!(
+        full * 2 > lips.end - lips.start,
+        "most lip Gaussians keep their opacity: {full} of {}",
+        lips.end - lips.start
+    );
 }
 
 /// Moves Gaussian `i` of `set` so its centre sits at `world` on the mesh

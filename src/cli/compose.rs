@@ -209,6 +209,7 @@ fn report(composer: &Composer, timings: &BuildTimings, frame: Option<usize>) -> 
         "deform": format!("{:?}", r.post.deform).to_lowercase(),
         "anchor": format!("{:?}", r.post.anchor).to_lowercase(),
         "shading": format!("{:?}", r.post.shading).to_lowercase(),
+        "skin": format!("{:?}", r.post.skin).to_lowercase(),
         "gaussians": c.gaussians.len(),
         "extra_gaussians": extra_total,
         "extras": extras,

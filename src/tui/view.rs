@@ -447,7 +447,7 @@ fn composite_sections(vm: &ViewModel) -> Vec<Section> {
         section(
             "post",
             vec![format!(
-                " base {} smoothing {} colour {} regions by {} deform {} anchor {} shading {}",
+                " base {} smoothing {} colour {} regions by {} deform {} anchor {} shading {} skin {}",
                 r.base,
                 lower(&r.post.smoothing),
                 lower(&r.post.colour),
@@ -455,6 +455,7 @@ fn composite_sections(vm: &ViewModel) -> Vec<Section> {
                 lower(&r.post.deform),
                 lower(&r.post.anchor),
                 lower(&r.post.shading),
+                lower(&r.post.skin),
             )],
         ),
         section(

@@ -12,7 +12,7 @@ use crate::compose::blend::Blender;
 use crate::compose::engine::{Engine, PosedMesh};
 use crate::compose::recipe::{
     Anchor, AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe,
-    Shading, Smoothing,
+    Shading, SkinSource, Smoothing,
 };
 use crate::error::{Error, Result};
 use crate::model::regions::Group;
@@ -119,6 +119,7 @@ pub fn run(args: &EngineBenchArgs) -> Result<()> {
         deform: Deform::Similarity,
         anchor: Anchor::Parent,
         shading: Shading::Kept,
+        skin: SkinSource::Source,
     };
     for &n in &args.sources {
         // A composite drawing on all n sources: random shape weights and assignment.

@@ -374,27 +374,39 @@ pub fn strict_skin_likeness(lab: Vec3, stats: &SkinStats) -> f32 {
 
 /// The semantic correction's gain for a Gaussian of `region` with display
 /// colour `rgb`: the skin transfer from `from` to `to` where it is skin,
-/// nothing where it is not (see [`holds_no_skin`], [`strict_skin_likeness`]).
+/// nothing where it is not (see [`semantic_skin_likeness`]).
 pub fn semantic_skin_gain(rgb: Vec3, region: Region, from: &SkinStats, to: &SkinStats) -> Vec3 {
+    let lab = srgb_to_lab(rgb);
+    match semantic_skin_likeness(rgb, region, from) {
+        Some(k) => transfer_gain(rgb, lab, k, from, to),
+        None => Vec3::ONE,
+    }
+}
+
+/// How surely a Gaussian of `region` with display colour `rgb` is skin, by
+/// the source's skin statistics `stats` (0 to 1): nothing in regions that
+/// hold no skin ([`holds_no_skin`]), the skin mode's likeness in regions
+/// mostly skin, a stricter one elsewhere ([`strict_skin_likeness`]). `None`
+/// for a colour with no CIELAB value (NaN).
+pub fn semantic_skin_likeness(rgb: Vec3, region: Region, stats: &SkinStats) -> Option<f32> {
     if holds_no_skin(region) {
-        return Vec3::ONE;
+        return Some(0.0);
     }
     let lab = srgb_to_lab(rgb);
     if !lab.is_finite() {
-        return Vec3::ONE;
+        return None;
     }
-    let k = if mostly_skin(region) {
-        skin_likeness(lab, from)
+    Some(if mostly_skin(region) {
+        skin_likeness(lab, stats)
     } else if matches!(region, Region::LeftEyeball | Region::RightEyeball) {
         // Lightness counted fully: a brown iris in shade is a dark skin's
         // hue and chroma, but far darker than the lid skin over the rim.
-        smoothstep(14.0, 8.0, (lab - from.mean).length())
+        smoothstep(14.0, 8.0, (lab - stats.mean).length())
     } else if region == Region::Remainder {
-        hairline_skin_likeness(rgb, lab, from)
+        hairline_skin_likeness(rgb, lab, stats)
     } else {
-        strict_skin_likeness(lab, from)
-    };
-    transfer_gain(rgb, lab, k, from, to)
+        strict_skin_likeness(lab, stats)
+    })
 }
 
 /// How surely a colour of the hairline's region (the remainder: temples,

@@ -7,6 +7,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::base_skin::SkinShare;
 use super::colour::apply_gain;
 use super::correction::Correction;
 use super::recipe::Membership;
@@ -48,8 +49,13 @@ pub fn copy_own(
                 let f = block.source;
                 let src = sources.gaussians(f);
                 let placed = sources.counted_triangles(copying.membership, f);
+                // The base's skin is the base's: no seam runs through it.
+                let of_base = block.skin.is_some_and(|s| s.of_base);
+                let seams = copying.seams.filter(|_| !of_base);
                 for (at, &i) in (start..).zip(indices) {
-                    let exponent = copying.own_exponent[placed[i as usize] as usize];
+                    let t = placed[i as usize];
+                    let share = block.skin.map_or(1.0, |s| s.of(i, t));
+                    let exponent = copying.own_exponent[t as usize] * share;
                     let opacity = OpacityEdit::Split(exponent).apply(src.opacity_logit[i as usize]);
                     range.set_from(at, src, i as usize, opacity);
                     let sh = range.sh_of_mut(at);
@@ -60,7 +66,7 @@ pub fn copy_own(
                     copied.gain_sum += gain;
                     note_anchor(&mut copied.anchored, block.anchors, at, f, i);
                     relight_sh(sh, copying.relight, f, i);
-                    if let (Some(seams), Some(cache)) = (copying.seams, cache.as_mut()) {
+                    if let (Some(seams), Some(cache)) = (seams, cache.as_mut()) {
                         if seams.blend(sources, cache, f, i, sh) {
                             copied.at_seams.push(at as u32);
                         }
@@ -91,6 +97,9 @@ pub struct OwnBlock<'e> {
     pub anchors: Option<&'e SourceAnchors>,
     /// Where the first lands in the composite.
     pub start: usize,
+    /// The share of its opacity each Gaussian keeps under `skin = "base"`
+    /// (all where `None`).
+    pub skin: Option<SkinShare<'e>>,
 }
 
 /// How a composite's own Gaussians are copied.

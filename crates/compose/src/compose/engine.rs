@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
+use super::base_skin::{base_skin_confidence, showing, skin_likeness, triangle_skin, SkinShare};
 use super::blend::{Blender, SparseRhs};
 use super::colour::{
     apply_gain, colour_weight, hair_chromaticity, seen_colours, semantic_skin_gain, skin_stats,
@@ -17,7 +18,7 @@ use super::correction::{Correction, SharedGains};
 use super::membership::{footprint_triangles, placements};
 use super::recipe::{
     Anchor, AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe,
-    Shading, Smoothing,
+    Shading, SkinSource, Smoothing,
 };
 use super::reshape::{note_anchor, Anchored, ReshapeSource, Reshaping, SourceAnchors};
 use super::seam_colours::{SeamColours, SourceTables};
@@ -73,6 +74,32 @@ pub struct Engine {
     /// `[source]` → the Gaussians that follow another triangle than their
     /// parent under `anchor = "nearest"` (method §6.8), computed on first use.
     anchors: Vec<OnceLock<SourceAnchors>>,
+    /// `[source][membership]` → how surely each Gaussian is skin, computed
+    /// on first use by `skin = "base"`.
+    skin_likeness: Vec<[OnceLock<Vec<f32>>; 2]>,
+    /// `[source][membership]` → per triangle, how much of what the source
+    /// shows there is skin, computed on first use by `skin = "base"`.
+    triangle_skin: Vec<[OnceLock<Vec<f32>>; 2]>,
+}
+
+/// What `skin = "base"` needs while one composite is selected.
+struct BaseSkin<'e> {
+    engine: &'e Engine,
+    membership: Membership,
+    /// Per triangle: how fully the base's skin takes over.
+    confidence: Vec<f32>,
+}
+
+impl BaseSkin<'_> {
+    /// The opacity share of `source`'s Gaussians, as the base's skin or as
+    /// the swapped-in source.
+    fn share(&self, source: usize, of_base: bool) -> SkinShare<'_> {
+        SkinShare {
+            likeness: self.engine.skin_likeness_of(source, self.membership),
+            confidence: &self.confidence,
+            of_base,
+        }
+    }
 }
 
 /// What a set of skin-transfer gains depends on: the source, the colour
@@ -269,6 +296,8 @@ impl Engine {
             colour_weights: (0..source_count).map(|_| OnceLock::new()).collect(),
             footprints: (0..source_count).map(|_| OnceLock::new()).collect(),
             anchors: (0..source_count).map(|_| OnceLock::new()).collect(),
+            skin_likeness: (0..source_count).map(|_| Default::default()).collect(),
+            triangle_skin: (0..source_count).map(|_| Default::default()).collect(),
         })
     }
 
@@ -613,20 +642,59 @@ impl Engine {
         }
         let anchors =
             |f: usize| (recipe.post.anchor == Anchor::Nearest).then(|| self.anchors_of(f));
+        let skin = (recipe.post.skin == SkinSource::Base).then(|| BaseSkin {
+            engine: self,
+            membership,
+            confidence: base_skin_confidence(recipe, &self.db.model.triangle_regions, |s| {
+                self.triangle_skin_of(s, membership)
+            }),
+        });
+        // Under `skin = "base"`, per region: the source's Gaussians that
+        // still show and the base's that show there.
+        let shown: Vec<Option<[Vec<u32>; 2]>> = Region::ALL
+            .iter()
+            .map(|&region| {
+                let f = Self::source_of(recipe, region);
+                let skin = skin.as_ref().filter(|_| f != recipe.base)?;
+                Some([(f, false), (recipe.base, true)].map(|(s, of_base)| {
+                    showing(
+                        skin.share(s, of_base),
+                        self.tables.region(membership, s, region),
+                        self.tables.counted_triangles(membership, s),
+                    )
+                }))
+            })
+            .collect();
         let mut own = Vec::with_capacity(Region::COUNT);
         let mut own_count = 0;
-        for region in Region::ALL {
+        for (region, shown) in Region::ALL.into_iter().zip(&shown) {
             let f = Self::source_of(recipe, region);
-            let indices = self.tables.region(membership, f, region);
-            own.push(OwnBlock {
-                region,
-                source: f,
-                indices,
-                correction: self.correction(recipe, region, f),
-                anchors: anchors(f),
-                start: own_count,
-            });
-            own_count += indices.len();
+            let parts: Vec<(usize, &[u32], Option<SkinShare>)> = match (shown, skin.as_ref()) {
+                (Some([own_part, base_part]), Some(skin)) => vec![
+                    (f, own_part.as_slice(), Some(skin.share(f, false))),
+                    (
+                        recipe.base,
+                        base_part.as_slice(),
+                        Some(skin.share(recipe.base, true)),
+                    ),
+                ],
+                _ => vec![(f, self.tables.region(membership, f, region), None)],
+            };
+            for (source, indices, share) in parts {
+                if indices.is_empty() && share.is_some_and(|s| s.of_base) {
+                    continue;
+                }
+                own.push(OwnBlock {
+                    region,
+                    source,
+                    indices,
+                    correction: self.correction(recipe, region, source),
+                    anchors: anchors(source),
+                    start: own_count,
+                    skin: share,
+                });
+                own_count += indices.len();
+            }
         }
         let set = &mut composite.gaussians;
         set.resize(own_count, degree);
@@ -666,7 +734,7 @@ impl Engine {
         }
         for (block, gain_sum) in own.iter().zip(gain_sums) {
             let n = block.indices.len();
-            if n > 0 {
+            if n > 0 && !block.skin.is_some_and(|s| s.of_base) {
                 gains[block.region.index()] = gain_sum / n as f32;
             }
             blocks.push(Block {
@@ -732,6 +800,31 @@ impl Engine {
         }
     }
 
+    /// Per Gaussian of `source`: how surely it is skin ([`skin_likeness`]).
+    fn skin_likeness_of(&self, source: usize, membership: Membership) -> &[f32] {
+        self.skin_likeness[source][membership as usize].get_or_init(|| {
+            skin_likeness(
+                &self.seen[source],
+                self.tables.counted_triangles(membership, source),
+                &self.db.model.triangle_regions,
+                self.skin[source].as_ref(),
+            )
+        })
+    }
+
+    /// Per triangle: how much of what `source` shows there is skin
+    /// ([`triangle_skin`]).
+    fn triangle_skin_of(&self, source: usize, membership: Membership) -> &[f32] {
+        self.triangle_skin[source][membership as usize].get_or_init(|| {
+            triangle_skin(
+                self.tables.counted_triangles(membership, source),
+                self.skin_likeness_of(source, membership),
+                self.colour_weights_of(source),
+                self.db.model.triangle_count(),
+            )
+        })
+    }
+
     /// Whether a recipe's Gaussians depend on how the blend reshaped their
     /// triangles beyond their parent's rotation and size (method §6.7, §6.8).
     fn follows_reshaping(post: &PostProcess) -> bool {
@@ -792,7 +885,9 @@ impl Engine {
         }
         let model = &self.db.model;
         let mut target = None;
-        for &f in &recipe.gaussians {
+        // Under `skin = "base"` the base shows in every swapped region.
+        let base = (recipe.post.skin == SkinSource::Base).then_some(recipe.base);
+        for f in recipe.gaussians.iter().copied().chain(base) {
             let (Some(light), true) = (self.lights[f], gains[f].is_empty()) else {
                 continue;
             };

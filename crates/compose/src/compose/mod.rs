@@ -1,6 +1,7 @@
 //! Composition: recipes, Gaussian selection by lookup tables, Laplacian shape
 //! blending, border smoothing, colour correction, animation and state hashes.
 
+pub mod base_skin;
 pub mod blend;
 pub mod colour;
 pub mod composition;

@@ -127,6 +127,19 @@ pub enum Shading {
     Relit,
 }
 
+/// Where a swapped region's skin comes from (docs/method.md §7.11).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SkinSource {
+    /// The thesis: every Gaussian of the region from its source, skin included.
+    #[default]
+    Source,
+    /// The source's features (lips, brows, lashes, iris, hair, beard) over
+    /// the base's own skin, in proportion to the base's share of the
+    /// region's shape and where both show skin.
+    Base,
+}
+
 /// How the composite is animated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -170,6 +183,9 @@ pub struct PostProcess {
     /// Whether colours are relit for their triangles' new normals.
     #[serde(skip_serializing_if = "is_default_shading")]
     pub shading: Shading,
+    /// Where a swapped region's skin comes from.
+    #[serde(skip_serializing_if = "is_default_skin")]
+    pub skin: SkinSource,
 }
 
 impl PostProcess {
@@ -182,6 +198,7 @@ impl PostProcess {
         deform: Deform::Similarity,
         anchor: Anchor::Parent,
         shading: Shading::Kept,
+        skin: SkinSource::Source,
     };
     /// The post-processing that measured best against ground truth
     /// (docs/method.md §13, README): `--pipeline ours` and the study's edited
@@ -193,6 +210,7 @@ impl PostProcess {
         deform: Deform::Similarity,
         anchor: Anchor::Nearest,
         shading: Shading::Relit,
+        skin: SkinSource::Base,
     };
 }
 
@@ -212,8 +230,12 @@ fn is_default_shading(s: &Shading) -> bool {
     *s == Shading::default()
 }
 
-/// Prints like a derived `Debug`, leaving `membership`, `deform`, `anchor`
-/// and `shading` out while they are the defaults: state hashes (which hash the recipe's `Debug` text) of recorded
+fn is_default_skin(s: &SkinSource) -> bool {
+    *s == SkinSource::default()
+}
+
+/// Prints like a derived `Debug`, leaving `membership`, `deform`, `anchor`,
+/// `shading` and `skin` out while they are the defaults: state hashes (which hash the recipe's `Debug` text) of recorded
 /// sessions stay what they were before the field existed.
 impl std::fmt::Debug for PostProcess {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -231,6 +253,9 @@ impl std::fmt::Debug for PostProcess {
         }
         if self.shading != Shading::default() {
             d.field("shading", &self.shading);
+        }
+        if self.skin != SkinSource::default() {
+            d.field("skin", &self.skin);
         }
         d.finish()
     }

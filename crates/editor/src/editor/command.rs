@@ -13,7 +13,7 @@ use std::iter::Peekable;
 use std::str::SplitWhitespace;
 
 use crate::compose::recipe::{
-    Anchor, AnimationMode, ColourCorrection, Deform, Membership, Shading, Smoothing,
+    Anchor, AnimationMode, ColourCorrection, Deform, Membership, Shading, SkinSource, Smoothing,
 };
 use crate::model::regions::Group;
 use crate::render::lod::LodPolicy;
@@ -515,6 +515,13 @@ impl Named for Shading {
     const WORDS: &'static [&'static str] = &["kept", "relit"];
 }
 
+impl Named for SkinSource {
+    const NAMES: &'static [(Self, &'static str)] =
+        &[(SkinSource::Source, "source"), (SkinSource::Base, "base")];
+    const LABEL: &'static str = "skin";
+    const WORDS: &'static [&'static str] = &["source", "base"];
+}
+
 impl Named for AnimationMode {
     const NAMES: &'static [(Self, &'static str)] = &[
         (AnimationMode::Fast, "fast"),
@@ -747,6 +754,10 @@ commands! {
     /// triangles' new normals.
     Shading(choice: Option<Shading> as Choice<Shading>)
         => "shading", "[kept|relit]", "keep each source's baked light or relight it for the blended shape", PostProcessing, edit;
+    /// Set (or with `None`, toggle) where a swapped region's skin comes
+    /// from: its source, or the base (under the source's features).
+    Skin(choice: Option<SkinSource> as Choice<SkinSource>)
+        => "skin", "[source|base]", "take a swapped region's skin from its source or from the base", PostProcessing, edit;
     /// Drive the composite with a motion ("rest" for none).
     Motion(motion: String as MotionName) => "motion", "NAME|rest", "drive the composite with a motion", Animation, edit;
     /// Switch to the next motion.
@@ -913,6 +924,8 @@ mod tests {
             "anchor",
             "shading relit",
             "shading",
+            "skin base",
+            "skin",
             "motion talk",
             "next-motion",
             "play",

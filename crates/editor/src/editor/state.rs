@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use crate::compose::recipe::{
     Anchor, AnimationMode, ColourCorrection, Deform, GroupEdit, Membership, Recipe, Shading,
-    Smoothing,
+    SkinSource, Smoothing,
 };
 use crate::model::regions::Group;
 use crate::pipeline::workbench::DebugView;
@@ -424,6 +424,12 @@ impl EditorState {
                 post.shading = s.unwrap_or(match post.shading {
                     Shading::Kept => Shading::Relit,
                     Shading::Relit => Shading::Kept,
+                })
+            }
+            Command::Skin(s) => {
+                post.skin = s.unwrap_or(match post.skin {
+                    SkinSource::Source => SkinSource::Base,
+                    SkinSource::Base => SkinSource::Source,
                 })
             }
             other => return Err(misrouted(other)),

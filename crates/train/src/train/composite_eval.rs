@@ -28,7 +28,7 @@ use crate::avatar::database::Database;
 use crate::avatar::synthetic::look_index;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
 use crate::compose::recipe::{
-    AnimationMode, ColourCorrection, PostProcess, Recipe, ResolvedRecipe, Smoothing,
+    AnimationMode, ColourCorrection, PostProcess, Recipe, ResolvedRecipe, SkinSource, Smoothing,
 };
 use crate::error::{Error, Result};
 use crate::model::head::{HeadModel, Joint, Pose};
@@ -308,11 +308,14 @@ fn steps(recipe: &Recipe) -> Vec<(&'static str, Recipe)> {
         deform: recipe.post.deform,
         anchor: recipe.post.anchor,
         shading: recipe.post.shading,
+        // The base's skin is part of matching skin, the +colour step.
+        skin: SkinSource::Source,
     };
     let mut shape = recipe.clone();
     shape.post = swap.post;
     let mut smoothing = recipe.clone();
     smoothing.post.colour = ColourCorrection::Off;
+    smoothing.post.skin = SkinSource::Source;
     vec![
         ("swap", swap),
         ("+shape", shape),
@@ -460,14 +463,21 @@ fn posed(engine: &Engine, composite: &Composite, t: &Timestep) -> PosedMesh {
     out
 }
 
-/// The composite's Gaussians with those of `source` (all, for `None`) white
+/// The composite's Gaussians selected for `source` (all, for `None`) white
 /// and the others black: rendered on black, a pixel's value is the share of
-/// its colour that `source` gives.
+/// its colour that `source` gives. A region's own Gaussians count for the
+/// source the region shows — the base's skin under `skin = "base"` (method
+/// §7.11) is selected for it — and border extras for the source they come
+/// from: a leak is colour selected for another region.
 fn one_hot(model: &Trainable, composite: &Composite, source: Option<usize>) -> Trainable {
     let mut out = model.clone();
     let c0 = crate::render::sh::C0;
     for block in &composite.blocks {
-        let white = source.is_none_or(|s| block.source == s);
+        let selected_for = match block.extra_from {
+            None => composite.recipe.gaussians[block.region.group().index()],
+            Some(_) => block.source,
+        };
+        let white = source.is_none_or(|s| selected_for == s);
         let value = if white { 0.5 / c0 } else { -0.5 / c0 };
         for i in block.start..block.end {
             let sh = &mut out.sh[i * SH_STRIDE..(i + 1) * SH_STRIDE];
