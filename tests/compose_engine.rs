@@ -859,6 +859,84 @@ fn a_source_with_an_empty_region_composes_by_place_with_semantic_colour() {
     }
 }
 
+/// A swapped mouth's inside (method §7.7): Gaussians bound to the cavity
+/// that show the source's skin — as training leaves them where a closed
+/// mouth hides the cavity — take the base's skin; the cavity's dark lining
+/// keeps its colour.
+#[test]
+fn skin_shown_from_a_swapped_mouths_inside_takes_the_bases_tone_and_its_lining_stays() {
+    use visage::avatar::gaussians::GaussianSet;
+    let (base_skin, source_skin) = (Vec3::new(0.85, 0.68, 0.58), Vec3::new(0.45, 0.30, 0.20));
+    let lining = Vec3::new(0.50, 0.16, 0.17);
+    let (skin_mark, lining_mark) = (3.0f32, 2.0f32);
+    let mut db = small_db();
+    let regions = db.model.triangle_regions.clone();
+    let flat = |set: &mut GaussianSet, i: usize, rgb: Vec3| {
+        let stride = set.sh_stride();
+        let sh = &mut set.sh[i * stride..(i + 1) * stride];
+        sh.fill(0.0);
+        sh[..3].copy_from_slice(&rgb.to_array().map(rgb_to_dc));
+    };
+    for (f, skin) in [(0, base_skin), (1, source_skin)] {
+        let set = &mut db.sources[f].gaussians;
+        let mut inside = 0;
+        for i in 0..set.len() {
+            match regions[set.binding[i] as usize] {
+                Region::Skin | Region::Nose | Region::Neck => flat(set, i, skin),
+                Region::LipsInside => {
+                    // Every other one paints the source's skin.
+                    let (rgb, mark) = if inside % 2 == 0 {
+                        (skin, skin_mark)
+                    } else {
+                        (lining, lining_mark)
+                    };
+                    flat(set, i, rgb);
+                    set.opacity_logit[i] = mark;
+                    inside += 1;
+                }
+                _ => {}
+            }
+        }
+    }
+    let e = Engine::new(db).unwrap();
+    let n = names(&e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.post = PostProcess {
+        smoothing: Smoothing::Off,
+        skin: SkinSource::Source,
+        shading: Default::default(),
+        ..PostProcess::BEST
+    };
+    r.groups
+        .insert("mouth".into(), edit(&n[1], &[(&n[0], 1.0)]));
+    let c = e.compose(&resolve(&e, &r));
+    let inside = c
+        .blocks
+        .iter()
+        .find(|b| b.region == Region::LipsInside && b.source == 1 && b.extra_from.is_none())
+        .copied()
+        .unwrap();
+    let colour = |i: usize| {
+        let sh = c.gaussians.sh_of(i);
+        Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]))
+    };
+    let (mut skins, mut linings) = (0, 0);
+    for i in inside.start..inside.end {
+        let rgb = colour(i);
+        if c.gaussians.opacity_logit[i] == skin_mark {
+            skins += 1;
+            assert!(
+                rgb.distance(base_skin) < 0.03,
+                "the source's skin in its mouth takes the base's: {rgb}"
+            );
+        } else if c.gaussians.opacity_logit[i] == lining_mark {
+            linings += 1;
+            assert!(rgb.distance(lining) < 1e-4, "the lining stays: {rgb}");
+        }
+    }
+    assert!(skins > 10 && linings > 10, "{skins} skin, {linings} lining");
+}
+
 /// Every Gaussian of `set` in one flat colour (no view-dependent terms).
 fn paint(set: &mut visage::avatar::gaussians::GaussianSet, rgb: f32) {
     let stride = set.sh_stride();

@@ -350,11 +350,15 @@ pub fn skin_transfer_gain(rgb: Vec3, from: &SkinStats, to: &SkinStats) -> Vec3 {
 /// captured whatever their colour. The eyeballs are not among them (since
 /// session 18): the lids cover their rim, and lid skin counted there moves
 /// by the strict likeness with lightness counted fully, which leaves whites
-/// and irises — a dark skin's brown iris too — as they are.
+/// and irises — a dark skin's brown iris too — as they are. Nor is the
+/// mouth's inside (since session 27, method §7.7): a trained source keeps
+/// Gaussians bound to its cavity that paint the lips and the skin round
+/// them while its mouth is closed, and they carry that skin out over the
+/// chin when a composite's mouth opens wider than the source's did.
 pub fn holds_no_skin(region: Region) -> bool {
     matches!(
         region,
-        Region::TeethUpper | Region::TeethLower | Region::LipsInside | Region::Hair
+        Region::TeethUpper | Region::TeethLower | Region::Hair
     )
 }
 
@@ -404,10 +408,36 @@ pub fn semantic_skin_likeness(rgb: Vec3, region: Region, stats: &SkinStats) -> O
         smoothstep(14.0, 8.0, (lab - stats.mean).length())
     } else if region == Region::Remainder {
         hairline_skin_likeness(rgb, lab, stats)
+    } else if matches!(region, Region::Lips | Region::LipsInside) {
+        strict_skin_likeness(lab, stats) * not_redder_than_skin(lab, stats)
     } else {
         strict_skin_likeness(lab, stats)
     })
 }
+
+/// How surely a colour is not redder than the source's skin tone: 1 within
+/// [`LIP_HUE`]'s near bound of the tone's hue angle (CIELAB h = atan2(b*,
+/// a*)) or yellower, 0 past its far bound towards red. Lips are redder than
+/// the skin round them at every tone (h about 20-37° against 54-64° for the
+/// built-in people, 6.8 apart in the strict distance for the darkest), and
+/// so is a mouth's lining; where chroma is under [`HUE_CHROMA`] hue says
+/// nothing and the colour counts as not redder.
+pub fn not_redder_than_skin(lab: Vec3, stats: &SkinStats) -> f32 {
+    let chroma = lab.y.hypot(lab.z);
+    if chroma.is_nan() || chroma < HUE_CHROMA {
+        return 1.0;
+    }
+    let hue = |c: Vec3| c.z.atan2(c.y).to_degrees();
+    let redder = (hue(stats.tone) - hue(lab) + 540.0).rem_euclid(360.0) - 180.0;
+    smoothstep(LIP_HUE.0, LIP_HUE.1, redder)
+}
+
+/// How many degrees of hue redder than the skin tone a colour stops being
+/// skin (far) and starts to (near) in [`not_redder_than_skin`].
+pub const LIP_HUE: (f32, f32) = (14.0, 7.0);
+
+/// Chroma under which a colour's hue is noise ([`not_redder_than_skin`]).
+pub const HUE_CHROMA: f32 = 4.0;
 
 /// How surely a colour of the hairline's region (the remainder: temples,
 /// sideburns, the sides of the head) is skin: the strict likeness, or more
@@ -445,10 +475,10 @@ const HAIRLINE_MARGIN: f32 = 0.3;
 /// eye sockets — the lids round the eyeball — and the eye regions — lids,
 /// with lashes and brows far enough from any skin tone for the likeness to
 /// leave them): the likeness of the skin mode decides there; elsewhere (lips,
-/// the hairline, the collar) the strict one. Until session 18 the eye regions
-/// and sockets were strict (the sockets against method §7.7's word): shaded
-/// lids kept part of the source's tone (dark-base-light-eyes 29.39 → 30.45
-/// dB at 128², non-skin ΔE unchanged).
+/// the mouth's inside, the hairline, the collar) the strict one. Until
+/// session 18 the eye regions and sockets were strict (the sockets against
+/// method §7.7's word): shaded lids kept part of the source's tone
+/// (dark-base-light-eyes 29.39 → 30.45 dB at 128², non-skin ΔE unchanged).
 fn mostly_skin(region: Region) -> bool {
     matches!(
         region,
@@ -639,6 +669,29 @@ mod tests {
         SkinStats::at(srgb_to_lab(rgb))
     }
 
+    #[test]
+    fn redder_than_skin_is_told_by_hue_wherever_the_tone_lies_and_not_in_greys() {
+        let skin = stats(Vec3::new(0.8, 0.6, 0.5));
+        let not_redder = |rgb: Vec3| not_redder_than_skin(srgb_to_lab(rgb), &skin);
+        assert_eq!(not_redder(Vec3::new(0.8, 0.6, 0.5)), 1.0);
+        // Yellower (a tan or a blond stubble) is no redder.
+        assert_eq!(not_redder(Vec3::new(0.8, 0.7, 0.4)), 1.0);
+        assert_eq!(not_redder(Vec3::new(0.7, 0.38, 0.36)), 0.0, "lips");
+        // Greys and black have no hue to tell; NaN neither.
+        for grey in [Vec3::splat(0.5), Vec3::ZERO] {
+            assert_eq!(not_redder(grey), 1.0, "{grey}");
+        }
+        assert_eq!(not_redder_than_skin(Vec3::NAN, &skin), 1.0);
+        // A tone whose hue angle lies across ±180° from a colour's: the
+        // difference wraps. The tone's h is about −177° (183°); 177° is 6°
+        // smaller, 143° is 40° smaller (towards red), −143° (217°) larger.
+        let teal = SkinStats::at(Vec3::new(50.0, -20.0, -1.0));
+        let not_redder = |b: f32| not_redder_than_skin(Vec3::new(50.0, -20.0, b), &teal);
+        assert_eq!(not_redder(1.0), 1.0);
+        assert_eq!(not_redder(15.0), 0.0);
+        assert_eq!(not_redder(-15.0), 1.0);
+    }
+
     /// A dark source's shaded skin on a light base becomes the light skin
     /// shaded alike in every channel: blue needs a gain past 4 (under the
     /// thesis's clamp such skin came out tan).
@@ -704,9 +757,27 @@ mod tests {
             assert!((got - want).length() < 2.0, "{from} -> {got}, want {want}");
         }
         // Regions that hold no skin keep their colour even when it is skin-like.
-        for region in [Region::Hair, Region::TeethUpper, Region::LipsInside] {
+        for region in [Region::Hair, Region::TeethUpper, Region::TeethLower] {
             let gain = semantic_skin_gain(light, region, &stats(light), &stats(dark));
             assert_eq!(gain, Vec3::ONE, "{region:?}");
+        }
+        // The mouth's inside moves what is its skin by the strict likeness,
+        // and keeps its dark lining and the lips.
+        let gain = semantic_skin_gain(light, Region::LipsInside, &stats(light), &stats(dark));
+        let got = srgb_to_lab(corrected(light, gain));
+        assert!((got - srgb_to_lab(dark)).length() < 2.0, "{got}");
+        for lining in [Vec3::new(0.50, 0.16, 0.17), Vec3::new(0.70, 0.38, 0.36)] {
+            let gain = semantic_skin_gain(lining, Region::LipsInside, &stats(light), &stats(dark));
+            assert_eq!(gain, Vec3::ONE, "{lining}");
+        }
+        // The darkest built-in skin and its lips are 6.8 apart in the strict
+        // distance: only their hue tells them apart, in the lips and the
+        // mouth's inside alike.
+        let (skin, lips) = (Vec3::new(0.31, 0.20, 0.14), Vec3::new(0.28, 0.15, 0.13));
+        for region in [Region::Lips, Region::LipsInside] {
+            let likeness = |rgb| semantic_skin_likeness(rgb, region, &stats(skin)).unwrap();
+            assert_eq!(likeness(skin), 1.0, "{region:?}");
+            assert_eq!(likeness(lips), 0.0, "{region:?}");
         }
         // On an eyeball, lid skin moves; the white and a green or brown iris
         // do not.

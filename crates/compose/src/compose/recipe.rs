@@ -66,9 +66,10 @@ pub enum ColourCorrection {
     /// in linear RGB) on skin-coloured Gaussians only.
     Skin,
     /// The same transfer on skin only by what it is: never in regions that
-    /// hold no skin (eyeballs, teeth, the mouth's inside, hair),
-    /// and elsewhere only where a Gaussian's colour is close to its source's
-    /// own skin (lips, brows, lashes and beards keep theirs).
+    /// hold no skin (teeth, hair), and elsewhere only where a Gaussian's
+    /// colour is close to its source's own skin — in the lips and the
+    /// mouth's inside also no redder in hue (lips, brows, lashes and beards
+    /// keep theirs; docs/method.md §7.7).
     Semantic,
 }
 
