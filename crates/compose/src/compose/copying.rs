@@ -4,6 +4,8 @@
 //! the preallocated set and each thread keeps its own seam cache, so the
 //! result is the same on any number of threads.
 
+use std::borrow::Cow;
+
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -89,8 +91,9 @@ pub struct OwnBlock<'e> {
     pub region: Region,
     /// The source it shows.
     pub source: usize,
-    /// The source's Gaussians counted for the region.
-    pub indices: &'e [u32],
+    /// The source's Gaussians counted for the region (under `skin =
+    /// "base"`, those that show).
+    pub indices: Cow<'e, [u32]>,
     /// Their colour correction.
     pub correction: Correction,
     /// The source's anchored Gaussians, under `anchor = "nearest"`.

@@ -1,6 +1,7 @@
 //! The composition engine: everything precomputed per database, composites built
 //! from recipes (and rebuilt only where a recipe changed), and posed frames.
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -649,51 +650,46 @@ impl Engine {
                 self.triangle_skin_of(s, membership)
             }),
         });
-        // Under `skin = "base"`, per region: the source's Gaussians that
-        // still show and the base's that show there.
-        let shown: Vec<Option<[Vec<u32>; 2]>> = Region::ALL
-            .iter()
-            .map(|&region| {
-                let f = Self::source_of(recipe, region);
-                let skin = skin.as_ref().filter(|_| f != recipe.base)?;
-                Some([(f, false), (recipe.base, true)].map(|(s, of_base)| {
-                    showing(
-                        skin.share(s, of_base),
-                        self.tables.region(membership, s, region),
-                        self.tables.counted_triangles(membership, s),
-                    )
-                }))
-            })
-            .collect();
+        // Per region, the source's Gaussians counted for it; under `skin =
+        // "base"` in a swapped region, those of them that still show and
+        // the base's that show there.
         let mut own = Vec::with_capacity(Region::COUNT);
         let mut own_count = 0;
-        for (region, shown) in Region::ALL.into_iter().zip(&shown) {
+        for region in Region::ALL {
             let f = Self::source_of(recipe, region);
-            let parts: Vec<(usize, &[u32], Option<SkinShare>)> = match (shown, skin.as_ref()) {
-                (Some([own_part, base_part]), Some(skin)) => vec![
-                    (f, own_part.as_slice(), Some(skin.share(f, false))),
-                    (
-                        recipe.base,
-                        base_part.as_slice(),
-                        Some(skin.share(recipe.base, true)),
-                    ),
-                ],
-                _ => vec![(f, self.tables.region(membership, f, region), None)],
-            };
+            let parts: Vec<(usize, Cow<[u32]>, Option<SkinShare>)> =
+                match skin.as_ref().filter(|_| f != recipe.base) {
+                    Some(skin) => [(f, false), (recipe.base, true)]
+                        .map(|(s, of_base)| {
+                            let share = skin.share(s, of_base);
+                            let indices = showing(
+                                share,
+                                self.tables.region(membership, s, region),
+                                self.tables.counted_triangles(membership, s),
+                            );
+                            (s, Cow::Owned(indices), Some(share))
+                        })
+                        .into(),
+                    None => vec![(
+                        f,
+                        Cow::Borrowed(self.tables.region(membership, f, region)),
+                        None,
+                    )],
+                };
             for (source, indices, share) in parts {
                 if indices.is_empty() && share.is_some_and(|s| s.of_base) {
                     continue;
                 }
+                own_count += indices.len();
                 own.push(OwnBlock {
                     region,
                     source,
+                    start: own_count - indices.len(),
                     indices,
                     correction: self.correction(recipe, region, source),
                     anchors: anchors(source),
-                    start: own_count,
                     skin: share,
                 });
-                own_count += indices.len();
             }
         }
         let set = &mut composite.gaussians;
