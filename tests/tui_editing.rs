@@ -136,7 +136,9 @@ fn recording_into_an_existing_journal_continues_it() {
     let args = format!("{DB} --record {}", journal.display());
     let tmux = Tmux::new("record");
     tmux.start_sized(&visage_line(&home, &args, &status), 80, 24);
-    tmux.wait_for("the editor", LONG, editor_ready);
+    let s = tmux.wait_for("the editor", LONG, editor_ready);
+    // A new session starts from the post-processing that measured best.
+    assert!(s.contains("semantic") && s.contains("relit"), "{s}");
     tmux.keys(&[":"]);
     tmux.type_text("set-base bram");
     tmux.keys(&["Enter"]);
@@ -183,6 +185,18 @@ fn recording_into_an_existing_journal_continues_it() {
         v["state_hash"].as_str().unwrap().to_string()
     };
     assert_eq!(hash(&journal), hash(&expected));
+    // It replays from the post-processing its header names: without the
+    // `post` line (as every session before it) it starts from none.
+    assert!(header.contains("\npost ours\n"), "{header}");
+    let unprocessed = temp("record-unprocessed.vsg");
+    std::fs::write(
+        &unprocessed,
+        std::fs::read_to_string(&expected)
+            .unwrap()
+            .replace("post ours\n", ""),
+    )
+    .unwrap();
+    assert_ne!(hash(&unprocessed), hash(&expected));
     // Resuming another session into it is refused before the terminal changes.
     let o = common::visage(&[
         "--session",

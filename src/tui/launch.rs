@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use super::graphics::{detect, GraphicsChoice, TerminalGraphics};
 use super::keymap::Keymap;
 use super::terminal::ask_yes_no;
+use crate::compose::recipe::PostPreset;
 use crate::editor::command::Command;
 use crate::editor::journal::{choose_subject, open_journal, JournalFolder, KEEP_JOURNALS};
 use crate::editor::replay::replay_commands;
@@ -90,7 +91,12 @@ pub fn launch(options: &EditOptions) -> Result<Launched> {
     let subject = resolved_subject(subject, &workbench);
     let graphics = detect(options.graphics);
     let size = crossterm::terminal::size().unwrap_or((120, 40));
-    let header = SessionHeader::for_subject(&subject, size, graphics.protocol);
+    let mut header = SessionHeader::for_subject(&subject, size, graphics.protocol);
+    if let Subject::Avatars(_) = subject {
+        // A new session starts from what measured best (README, ground
+        // truth); one continued or resumed starts from what it recorded.
+        header.post = PostPreset::Ours;
+    }
 
     let mut status = String::new();
     let (recorder, replayed, auto) = match (&options.record, &recovered, &journals) {
@@ -130,6 +136,7 @@ pub fn launch(options: &EditOptions) -> Result<Launched> {
         }
     };
     let mut editor = Editor::for_workbench(&workbench);
+    editor.start_from(replayed.as_ref().map_or(header.post, |s| s.header.post));
     let mut unsaved = 0;
     let mut render_size = header.render;
     if let Some(session) = &replayed {

@@ -215,6 +215,48 @@ impl PostProcess {
     };
 }
 
+/// A named set of post-processing options: what a session starts from (its
+/// header's `post` line) and what `--pipeline` benches name.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PostPreset {
+    /// [`PostProcess::default`]: the swap as selected, no correction (what
+    /// sessions without a `post` line, from before session 27, start from).
+    #[default]
+    Off,
+    /// [`PostProcess::THESIS`].
+    Thesis,
+    /// [`PostProcess::BEST`]: what a new editor session starts from.
+    Ours,
+}
+
+impl PostPreset {
+    /// Every preset, in the order of [`PostPreset::name`]s in messages.
+    pub const ALL: [PostPreset; 3] = [PostPreset::Off, PostPreset::Thesis, PostPreset::Ours];
+
+    /// The options it names.
+    pub fn post(self) -> PostProcess {
+        match self {
+            PostPreset::Off => PostProcess::default(),
+            PostPreset::Thesis => PostProcess::THESIS,
+            PostPreset::Ours => PostProcess::BEST,
+        }
+    }
+
+    /// Its name in session headers.
+    pub fn name(self) -> &'static str {
+        match self {
+            PostPreset::Off => "off",
+            PostPreset::Thesis => "thesis",
+            PostPreset::Ours => "ours",
+        }
+    }
+
+    /// The preset a name (as [`PostPreset::name`] writes it) names.
+    pub fn from_name(name: &str) -> Option<PostPreset> {
+        Self::ALL.into_iter().find(|p| p.name() == name)
+    }
+}
+
 fn is_default_membership(m: &Membership) -> bool {
     *m == Membership::default()
 }

@@ -14,7 +14,7 @@ pub mod state;
 use std::path::{Path, PathBuf};
 
 use crate::compose::engine::Engine;
-use crate::compose::recipe::Recipe;
+use crate::compose::recipe::{PostPreset, Recipe};
 use crate::error::{Error, Result};
 use crate::pipeline::workbench::{FrameRequest, Workbench};
 use command::Command;
@@ -47,6 +47,12 @@ impl Editor {
             catalog,
             tick: 0,
         }
+    }
+
+    /// Sets the post-processing the session starts from (its header's
+    /// `post`), before any command: undo never goes back past it.
+    pub fn start_from(&mut self, post: PostPreset) {
+        self.state.recipe.post = post.post();
     }
 
     /// An editor for an engine's database.

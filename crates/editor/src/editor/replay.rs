@@ -76,6 +76,7 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
     let session = Session::load(path)?;
     let mut workbench = session.header.subject().open(Backend::Cpu, &|_, _| {})?;
     let mut editor = Editor::for_workbench(&workbench);
+    editor.start_from(session.header.post);
     if let Some(dir) = out {
         std::fs::create_dir_all(dir).map_err(|e| Error::io("create", dir, e))?;
     }

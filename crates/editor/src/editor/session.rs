@@ -7,6 +7,7 @@
 //! terminal 120x40
 //! graphics halfblocks
 //! render 160x120
+//! post ours
 //! ---
 //! 0 select-group nose
 //! 0 set-gaussians nose bram
@@ -24,6 +25,7 @@ use std::fs::{File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use crate::compose::recipe::PostPreset;
 use crate::error::{Error, Result};
 use crate::pipeline::{DatabaseSpec, SceneSpec, Subject};
 use crate::scene::camera::UpAxis;
@@ -99,6 +101,11 @@ pub struct SessionHeader {
     pub graphics: Protocol,
     /// Size of snapshots and image checks in replay.
     pub render: (u32, u32),
+    /// The post-processing the session starts from: `off` where the header
+    /// has no `post` line (sessions from before session 27, and those made
+    /// through [`SessionHeader::new`]); the editor starts new sessions from
+    /// `ours`.
+    pub post: PostPreset,
 }
 
 impl SessionHeader {
@@ -125,6 +132,7 @@ impl SessionHeader {
             terminal,
             graphics,
             render: NEW_SESSION_RENDER,
+            post: PostPreset::Off,
         }
     }
 
@@ -195,6 +203,10 @@ impl SessionHeader {
         writeln!(out, "terminal {}x{}", self.terminal.0, self.terminal.1)?;
         writeln!(out, "graphics {}", self.graphics.name())?;
         writeln!(out, "render {}x{}", self.render.0, self.render.1)?;
+        // Left out when off: such headers read as before.
+        if self.post != PostPreset::Off {
+            writeln!(out, "post {}", self.post.name())?;
+        }
         writeln!(out, "---")
     }
 }
@@ -330,6 +342,7 @@ impl Session {
             terminal: (120, 40),
             graphics: Protocol::Halfblocks,
             render: (160, 120),
+            post: PostPreset::Off,
         };
         let mut body = false;
         let mut out = Vec::new();
@@ -411,6 +424,17 @@ impl Session {
                         })?
                     }
                     "render" => header.render = size(rest, "render", n, name)?,
+                    "post" => {
+                        header.post = PostPreset::from_name(rest.trim()).ok_or_else(|| {
+                            err(
+                                n,
+                                format!(
+                                    "unknown post-processing '{}' (off, thesis or ours)",
+                                    crate::text::printable(rest)
+                                ),
+                            )
+                        })?
+                    }
                     _ => {
                         return Err(err(
                             n,
@@ -768,6 +792,32 @@ mod tests {
         };
         assert!(scene.path.is_absolute() && scene.path.ends_with("my scans/garden.ply"));
         assert_eq!(scene.up, Some(UpAxis::NegY));
+    }
+
+    /// The post-processing a session starts from reads back; a header
+    /// without a `post` line (every session before session 27) starts from
+    /// none, and an unknown name is refused with its line.
+    #[test]
+    fn the_post_processing_a_session_starts_from_parses_back() {
+        let mut header = SessionHeader::new(&DatabaseSpec::default(), (80, 24), Protocol::Sixel);
+        assert_eq!(header.post, PostPreset::Off);
+        for post in PostPreset::ALL {
+            header.post = post;
+            let mut text = Vec::new();
+            header.write(&mut text).unwrap();
+            let text = String::from_utf8(text).unwrap();
+            assert_eq!(text.contains("\npost "), post != PostPreset::Off, "{text}");
+            assert_eq!(Session::parse(&text, "s.vsg").unwrap().header, header);
+        }
+        let old = Session::parse("visage-session 1\nrender 64x48\n---\n", "s.vsg").unwrap();
+        assert_eq!(old.header.post, PostPreset::Off);
+        let e = Session::parse("visage-session 1\npost warm\n---\n", "s.vsg")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(":2: unknown post-processing 'warm' (off, thesis or ours)"),
+            "{e}"
+        );
     }
 
     #[test]
