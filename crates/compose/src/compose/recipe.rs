@@ -215,8 +215,8 @@ impl PostProcess {
     };
 }
 
-/// A named set of post-processing options: what a session starts from (its
-/// header's `post` line) and what `--pipeline` benches name.
+/// A named set of post-processing options: what an editor session starts
+/// from (its header's `post` line).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum PostPreset {
     /// [`PostProcess::default`]: the swap as selected, no correction (what
