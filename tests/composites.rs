@@ -119,6 +119,7 @@ fn an_unedited_recipe_is_its_source_in_capture_and_evaluation() {
     );
     assert!(psnr > 20.0, "{psnr}");
     assert_eq!(report["border"]["pixels"], 0, "one source: no border band");
+    assert_eq!(report["ceiling_border"]["pixels"], 0, "nor in the ceiling");
     assert!(
         report["border"]["psnr_db"].is_null(),
         "and no figure for it"
@@ -219,6 +220,14 @@ fn an_edited_composite_reports_regions_band_leak_ceiling_and_steps() {
     );
     assert!(px(&report["ceiling_skin"]) > 0 && px(&report["ceiling_non_skin"]) > 0);
     assert!(text.contains("ceiling non-skin"), "{text}");
+    // So does its split into the band, as it lies in the sources' own
+    // images, and the rest; a swapped nose has a band there too.
+    assert_eq!(
+        px(&report["ceiling_border"]) + px(&report["ceiling_interior"]),
+        px(&report["ceiling"])
+    );
+    assert!(px(&report["ceiling_border"]) > 0 && px(&report["ceiling_interior"]) > 0);
+    assert!(text.contains("ceiling band"), "{text}");
 }
 
 /// A composite whose face Gaussians are counted as another source's than
@@ -392,6 +401,11 @@ fn bench_composites_trains_once_and_reports_every_recipe() {
         (Some("source"), Some("hard"))
     );
     assert!(first["mean"]["psnr_db"].as_f64().unwrap() > 5.0);
+    // The band's own ceiling is the mean over the recipes that have a band.
+    assert_eq!(
+        first["mean"]["ceiling_border_psnr_db"],
+        first["recipes"][0]["report"]["ceiling_border"]["psnr_db"]
+    );
     assert!(first["sources"]
         .as_array()
         .unwrap()

@@ -84,6 +84,8 @@ fn print_report(r: &CompositeReport) {
     println!("{}", row("non-skin", &r.non_skin));
     println!("{}", row("ceiling skin", &r.ceiling_skin));
     println!("{}", row("ceiling non-skin", &r.ceiling_non_skin));
+    println!("{}", row("ceiling band", &r.ceiling_border));
+    println!("{}", row("ceiling interior", &r.ceiling_interior));
     println!(
         "  leak             {:.2} % of colour from another source ({:.2} % of {} interior px over 5 %)",
         100.0 * r.leak.mean,

@@ -109,6 +109,8 @@ struct Means {
     non_skin_delta_e: f64,
     ceiling_skin_delta_e: f64,
     ceiling_non_skin_delta_e: f64,
+    ceiling_border_psnr_db: f64,
+    ceiling_interior_psnr_db: f64,
 }
 
 /// The whole bench.
@@ -314,6 +316,8 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
             non_skin_delta_e: mean_of(&|r| r.non_skin.delta_e),
             ceiling_skin_delta_e: mean_of(&|r| r.ceiling_skin.delta_e),
             ceiling_non_skin_delta_e: mean_of(&|r| r.ceiling_non_skin.delta_e),
+            ceiling_border_psnr_db: mean_of(&|r| r.ceiling_border.psnr_db),
+            ceiling_interior_psnr_db: mean_of(&|r| r.ceiling_interior.psnr_db),
         },
         sources,
         recipes: rows,
@@ -397,7 +401,10 @@ fn print_table(b: &CompositesBench) {
         holes = m.holes_percent
     );
     println!(
-        "the sources on their own truth (the ceiling): ΔE skin {:.2}, ΔE other {:.2}",
-        m.ceiling_skin_delta_e, m.ceiling_non_skin_delta_e
+        "the sources on their own truth (the ceiling): ΔE skin {:.2}, ΔE other {:.2}; band {:.2} dB, interior {:.2} dB",
+        m.ceiling_skin_delta_e,
+        m.ceiling_non_skin_delta_e,
+        m.ceiling_border_psnr_db,
+        m.ceiling_interior_psnr_db
     );
 }

@@ -219,6 +219,13 @@ pub struct CompositeReport {
     pub ceiling_skin: Quality,
     /// The ceiling over the other pixels.
     pub ceiling_non_skin: Quality,
+    /// The ceiling over the border band as it lies in each source's own
+    /// images (its groups' pixels near groups the recipe gives another
+    /// source): how well training alone draws those places, so the band's
+    /// gap to the interior can be told from the composite's own.
+    pub ceiling_border: Quality,
+    /// The ceiling over the rest of the assigned groups' pixels.
+    pub ceiling_interior: Quality,
     /// Each source's own figures.
     pub sources: Vec<SourceCeiling>,
     /// swap → +shape → +smoothing → +colour.
@@ -389,10 +396,7 @@ fn labels(
         .zip(mask)
         .map(|(r, &m)| r.is_some() && m > 127)
         .collect();
-    let source: Vec<u32> = region
-        .iter()
-        .map(|r| r.map_or(u32::MAX, |r| recipe.gaussians[r.group().index()] as u32))
-        .collect();
+    let source = assigned_sources(&region, recipe);
     let band = band(&source, camera.size, border_px);
     Labels {
         head,
@@ -400,6 +404,15 @@ fn labels(
         source,
         band,
     }
+}
+
+/// Per pixel: the source the recipe assigns the region shown there
+/// (`u32::MAX` where no region is).
+fn assigned_sources(region: &[Option<Region>], recipe: &ResolvedRecipe) -> Vec<u32> {
+    region
+        .iter()
+        .map(|r| r.map_or(u32::MAX, |r| recipe.gaussians[r.group().index()] as u32))
+        .collect()
 }
 
 /// Pixels within `k` pixels (a square window) of a pixel showing another
@@ -578,6 +591,8 @@ pub fn evaluate_variants(
     let mut ceilings = [Sums::default(); Group::COUNT];
     // [skin, other] pixels of the ceiling.
     let mut ceiling_parts = [Sums::default(); 2];
+    // [band, interior] pixels of the ceiling.
+    let mut ceiling_zones = [Sums::default(); 2];
     let mut source_sums = vec![Sums::default(); own.len()];
     let mut step_sums = vec![[Sums::default(); 5]; variants.len()];
     let (mut leak_sum, mut leak_over, mut leak_pixels) = (0.0, 0usize, 0usize);
@@ -673,6 +688,17 @@ pub fn evaluate_variants(
             let image = render(trainable, &frames, camera);
             let ssim = ssim_map(&image, &truth_goal, w as usize, h as usize);
             let shown = visible_triangles(&truth, &model.triangles, camera);
+            // The band as it lies in the source's own image: where its groups
+            // meet groups the recipe gives other sources.
+            let regions: Vec<Option<Region>> = shown
+                .iter()
+                .map(|t| t.map(|t| model.triangle_regions[t as usize]))
+                .collect();
+            let own_band = band(
+                &assigned_sources(&regions, &resolved),
+                camera.size,
+                options.border_px,
+            );
             for p in 0..shown.len() {
                 let Some(tri) = shown[p].filter(|_| truth_mask[p] > 127) else {
                     continue;
@@ -685,6 +711,7 @@ pub fn evaluate_variants(
                 if resolved.gaussians[g.index()] == *s {
                     ceilings[g.index()].add(sq, ssim[p], de);
                     ceiling_parts[usize::from(!is_skin(region))].add(sq, ssim[p], de);
+                    ceiling_zones[usize::from(!own_band[p])].add(sq, ssim[p], de);
                 }
             }
         }
@@ -736,6 +763,8 @@ pub fn evaluate_variants(
         ceiling: ceiling.quality(),
         ceiling_skin: ceiling_parts[0].quality(),
         ceiling_non_skin: ceiling_parts[1].quality(),
+        ceiling_border: ceiling_zones[0].quality(),
+        ceiling_interior: ceiling_zones[1].quality(),
         sources: own
             .iter()
             .zip(&source_sums)
