@@ -120,6 +120,12 @@ fn an_unedited_recipe_is_its_source_in_capture_and_evaluation() {
     assert!(psnr > 20.0, "{psnr}");
     assert_eq!(report["border"]["pixels"], 0, "one source: no border band");
     assert_eq!(report["ceiling_border"]["pixels"], 0, "nor in the ceiling");
+    // Every region is its source's own: nothing over the ceiling anywhere.
+    for region in report["regions"].as_array().unwrap() {
+        assert_eq!(region["band"]["pixels"], 0);
+        let excess = region["excess"].as_f64().unwrap();
+        assert!(excess.abs() < 0.05, "{region}");
+    }
     assert!(
         report["border"]["psnr_db"].is_null(),
         "and no figure for it"
@@ -228,6 +234,29 @@ fn an_edited_composite_reports_regions_band_leak_ceiling_and_steps() {
     );
     assert!(px(&report["ceiling_border"]) > 0 && px(&report["ceiling_interior"]) > 0);
     assert!(text.contains("ceiling band"), "{text}");
+    // Per region, band and interior: together the groups' pixels, the
+    // costliest first, and the swapped nose's border has a band.
+    let regions = report["regions"].as_array().unwrap();
+    let region_px: u64 = regions
+        .iter()
+        .map(|r| px(&r["band"]) + px(&r["interior"]))
+        .sum();
+    let group_px: u64 = report["groups"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| px(&g["quality"]))
+        .sum();
+    assert_eq!(region_px, group_px);
+    let excess: Vec<f64> = regions
+        .iter()
+        .map(|r| r["excess"].as_f64().unwrap())
+        .collect();
+    assert!(excess.windows(2).all(|w| w[0] >= w[1]), "{excess:?}");
+    let nose = regions.iter().find(|r| r["region"] == "nose").unwrap();
+    assert_eq!(nose["source"], "cleo");
+    assert!(px(&nose["band"]) > 0, "{nose}");
+    assert!(text.contains("error over the ceiling by region"), "{text}");
 }
 
 /// A composite whose face Gaussians are counted as another source's than

@@ -68,6 +68,22 @@ fn row(name: &str, q: &Quality) -> String {
     )
 }
 
+/// Regions listed under "where the error over the ceiling lies".
+const REGIONS_SHOWN: usize = 6;
+
+/// A PSNR for a table cell, "-" where there are no pixels.
+fn decibels(q: &Quality) -> String {
+    decibels_of(if q.pixels == 0 { f64::NAN } else { q.psnr_db })
+}
+
+fn decibels_of(db: f64) -> String {
+    if db.is_finite() {
+        format!("{db:5.2}")
+    } else {
+        format!("{:>5}", "-")
+    }
+}
+
 fn print_report(r: &CompositeReport) {
     println!(
         "composite against its ground truth: {} views, band {} px",
@@ -104,6 +120,24 @@ fn print_report(r: &CompositeReport) {
             "{}  ceiling {:.2} dB",
             row(&format!("{} ({})", g.group, g.source), &g.quality),
             g.ceiling_psnr_db
+        );
+    }
+    let head_error = 10f64.powf(-r.quality.psnr_db / 10.0) * r.quality.pixels as f64;
+    println!("error over the ceiling by region (dB: composite/source's own; % of head error):");
+    for g in r
+        .regions
+        .iter()
+        .filter(|g| g.excess > 0.0)
+        .take(REGIONS_SHOWN)
+    {
+        println!(
+            "  {:<23} band {}/{}  interior {}/{}  {:>4.1} %",
+            format!("{} ({})", g.region, g.source),
+            decibels(&g.band),
+            decibels_of(g.ceiling_band_psnr_db),
+            decibels(&g.interior),
+            decibels_of(g.ceiling_interior_psnr_db),
+            100.0 * g.excess / head_error
         );
     }
     println!("sources on their own ground truth:");

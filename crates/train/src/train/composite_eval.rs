@@ -75,6 +75,11 @@ impl Sums {
         self.pixels += 1;
     }
 
+    /// Mean squared error per channel (as PSNR reads it); NaN without pixels.
+    fn mse(&self) -> f64 {
+        self.squared / (3.0 * self.pixels as f64)
+    }
+
     fn merge(&mut self, other: &Sums) {
         self.squared += other.squared;
         self.ssim += other.ssim;
@@ -144,6 +149,29 @@ pub struct GroupQuality {
     pub ceiling_psnr_db: f64,
 }
 
+/// One region's figures, in the border band and in the interior.
+#[derive(Clone, Debug, Serialize)]
+pub struct RegionQuality {
+    /// The region.
+    pub region: &'static str,
+    /// Whose Gaussians it shows.
+    pub source: String,
+    /// Over the region's pixels in the border band.
+    pub band: Quality,
+    /// Over the rest of its pixels.
+    pub interior: Quality,
+    /// Its source on its own ground truth, over the region's band as it lies
+    /// in the source's own images.
+    pub ceiling_band_psnr_db: f64,
+    /// Its source on its own ground truth, over the rest of the region.
+    pub ceiling_interior_psnr_db: f64,
+    /// The squared error (per channel, colours 0-1) over the ceiling's, times
+    /// the pixels, band and interior together: how much of the composite's
+    /// error beyond what training reaches lies here. Regions are listed
+    /// largest first.
+    pub excess: f64,
+}
+
 /// Where colour comes from another source than the one assigned.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
 pub struct Leak {
@@ -196,6 +224,8 @@ pub struct CompositeReport {
     pub per_view: Vec<ViewQuality>,
     /// Per group.
     pub groups: Vec<GroupQuality>,
+    /// Per region shown, the largest excess over the ceiling first.
+    pub regions: Vec<RegionQuality>,
     /// Over the border band.
     pub border: Quality,
     /// Over the interior (outside the band).
@@ -406,6 +436,42 @@ fn labels(
     }
 }
 
+/// Per region shown (of `sums`, [band, interior] each, against the same of
+/// `ceilings`), largest excess over the ceiling first; `source_of` names the
+/// source a region shows.
+fn region_figures(
+    sums: &[[Sums; 2]; Region::COUNT],
+    ceilings: &[[Sums; 2]; Region::COUNT],
+    source_of: impl Fn(Region) -> String,
+) -> Vec<RegionQuality> {
+    let mut regions: Vec<RegionQuality> = Region::ALL
+        .iter()
+        .map(|&r| (r, &sums[r as usize], &ceilings[r as usize]))
+        .filter(|(_, [band, interior], _)| band.pixels + interior.pixels > 0)
+        .map(|(r, zones, ceiling)| {
+            // A zone the source's own images lack adds nothing it can be
+            // told against.
+            let excess = zones
+                .iter()
+                .zip(ceiling)
+                .filter(|(z, c)| z.pixels > 0 && c.pixels > 0)
+                .map(|(z, c)| (z.mse() - c.mse()) * z.pixels as f64)
+                .sum();
+            RegionQuality {
+                region: r.name(),
+                source: source_of(r),
+                band: zones[0].quality(),
+                interior: zones[1].quality(),
+                ceiling_band_psnr_db: ceiling[0].quality().psnr_db,
+                ceiling_interior_psnr_db: ceiling[1].quality().psnr_db,
+                excess,
+            }
+        })
+        .collect();
+    regions.sort_by(|a, b| b.excess.total_cmp(&a.excess));
+    regions
+}
+
 /// Per pixel: the source the recipe assigns the region shown there
 /// (`u32::MAX` where no region is).
 fn assigned_sources(region: &[Option<Region>], recipe: &ResolvedRecipe) -> Vec<u32> {
@@ -589,6 +655,9 @@ pub fn evaluate_variants(
     let mut per_view = Vec::new();
     let mut groups = [Sums::default(); Group::COUNT];
     let mut ceilings = [Sums::default(); Group::COUNT];
+    // Per region, [band, interior], of the composite and of the ceiling.
+    let mut region_sums = [[Sums::default(); 2]; Region::COUNT];
+    let mut region_ceilings = [[Sums::default(); 2]; Region::COUNT];
     // [skin, other] pixels of the ceiling.
     let mut ceiling_parts = [Sums::default(); 2];
     // [band, interior] pixels of the ceiling.
@@ -625,6 +694,7 @@ pub fn evaluate_variants(
                     view_sums.add(sq, ssim[p], de);
                     if let Some(r) = labels.region[p] {
                         groups[r.group().index()].add(sq, ssim[p], de);
+                        region_sums[r as usize][usize::from(!labels.band[p])].add(sq, ssim[p], de);
                     }
                 }
             }
@@ -712,6 +782,8 @@ pub fn evaluate_variants(
                     ceilings[g.index()].add(sq, ssim[p], de);
                     ceiling_parts[usize::from(!is_skin(region))].add(sq, ssim[p], de);
                     ceiling_zones[usize::from(!own_band[p])].add(sq, ssim[p], de);
+                    region_ceilings[region as usize][usize::from(!own_band[p])]
+                        .add(sq, ssim[p], de);
                 }
             }
         }
@@ -748,6 +820,11 @@ pub fn evaluate_variants(
                 ceiling_psnr_db: ceilings[g.index()].quality().psnr_db,
             })
             .collect(),
+        regions: region_figures(&region_sums, &region_ceilings, |r| {
+            trained.sources[resolved.gaussians[r.group().index()]]
+                .name
+                .clone()
+        }),
         border: final_step[1].quality(),
         interior: final_step[2].quality(),
         skin: final_step[3].quality(),
