@@ -120,11 +120,17 @@ fn an_unedited_recipe_is_its_source_in_capture_and_evaluation() {
     assert!(psnr > 20.0, "{psnr}");
     assert_eq!(report["border"]["pixels"], 0, "one source: no border band");
     assert_eq!(report["ceiling_border"]["pixels"], 0, "nor in the ceiling");
-    // Every region is its source's own: nothing over the ceiling anywhere.
-    for region in report["regions"].as_array().unwrap() {
+    // Every region is its source's own: as good as its ceiling everywhere.
+    let regions = report["regions"].as_array().unwrap();
+    assert!(regions.len() > 5, "{regions:?}");
+    let head_error = 10f64.powf(-psnr / 10.0) * report["quality"]["pixels"].as_f64().unwrap();
+    for region in regions {
         assert_eq!(region["band"]["pixels"], 0);
         let excess = region["excess"].as_f64().unwrap();
-        assert!(excess.abs() < 0.05, "{region}");
+        assert!(excess.abs() < 1e-3 * head_error, "{region}");
+        let own = region["interior"]["psnr_db"].as_f64().unwrap();
+        let ceiling = region["ceiling_interior_psnr_db"].as_f64();
+        assert!((own - ceiling.unwrap()).abs() < 0.05, "{region}");
     }
     assert!(
         report["border"]["psnr_db"].is_null(),
@@ -256,7 +262,15 @@ fn an_edited_composite_reports_regions_band_leak_ceiling_and_steps() {
     let nose = regions.iter().find(|r| r["region"] == "nose").unwrap();
     assert_eq!(nose["source"], "cleo");
     assert!(px(&nose["band"]) > 0, "{nose}");
-    assert!(text.contains("error over the ceiling by region"), "{text}");
+    assert!(nose["ceiling_band_psnr_db"].as_f64().is_some(), "{nose}");
+    assert!(
+        text.lines().any(|l| l
+            .trim_start()
+            .starts_with(regions[0]["region"].as_str().unwrap())
+            && l.contains(" band ")
+            && l.contains(" interior ")),
+        "the costliest region's row:\n{text}"
+    );
 }
 
 /// A composite whose face Gaussians are counted as another source's than

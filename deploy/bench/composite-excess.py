@@ -48,7 +48,7 @@ def excess(run):
               f"ceiling {report['ceiling']['psnr_db']:.2f} dB")
         for share, name, source, psnr, ceiling, pixels in sorted(rows, reverse=True):
             print(f"  {name:6} {source:6} {psnr:6.2f} dB (ceiling {ceiling:6.2f}) "
-                  f"{pixels:7} px  {100 * share:5.1f} % of the recipe's error over its ceiling")
+                  f"{pixels:7} px  over it by {100 * share:5.1f} % of the recipe's error")
         # Runs since session 28 also split each region into band and interior.
         for region in report.get("regions", [])[:REGIONS]:
             if region["excess"] <= 0:
@@ -56,7 +56,7 @@ def excess(run):
             print(f"    {region['region']:16} {region['source']:6} "
                   f"band {cell(region['band'])}/{number(region['ceiling_band_psnr_db'])} "
                   f"interior {cell(region['interior'])}/{number(region['ceiling_interior_psnr_db'])} dB  "
-                  f"{100 * region['excess'] / whole:5.1f} %")
+                  f"over it by {100 * region['excess'] / whole:5.1f} % of the recipe's error")
 
 
 def number(db):

@@ -76,6 +76,7 @@ fn decibels(q: &Quality) -> String {
     decibels_of(if q.pixels == 0 { f64::NAN } else { q.psnr_db })
 }
 
+/// A PSNR for a table cell, "-" where it is not a number (no pixels).
 fn decibels_of(db: f64) -> String {
     if db.is_finite() {
         format!("{db:5.2}")

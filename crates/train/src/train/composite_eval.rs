@@ -167,8 +167,9 @@ pub struct RegionQuality {
     pub ceiling_interior_psnr_db: f64,
     /// The squared error (per channel, colours 0-1) over the ceiling's, times
     /// the pixels, band and interior together: how much of the composite's
-    /// error beyond what training reaches lies here. Regions are listed
-    /// largest first.
+    /// error beyond what training reaches lies here. A zone the source's own
+    /// images lack is told against the region's whole ceiling; a region they
+    /// never show has none. Regions are listed largest first.
     pub excess: f64,
 }
 
@@ -446,16 +447,23 @@ fn region_figures(
 ) -> Vec<RegionQuality> {
     let mut regions: Vec<RegionQuality> = Region::ALL
         .iter()
-        .map(|&r| (r, &sums[r as usize], &ceilings[r as usize]))
+        .map(|&r| (r, &sums[r.index()], &ceilings[r.index()]))
         .filter(|(_, [band, interior], _)| band.pixels + interior.pixels > 0)
         .map(|(r, zones, ceiling)| {
-            // A zone the source's own images lack adds nothing it can be
-            // told against.
+            // A zone the source's own images lack (its band falls elsewhere
+            // there) is told against the region's whole ceiling; a region
+            // the source's own images never show adds nothing.
+            let mut whole = ceiling[0];
+            whole.merge(&ceiling[1]);
             let excess = zones
                 .iter()
                 .zip(ceiling)
-                .filter(|(z, c)| z.pixels > 0 && c.pixels > 0)
-                .map(|(z, c)| (z.mse() - c.mse()) * z.pixels as f64)
+                .filter(|(z, _)| z.pixels > 0)
+                .map(|(z, c)| {
+                    let c = if c.pixels > 0 { c } else { &whole };
+                    (z.mse() - c.mse()) * z.pixels as f64
+                })
+                .filter(|e| e.is_finite())
                 .sum();
             RegionQuality {
                 region: r.name(),
@@ -694,7 +702,7 @@ pub fn evaluate_variants(
                     view_sums.add(sq, ssim[p], de);
                     if let Some(r) = labels.region[p] {
                         groups[r.group().index()].add(sq, ssim[p], de);
-                        region_sums[r as usize][usize::from(!labels.band[p])].add(sq, ssim[p], de);
+                        region_sums[r.index()][usize::from(!labels.band[p])].add(sq, ssim[p], de);
                     }
                 }
             }
@@ -782,8 +790,7 @@ pub fn evaluate_variants(
                     ceilings[g.index()].add(sq, ssim[p], de);
                     ceiling_parts[usize::from(!is_skin(region))].add(sq, ssim[p], de);
                     ceiling_zones[usize::from(!own_band[p])].add(sq, ssim[p], de);
-                    region_ceilings[region as usize][usize::from(!own_band[p])]
-                        .add(sq, ssim[p], de);
+                    region_ceilings[region.index()][usize::from(!own_band[p])].add(sq, ssim[p], de);
                 }
             }
         }
