@@ -475,6 +475,33 @@ fn bench_composites_trains_once_and_reports_every_recipe() {
     );
     let thesis = run_with("thesis");
     assert_eq!(thesis["pipeline"], "thesis");
+    // A bench of single-source recipes has no band: its band means are
+    // none, not 0 dB.
+    let plain_only = temp("bench-plain");
+    std::fs::create_dir_all(&plain_only).unwrap();
+    std::fs::copy(recipes.join("plain.toml"), plain_only.join("plain.toml")).unwrap();
+    let o = visage(&[
+        "bench",
+        "composites",
+        "--recipes",
+        plain_only.to_str().unwrap(),
+        "--size",
+        "24x24",
+        "--cameras",
+        "3",
+        "--frames",
+        "2",
+        "--iterations",
+        "20",
+        "--renderer",
+        "cpu",
+        "--cache",
+        cache.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(text.contains("band - dB"), "{text}");
+    assert!(!text.contains("NaN"), "{text}");
     // The nose recipe is written with the thesis's post-processing; only the
     // membership differs, and the built-in avatars' Gaussians sit on their
     // triangles.

@@ -287,14 +287,17 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
         });
     }
     // Means over the recipes that have the figure (a single-source composite
-    // has no border band).
+    // has no border band); none where no recipe has it, rather than a 0.
     let mean_of = |f: &dyn Fn(&CompositeReport) -> f64| {
         let values: Vec<f64> = rows
             .iter()
             .map(|r| f(&r.report))
             .filter(|v| v.is_finite())
             .collect();
-        values.iter().sum::<f64>() / values.len().max(1) as f64
+        if values.is_empty() {
+            return f64::NAN;
+        }
+        values.iter().sum::<f64>() / values.len() as f64
     };
     let report = CompositesBench {
         bench: "composites",
@@ -394,17 +397,25 @@ fn print_table(b: &CompositesBench) {
         ],
         String::new(),
     );
+    // A mean no recipe has (no open mouth, no band) reads "-".
+    let figure = |x: f64| {
+        if x.is_finite() {
+            format!("{x:.2}")
+        } else {
+            "-".to_string()
+        }
+    };
     println!(
-        "open-mouth views {:.2} dB, closed-mouth views {:.2} dB (means; {holes:.2} % of head pixels are holes)",
-        m.open_mouth_psnr_db,
-        m.closed_mouth_psnr_db,
-        holes = m.holes_percent
+        "open-mouth views {} dB, closed-mouth views {} dB (means; {} % of head pixels are holes)",
+        figure(m.open_mouth_psnr_db),
+        figure(m.closed_mouth_psnr_db),
+        figure(m.holes_percent)
     );
     println!(
-        "the sources on their own truth (the ceiling): ΔE skin {:.2}, ΔE other {:.2}; band {:.2} dB, interior {:.2} dB",
-        m.ceiling_skin_delta_e,
-        m.ceiling_non_skin_delta_e,
-        m.ceiling_border_psnr_db,
-        m.ceiling_interior_psnr_db
+        "the sources on their own truth (the ceiling): ΔE skin {}, ΔE other {}; band {} dB, interior {} dB",
+        figure(m.ceiling_skin_delta_e),
+        figure(m.ceiling_non_skin_delta_e),
+        figure(m.ceiling_border_psnr_db),
+        figure(m.ceiling_interior_psnr_db)
     );
 }
