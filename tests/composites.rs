@@ -405,14 +405,13 @@ fn bench_composites_trains_once_and_reports_every_recipe() {
     std::fs::write(recipes.join("plain.toml"), "base = \"bram\"\n").unwrap();
     let cache = temp("bench-cache");
     std::fs::remove_dir_all(&cache).ok();
-    let run_with = |pipeline: &str| -> serde_json::Value {
-        let o = visage(&[
+    // The bench at a tiny size over the recipes of `dir`, the sources cached.
+    let bench = |dir: &Path, extra: &[&str]| {
+        let mut args = vec![
             "bench",
             "composites",
-            "--pipeline",
-            pipeline,
             "--recipes",
-            recipes.to_str().unwrap(),
+            dir.to_str().unwrap(),
             "--size",
             "24x24",
             "--cameras",
@@ -425,9 +424,14 @@ fn bench_composites_trains_once_and_reports_every_recipe() {
             "cpu",
             "--cache",
             cache.to_str().unwrap(),
-            "--json",
-        ]);
+        ];
+        args.extend_from_slice(extra);
+        let o = visage(&args);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        o
+    };
+    let run_with = |pipeline: &str| -> serde_json::Value {
+        let o = bench(&recipes, &["--pipeline", pipeline, "--json"]);
         serde_json::from_slice(&o.stdout).unwrap()
     };
     let run = || run_with("recipe");
@@ -475,33 +479,6 @@ fn bench_composites_trains_once_and_reports_every_recipe() {
     );
     let thesis = run_with("thesis");
     assert_eq!(thesis["pipeline"], "thesis");
-    // A bench of single-source recipes has no band: its band means are
-    // none, not 0 dB.
-    let plain_only = temp("bench-plain");
-    std::fs::create_dir_all(&plain_only).unwrap();
-    std::fs::copy(recipes.join("plain.toml"), plain_only.join("plain.toml")).unwrap();
-    let o = visage(&[
-        "bench",
-        "composites",
-        "--recipes",
-        plain_only.to_str().unwrap(),
-        "--size",
-        "24x24",
-        "--cameras",
-        "3",
-        "--frames",
-        "2",
-        "--iterations",
-        "20",
-        "--renderer",
-        "cpu",
-        "--cache",
-        cache.to_str().unwrap(),
-    ]);
-    let text = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(text.contains("band - dB"), "{text}");
-    assert!(!text.contains("NaN"), "{text}");
     // The nose recipe is written with the thesis's post-processing; only the
     // membership differs, and the built-in avatars' Gaussians sit on their
     // triangles.
@@ -516,4 +493,12 @@ fn bench_composites_trains_once_and_reports_every_recipe() {
         psnr(&thesis),
         psnr(&first)
     );
+    // A bench of single-source recipes has no band: its band means are
+    // none, not 0 dB.
+    let plain_only = temp("bench-plain");
+    std::fs::create_dir_all(&plain_only).unwrap();
+    std::fs::copy(recipes.join("plain.toml"), plain_only.join("plain.toml")).unwrap();
+    let text = String::from_utf8(bench(&plain_only, &[]).stdout).unwrap();
+    assert!(text.contains("band - dB"), "{text}");
+    assert!(!text.contains("NaN"), "{text}");
 }

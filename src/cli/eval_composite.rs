@@ -68,16 +68,11 @@ fn row(name: &str, q: &Quality) -> String {
     )
 }
 
-/// Regions listed under "where the error over the ceiling lies".
+/// Regions listed under "error over the ceiling by region".
 const REGIONS_SHOWN: usize = 6;
 
-/// A PSNR for a table cell, "-" where there are no pixels.
-fn decibels(q: &Quality) -> String {
-    decibels_of(if q.pixels == 0 { f64::NAN } else { q.psnr_db })
-}
-
 /// A PSNR for a table cell, "-" where it is not a number (no pixels).
-fn decibels_of(db: f64) -> String {
+fn decibels(db: f64) -> String {
     if db.is_finite() {
         format!("{db:5.2}")
     } else {
@@ -134,10 +129,10 @@ fn print_report(r: &CompositeReport) {
         println!(
             "  {:<23} band {}/{}  interior {}/{}  {:>4.1} %",
             format!("{} ({})", g.region, g.source),
-            decibels(&g.band),
-            decibels_of(g.ceiling_band_psnr_db),
-            decibels(&g.interior),
-            decibels_of(g.ceiling_interior_psnr_db),
+            decibels(g.band.psnr_db),
+            decibels(g.ceiling_band_psnr_db),
+            decibels(g.interior.psnr_db),
+            decibels(g.ceiling_interior_psnr_db),
             100.0 * g.excess / head_error
         );
     }

@@ -417,11 +417,7 @@ fn labels(
     recipe: &ResolvedRecipe,
     border_px: u32,
 ) -> Labels {
-    let shown = visible_triangles(truth, &model.triangles, camera);
-    let region: Vec<Option<Region>> = shown
-        .iter()
-        .map(|t| t.map(|t| model.triangle_regions[t as usize]))
-        .collect();
+    let region = shown_regions(&visible_triangles(truth, &model.triangles, camera), model);
     let head: Vec<bool> = region
         .iter()
         .zip(mask)
@@ -478,6 +474,14 @@ fn region_figures(
         .collect();
     regions.sort_by(|a, b| b.excess.total_cmp(&a.excess));
     regions
+}
+
+/// Per pixel: the region of the triangle `shown` there, if any.
+fn shown_regions(shown: &[Option<u32>], model: &HeadModel) -> Vec<Option<Region>> {
+    shown
+        .iter()
+        .map(|t| t.map(|t| model.triangle_regions[t as usize]))
+        .collect()
 }
 
 /// Per pixel: the source the recipe assigns the region shown there
@@ -768,12 +772,8 @@ pub fn evaluate_variants(
             let shown = visible_triangles(&truth, &model.triangles, camera);
             // The band as it lies in the source's own image: where its groups
             // meet groups the recipe gives other sources.
-            let regions: Vec<Option<Region>> = shown
-                .iter()
-                .map(|t| t.map(|t| model.triangle_regions[t as usize]))
-                .collect();
             let own_band = band(
-                &assigned_sources(&regions, &resolved),
+                &assigned_sources(&shown_regions(&shown, model), &resolved),
                 camera.size,
                 options.border_px,
             );
