@@ -14,6 +14,7 @@
 //! task each (`raster.rs`), entries whose footprint is already saturated are
 //! skipped, and a tile stops once every pixel in it is saturated.
 
+mod colour;
 mod fastmath;
 mod prefetch;
 mod prepared;
@@ -22,14 +23,17 @@ mod raster;
 
 use std::time::Instant;
 
+use glam::Vec3;
+
 use rayon::prelude::*;
 
+use self::colour::batch_bases;
 use self::prepared::Prepared;
 use self::project::{Projector, Splat, LANES};
 use self::raster::{blend_tile, TILE_PIXELS};
 use super::image::RgbImage;
 use super::settings::{RenderSettings, StageTimings};
-use super::sh::eval_rgb_f32;
+use super::sh::rgb_from_basis_f32;
 use super::tiles::{pack_tile, TileBins, TileKey};
 use crate::avatar::binding::TriangleFrame;
 use crate::avatar::gaussians::GaussianSet;
@@ -159,14 +163,21 @@ fn project_all(
             for (batch, ((splats, keys), cores)) in batches.enumerate() {
                 let first = chunk * PROJECT_CHUNK + batch * LANES;
                 let footprints = projector.project_batch(cores, frames);
+                if footprints.iter().all(Option::is_none) {
+                    keys.fill([0; 4]);
+                    continue;
+                }
+                let bases = batch_bases(
+                    &footprints.map(|f| f.map_or(Vec3::ZERO, |f| f.from_eye)),
+                    degree,
+                );
                 for (lane, (splat, key)) in splats.iter_mut().zip(keys.iter_mut()).enumerate() {
                     let Some(f) = footprints[lane] else {
                         *key = [0; 4];
                         continue;
                     };
-                    let dir = f.from_eye.normalize_or_zero();
                     *splat = Splat {
-                        rgb: eval_rgb_f32(prepared.sh_of(first + lane), degree, dir.to_array()),
+                        rgb: rgb_from_basis_f32(prepared.sh_of(first + lane), &bases[lane], degree),
                         ..f.splat
                     };
                     let [x0, y0, x1, y1] = f.splat.rect.map(u32::from);
