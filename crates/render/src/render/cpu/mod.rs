@@ -203,23 +203,29 @@ fn rasterize(
 ) -> RgbImage {
     let tiles = (width.div_ceil(CPU_TILE), height.div_ceil(CPU_TILE));
     let tile_origin = |tile: u32| ((tile % tiles.0) * CPU_TILE, (tile / tiles.0) * CPU_TILE);
-    let tile_pixels: Vec<[[u8; 3]; TILE_PIXELS]> = (0..tiles.0 * tiles.1)
+    // Longest lists first, one task each: a tile's cost follows its list,
+    // and a long tile started last would leave the other cores idle.
+    let mut order: Vec<u32> = (0..tiles.0 * tiles.1).collect();
+    order.sort_by_key(|&tile| std::cmp::Reverse(bins.tile(tile as usize).len()));
+    let tile_pixels: Vec<(u32, [[u8; 3]; TILE_PIXELS])> = order
         .into_par_iter()
+        .with_max_len(1)
         .map(|tile| {
-            blend_tile(
+            let pixels = blend_tile(
                 tile_origin(tile),
                 (width, height),
                 bins.tile(tile as usize),
                 splats,
                 settings.background,
                 settings.early_stop,
-            )
+            );
+            (tile, pixels)
         })
         .collect();
     let mut rgb = vec![0u8; (width * height * 3) as usize];
     let row_bytes = (width * 3) as usize;
-    for (tile, pixels) in tile_pixels.iter().enumerate() {
-        let (x0, y0) = tile_origin(tile as u32);
+    for (tile, pixels) in &tile_pixels {
+        let (x0, y0) = tile_origin(*tile);
         let w = (width - x0).min(CPU_TILE) as usize;
         for ly in 0..(height - y0).min(CPU_TILE) as usize {
             let at = (y0 as usize + ly) * row_bytes + x0 as usize * 3;
