@@ -53,6 +53,9 @@ pub(super) struct Footprint {
     pub depth: f32,
     /// World-space centre minus the eye (for the SH direction).
     pub from_eye: Vec3,
+    /// The square footprint's pixels (the reference's rule; `splat.rect`
+    /// is its part the ellipse can reach), whose tiles list the splat.
+    pub square: [u16; 4],
 }
 
 /// The camera as the per-frame projection uses it.
@@ -231,7 +234,8 @@ impl Projector {
         if near_image == 0 {
             return out;
         }
-        let (conic, lambda, valid) = self.covariance_2d(&placed, frames.is_some(), depth, vx, vy);
+        let (conic, lambda, valid, variance) =
+            self.covariance_2d(&placed, frames.is_some(), depth, vx, vy);
         let three_sigma = ceil_lanes(f32x8::splat(RADIUS_SIGMAS as f32) * lambda.sqrt());
         let visible = (f32x8::splat(2.0) * lambda * f32x8::new(placed.log_visible)).sqrt();
         let radius = three_sigma.min(visible * f32x8::splat(1.0 + 1e-4) + f32x8::splat(1e-3));
@@ -239,13 +243,24 @@ impl Projector {
         let radius = finite.bitselect(radius, f32x8::ZERO);
         let live =
             near_image & valid & finite.to_bitmask() & self.on_screen(center_x, center_y, radius);
-        let rect = self.pixel_rects(center_x, center_y, radius);
+        let rect = self.pixel_rects(center_x, center_y, [radius; 2]);
+        // The ellipse where α reaches 1/255, |d|² ≤ 2·ln(255·o) in the
+        // covariance's metric, reaches ±√(2·ln(255·o)·Σ_xx) across and
+        // ±√(2·ln(255·o)·Σ_yy) down (widened a little for rounding): for
+        // the blend, the square's pixels outside that box are skipped. The
+        // sort keys keep the square's tiles (the GPU's lists are the same).
+        let reach = f32x8::splat(2.0) * f32x8::new(placed.log_visible);
+        let extent = |v: f32x8| {
+            radius.min((reach * v).sqrt() * f32x8::splat(1.0 + 1e-3) + f32x8::splat(1e-2))
+        };
+        let tight = self.pixel_rects(center_x, center_y, variance.map(extent));
         let (x, y) = (center_x.to_array(), center_y.to_array());
         let inv_a = (f32x8::ONE / conic[0]).to_array();
         let conic = conic.map(f32x8::to_array);
+        let lane_rect = |edges: &[[f32; LANES]; 4], lane: usize| edges.map(|e| e[lane] as u16);
         for (lane, g) in cores.iter().enumerate() {
-            let rect = rect[lane];
-            if live & (1 << lane) == 0 || rect[0] > rect[2] || rect[1] > rect[3] {
+            let [x0, y0, x1, y1] = rect.map(|e| e[lane]);
+            if live & (1 << lane) == 0 || x0 > x1 || y0 > y1 {
                 continue;
             }
             out[lane] = Some(Footprint {
@@ -257,8 +272,9 @@ impl Projector {
                     opacity: g.opacity,
                     cutoff: -g.log_visible - 1e-6,
                     rgb: [0.0; 3],
-                    rect: rect.map(|v| v as u16),
+                    rect: lane_rect(&tight, lane),
                 },
+                square: lane_rect(&rect, lane),
                 depth: placed.depth[lane],
                 from_eye: placed.from_eye[lane],
             });
@@ -331,7 +347,7 @@ impl Projector {
         depth: f32x8,
         vx: f32x8,
         vy: f32x8,
-    ) -> ([f32x8; 3], f32x8, u32) {
+    ) -> ([f32x8; 3], f32x8, u32, [f32x8; 2]) {
         let tx = vx
             .max(f32x8::splat(-self.lim_x))
             .min(f32x8::splat(self.lim_x));
@@ -383,28 +399,122 @@ impl Projector {
         let half_gap = half * (a - c);
         let lambda = mid + (half_gap * half_gap + b * b).max(f32x8::splat(0.1)).sqrt();
         let inv_det = f32x8::ONE / det;
-        ([c * inv_det, -b * inv_det, a * inv_det], lambda, valid)
+        (
+            [c * inv_det, -b * inv_det, a * inv_det],
+            lambda,
+            valid,
+            [a, c],
+        )
     }
 
-    /// Each lane's inclusive pixel range whose centres lie in the square
-    /// footprint, clamped to the image (pixel i's centre is i + 0.5); as
-    /// x0, y0, x1, y1, empty where x0 > x1 or y0 > y1. The arguments are
-    /// clamped before rounding (⌈max(v, −1)⌉ = max(⌈v⌉, −1), and so on), so
-    /// footprints far larger than the image round exactly.
-    fn pixel_rects(&self, center_x: f32x8, center_y: f32x8, radius: f32x8) -> [[f32; 4]; LANES] {
+    /// The inclusive pixel range whose centres lie in the box of
+    /// half-sides `radius` (across, down) around the centre, clamped to the
+    /// image (pixel i's centre is i + 0.5), as x0, y0, x1, y1 of each lane,
+    /// empty where x0 > x1 or y0 > y1. The arguments are clamped before rounding
+    /// (⌈max(v, −1)⌉ = max(⌈v⌉, −1), and so on), so footprints far larger
+    /// than the image round exactly.
+    fn pixel_rects(
+        &self,
+        center_x: f32x8,
+        center_y: f32x8,
+        [radius_x, radius_y]: [f32x8; 2],
+    ) -> [[f32; LANES]; 4] {
         let half = f32x8::splat(0.5);
-        let low =
-            |c: f32x8| ceil_lanes((c - radius - half).max(f32x8::splat(-1.0))).max(f32x8::ZERO);
-        let high = |c: f32x8, size: f32| {
+        let low = |c: f32x8, radius: f32x8| {
+            ceil_lanes((c - radius - half).max(f32x8::splat(-1.0))).max(f32x8::ZERO)
+        };
+        let high = |c: f32x8, radius: f32x8, size: f32| {
             let last = f32x8::splat(size - 1.0);
             floor_lanes((c + radius - half).min(f32x8::splat(size))).min(last)
         };
-        let edges = [
-            low(center_x).to_array(),
-            low(center_y).to_array(),
-            high(center_x, self.width).to_array(),
-            high(center_y, self.height).to_array(),
-        ];
-        std::array::from_fn(|lane| edges.map(|e| e[lane]))
+        [
+            low(center_x, radius_x).to_array(),
+            low(center_y, radius_y).to_array(),
+            high(center_x, radius_x, self.width).to_array(),
+            high(center_y, radius_y, self.height).to_array(),
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Quat;
+    use rand::{Rng, SeedableRng};
+
+    use super::*;
+    use crate::render::cpu::prepared::Prepared;
+    use crate::scene::camera::Orbit;
+    use crate::scene::splats::SplatScene;
+
+    /// The box handed to the blend (the square's part the ellipse can
+    /// reach) holds every pixel of the square where α reaches 1/255, for
+    /// needles, discs and round Gaussians at every orientation; and it is
+    /// smaller than the square for the thin ones, or it would prove nothing.
+    #[test]
+    fn the_blend_box_keeps_every_pixel_the_ellipse_reaches() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut scene = SplatScene::with_degree(0);
+        for _ in 0..4_000 {
+            let position = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            let axis = Vec3::new(rng.random(), rng.random(), rng.random()) - 0.5;
+            let rotation =
+                Quat::from_axis_angle(axis.normalize_or(Vec3::X), rng.random_range(0.0..6.3));
+            let thin = [1.0, 1e-1, 1e-3][rng.random_range(0..3)];
+            let scale = Vec3::new(0.05, 0.05 * thin, 0.05 * rng.random_range(thin..=1.0));
+            scene.push(
+                position,
+                rotation,
+                scale,
+                rng.random_range(0.01..1.0),
+                &[0.0; 3],
+            );
+        }
+        let prepared = Prepared::of_scene(&scene);
+        let camera = Orbit {
+            radius: 4.0,
+            target: [0.0; 3],
+            ..Orbit::STUDY
+        }
+        .camera(160, 120);
+        let projector = Projector::new(&camera, 1.0);
+        let (mut checked, mut smaller) = (0, 0);
+        for cores in prepared.core.chunks(LANES) {
+            for f in projector.project_batch(cores, None).into_iter().flatten() {
+                let s = f.splat;
+                let [x0, y0, x1, y1] = f.square.map(u32::from);
+                for py in y0..=y1 {
+                    for px in x0..=x1 {
+                        let (dx, dy) = (px as f64 + 0.5 - s.x as f64, py as f64 + 0.5 - s.y as f64);
+                        let [a, b, c] = s.conic.map(f64::from);
+                        let power = -0.5 * (a * dx * dx + 2.0 * b * dx * dy + c * dy * dy);
+                        if power < f64::from(s.cutoff) {
+                            continue;
+                        }
+                        checked += 1;
+                        let [bx0, by0, bx1, by1] = s.rect.map(u32::from);
+                        assert!(
+                            (bx0..=bx1).contains(&px) && (by0..=by1).contains(&py),
+                            "pixel ({px}, {py}) with power {power} outside {:?} (square {:?})",
+                            s.rect,
+                            f.square
+                        );
+                    }
+                }
+                let area = |r: [u16; 4]| {
+                    (u32::from(r[2]) + 1).saturating_sub(r[0].into())
+                        * (u32::from(r[3]) + 1).saturating_sub(r[1].into())
+                };
+                smaller += usize::from(area(s.rect) < area(f.square));
+            }
+        }
+        assert!(checked > 20_000, "only {checked} pixels reached");
+        assert!(
+            smaller > 500,
+            "the box is smaller than the square for only {smaller}"
+        );
     }
 }
