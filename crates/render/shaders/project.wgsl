@@ -187,7 +187,18 @@ fn project_one(i: u32) -> u32 {
     let x1 = min(floor(centre.x + radius - 0.5), width - 1.0);
     let y0 = max(ceil(centre.y - radius - 0.5), 0.0);
     let y1 = min(floor(centre.y + radius - 0.5), height - 1.0);
-    if (!finite(radius) || !(x0 <= x1) || !(y0 <= y1)) {
+    // The square's part the ellipse where α reaches 1/255 can reach,
+    // ±sqrt(2 ln(o / MIN_ALPHA) Σ_xx) across and Σ_yy down, widened a little
+    // for rounding (cpu/project.rs, the same box): only its tiles list the
+    // Gaussian, since the square's other pixels are never blended.
+    let reach = 2.0 * max(log(opacity / MIN_ALPHA), 0.0);
+    let reach_x = min(radius, sqrt(reach * a) * (1.0 + 1e-3) + 1e-2);
+    let reach_y = min(radius, sqrt(reach * c) * (1.0 + 1e-3) + 1e-2);
+    let bx0 = max(ceil(centre.x - reach_x - 0.5), 0.0);
+    let bx1 = min(floor(centre.x + reach_x - 0.5), width - 1.0);
+    let by0 = max(ceil(centre.y - reach_y - 0.5), 0.0);
+    let by1 = min(floor(centre.y + reach_y - 0.5), height - 1.0);
+    if (!finite(radius) || !(x0 <= x1) || !(y0 <= y1) || !(bx0 <= bx1) || !(by0 <= by1)) {
         cull(i);
         return 0u;
     }
@@ -196,8 +207,8 @@ fn project_one(i: u32) -> u32 {
     projected[3u * i] = vec4<f32>(centre, depth, radius);
     projected[3u * i + 1u] = vec4<f32>(c / det, -b / det, a / det, opacity);
     projected[3u * i + 2u] = vec4<f32>(rgb, 0.0);
-    let t0 = vec2<u32>(u32(x0) / TILE, u32(y0) / TILE);
-    let t1 = vec2<u32>(u32(x1) / TILE, u32(y1) / TILE);
+    let t0 = vec2<u32>(u32(bx0) / TILE, u32(by0) / TILE);
+    let t1 = vec2<u32>(u32(bx1) / TILE, u32(by1) / TILE);
     keys[i] = vec4<u32>(bitcast<u32>(depth), t0.x | (t0.y << 16u), t1.x | (t1.y << 16u), 1u);
     return kind;
 }

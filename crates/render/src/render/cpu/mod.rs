@@ -180,7 +180,7 @@ fn project_all(
                         rgb: rgb_from_basis_f32(prepared.sh_of(first + lane), &bases[lane], degree),
                         ..f.splat
                     };
-                    let [x0, y0, x1, y1] = f.square.map(u32::from);
+                    let [x0, y0, x1, y1] = f.splat.rect.map(u32::from);
                     *key = [
                         f.depth.to_bits(),
                         pack_tile(x0 / CPU_TILE, y0 / CPU_TILE),
