@@ -116,6 +116,7 @@ pub fn eval_rgb_f32(sh: &[f32], use_degree: u8, d: [f32; 3]) -> [f32; 3] {
 
 /// [`eval_rgb_f32`] from the basis values `b` of the view direction, for
 /// callers that evaluate the basis of many Gaussians at once.
+#[inline]
 pub fn rgb_from_basis_f32(sh: &[f32], b: &[f32; 16], use_degree: u8) -> [f32; 3] {
     let coefficients = (use_degree as usize + 1).pow(2);
     match sh.first_chunk::<48>() {
@@ -130,6 +131,7 @@ pub fn rgb_from_basis_f32(sh: &[f32], b: &[f32; 16], use_degree: u8) -> [f32; 3]
 /// side, so each register's chain is four adds long instead of sixteen and
 /// the loop has a fixed length the compiler unrolls: the projection of a
 /// million Gaussians spent 45 % of its colour time in the general loop.
+#[inline]
 fn rgb_from_basis_degree3(sh: &[f32; 48], b: &[f32; 16]) -> [f32; 3] {
     let mut partial = [0.0f32; 12];
     for (group, coefficients) in sh.chunks_exact(12).enumerate() {

@@ -411,6 +411,7 @@ impl Projector {
     /// empty where x0 > x1 or y0 > y1. The arguments are clamped before rounding
     /// (⌈max(v, −1)⌉ = max(⌈v⌉, −1), and so on), so footprints far larger
     /// than the image round exactly.
+    #[inline]
     fn pixel_rects(
         &self,
         center_x: f32x8,
