@@ -35,6 +35,10 @@ const LANES: usize = 8;
 /// of what 5 gains at 640×480.
 const LANE_SPAN: u32 = 5;
 
+/// Rows of a splat's box at least this many pixels wide have their span
+/// inside the ellipse solved for; narrower ones test each pixel.
+const SOLVED_SPAN: u32 = 4;
+
 /// How many entries ahead of the blend a tile's splats are fetched
 /// (measured at 1M, 200×120: 8 saved 6 ms of the blend's 46, 16 saved 7).
 const PREFETCH_AHEAD: usize = 16;
@@ -130,24 +134,30 @@ fn blend_splat(
             continue;
         }
         let dy = oy + ly as f32 + 0.5 - s.y;
-        let disc = b * b * dy * dy - a * (c * dy * dy - reach2);
-        if disc < 0.0 {
-            continue;
-        }
-        let root = disc.sqrt();
-        // Pixel centres ox + lx + 0.5 with dx in [(−b·dy − root)/a, (−b·dy + root)/a],
-        // widened a little so rounding never drops a pixel that counts.
-        let margin = 1e-3 * (1.0 + root * s.inv_a);
-        let lo = (-b * dy - root) * s.inv_a - margin + s.x - ox - 0.5;
-        let hi = (-b * dy + root) * s.inv_a + margin + s.x - ox - 0.5;
-        let span0 = ceil(lo).max(x0 as f32) as u32;
-        let span1 = floor(hi).min(x1 as f32);
-        if span1 < span0 as f32 {
-            continue;
-        }
+        let span = if x1 - x0 < SOLVED_SPAN {
+            // A pixel or two: testing each costs less than solving.
+            (x0, x1)
+        } else {
+            let disc = b * b * dy * dy - a * (c * dy * dy - reach2);
+            if disc < 0.0 {
+                continue;
+            }
+            let root = disc.sqrt();
+            // Pixel centres ox + lx + 0.5 with dx in [(−b·dy − root)/a, (−b·dy + root)/a],
+            // widened a little so rounding never drops a pixel that counts.
+            let margin = 1e-3 * (1.0 + root * s.inv_a);
+            let lo = (-b * dy - root) * s.inv_a - margin + s.x - ox - 0.5;
+            let hi = (-b * dy + root) * s.inv_a + margin + s.x - ox - 0.5;
+            let span0 = ceil(lo).max(x0 as f32) as u32;
+            let span1 = floor(hi).min(x1 as f32);
+            if span1 < span0 as f32 {
+                continue;
+            }
+            (span0, span1 as u32)
+        };
         let row = Row {
             ly,
-            span: (span0, span1 as u32),
+            span,
             q0: -0.5 * c * dy * dy,
             q1: -b * dy,
             ox,
