@@ -23,8 +23,6 @@ mod raster;
 
 use std::time::Instant;
 
-use glam::Vec3;
-
 use rayon::prelude::*;
 
 use self::colour::batch_bases;
@@ -162,27 +160,21 @@ fn project_all(
                 .zip(cores.chunks(LANES));
             for (batch, ((splats, keys), cores)) in batches.enumerate() {
                 let first = chunk * PROJECT_CHUNK + batch * LANES;
-                let footprints = projector.project_batch(cores, frames);
-                if footprints.iter().all(Option::is_none) {
+                let projected = projector.project_batch(cores, frames, splats);
+                if projected.live == 0 {
                     keys.fill([0; 4]);
                     continue;
                 }
-                let bases = batch_bases(
-                    &footprints.map(|f| f.map_or(Vec3::ZERO, |f| f.from_eye)),
-                    degree,
-                );
+                let bases = batch_bases(&projected.from_eye, degree);
                 for (lane, (splat, key)) in splats.iter_mut().zip(keys.iter_mut()).enumerate() {
-                    let Some(f) = footprints[lane] else {
+                    if projected.live & (1 << lane) == 0 {
                         *key = [0; 4];
                         continue;
-                    };
-                    *splat = Splat {
-                        rgb: rgb_from_basis_f32(prepared.sh_of(first + lane), &bases[lane], degree),
-                        ..f.splat
-                    };
-                    let [x0, y0, x1, y1] = f.splat.rect.map(u32::from);
+                    }
+                    splat.rgb = rgb_from_basis_f32(prepared.sh_of(first + lane), &bases[lane], degree);
+                    let [x0, y0, x1, y1] = splat.rect.map(u32::from);
                     *key = [
-                        f.depth.to_bits(),
+                        projected.depth[lane].to_bits(),
                         pack_tile(x0 / CPU_TILE, y0 / CPU_TILE),
                         pack_tile(x1 / CPU_TILE, y1 / CPU_TILE),
                         1,

@@ -44,15 +44,16 @@ pub(super) struct Splat {
     pub rect: [u16; 4],
 }
 
-/// A splat before its colour: where it lands, how deep, and its footprint.
+/// What projecting a batch leaves beside the splats it wrote.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Footprint {
-    /// The splat, colour still black.
-    pub splat: Splat,
+pub(super) struct Projected {
+    /// Lanes (bits) whose Gaussian can touch the image: their splats were
+    /// written, colour still black.
+    pub live: u32,
     /// Distance along the viewing axis.
-    pub depth: f32,
+    pub depth: [f32; LANES],
     /// World-space centre minus the eye (for the SH direction).
-    pub from_eye: Vec3,
+    pub from_eye: [Vec3; LANES],
 }
 
 /// The camera as the per-frame projection uses it.
@@ -201,16 +202,23 @@ impl Projector {
 
     /// Projects up to [`LANES`] Gaussians, each on its triangle's frame
     /// (`frames` is `None` for world-space scenes, which skips the frames'
-    /// arithmetic); a lane is `None` when its Gaussian cannot touch the image
-    /// (the reference's culls: behind the near plane, beyond the far one,
-    /// degenerate, not finite, or off-screen).
+    /// arithmetic), into `splats` (one per Gaussian, written in place: a
+    /// batch's eight returned by value cost a copy of each); a lane is not
+    /// live when its Gaussian cannot touch the image (the reference's
+    /// culls: behind the near plane, beyond the far one, degenerate, not
+    /// finite, or off-screen), and its splat is left as it was.
     pub fn project_batch(
         &self,
         cores: &[Core],
         frames: Option<&[TriangleFrame]>,
-    ) -> [Option<Footprint>; LANES] {
+        splats: &mut [Splat],
+    ) -> Projected {
         let placed = self.place(cores, frames);
-        let mut out = [None; LANES];
+        let mut out = Projected {
+            live: 0,
+            depth: placed.depth,
+            from_eye: placed.from_eye,
+        };
         if placed.alive == 0 {
             return out;
         }
@@ -258,24 +266,21 @@ impl Projector {
         let empty = |edges: &[[f32; LANES]; 4], lane: usize| {
             edges[0][lane] > edges[2][lane] || edges[1][lane] > edges[3][lane]
         };
-        for (lane, g) in cores.iter().enumerate() {
+        for (lane, (g, splat)) in cores.iter().zip(splats).enumerate() {
             if live & (1 << lane) == 0 || empty(&rect, lane) || empty(&tight, lane) {
                 continue;
             }
-            out[lane] = Some(Footprint {
-                splat: Splat {
-                    x: x[lane],
-                    y: y[lane],
-                    conic: [conic[0][lane], conic[1][lane], conic[2][lane]],
-                    inv_a: inv_a[lane],
-                    opacity: g.opacity,
-                    cutoff: -g.log_visible - 1e-6,
-                    rgb: [0.0; 3],
-                    rect: tight.map(|e| e[lane] as u16),
-                },
-                depth: placed.depth[lane],
-                from_eye: placed.from_eye[lane],
-            });
+            out.live |= 1 << lane;
+            *splat = Splat {
+                x: x[lane],
+                y: y[lane],
+                conic: [conic[0][lane], conic[1][lane], conic[2][lane]],
+                inv_a: inv_a[lane],
+                opacity: g.opacity,
+                cutoff: -g.log_visible - 1e-6,
+                rgb: [0.0; 3],
+                rect: tight.map(|e| e[lane] as u16),
+            };
         }
         out
     }
@@ -483,10 +488,14 @@ mod tests {
         .camera(160, 120);
         let projector = Projector::new(&camera, 1.0);
         let reference = ProjectionCamera::new(&camera);
-        let footprints: Vec<Option<Footprint>> = prepared
+        let footprints: Vec<Option<Splat>> = prepared
             .core
             .chunks(LANES)
-            .flat_map(|cores| projector.project_batch(cores, None))
+            .flat_map(|cores| {
+                let mut splats = [Splat::default(); LANES];
+                let live = projector.project_batch(cores, None, &mut splats).live;
+                (0..LANES).map(move |lane| (live & (1 << lane) != 0).then_some(splats[lane]))
+            })
             .collect();
         let (mut checked, mut smaller) = (0, 0);
         for (i, footprint) in footprints.iter().enumerate() {
@@ -505,7 +514,7 @@ mod tests {
                         continue;
                     }
                     reached += 1;
-                    let rect = footprint.map(|f| f.splat.rect.map(u32::from));
+                    let rect = footprint.map(|f| f.rect.map(u32::from));
                     assert!(
                         rect.is_some_and(|[bx0, by0, bx1, by1]| {
                             (bx0..=bx1).contains(&px) && (by0..=by1).contains(&py)
@@ -517,7 +526,7 @@ mod tests {
             }
             checked += reached;
             if let Some(f) = footprint {
-                let [bx0, by0, bx1, by1] = f.splat.rect.map(u32::from);
+                let [bx0, by0, bx1, by1] = f.rect.map(u32::from);
                 smaller +=
                     usize::from((bx1 - bx0 + 1) * (by1 - by0 + 1) < (x1 - x0 + 1) * (y1 - y0 + 1));
             }
