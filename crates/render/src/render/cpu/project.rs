@@ -248,7 +248,6 @@ impl Projector {
         let radius = finite.bitselect(radius, f32x8::ZERO);
         let live =
             near_image & valid & finite.to_bitmask() & self.on_screen(center_x, center_y, radius);
-        let rect = self.pixel_rects(center_x, center_y, [radius; 2]);
         // The ellipse where α reaches 1/255, |d|² ≤ 2·ln(255·o) in the
         // covariance's metric, reaches ±√(2·ln(255·o)·Σ_xx) across and
         // ±√(2·ln(255·o)·Σ_yy) down (widened a little for rounding): the
@@ -267,7 +266,9 @@ impl Projector {
             edges[0][lane] > edges[2][lane] || edges[1][lane] > edges[3][lane]
         };
         for (lane, (g, splat)) in cores.iter().zip(splats).enumerate() {
-            if live & (1 << lane) == 0 || empty(&rect, lane) || empty(&tight, lane) {
+            // The box lies inside the square, so it is empty wherever the
+            // square is.
+            if live & (1 << lane) == 0 || empty(&tight, lane) {
                 continue;
             }
             out.live |= 1 << lane;
