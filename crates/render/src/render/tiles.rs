@@ -21,10 +21,11 @@ pub fn pack_tile(x: u32, y: u32) -> u32 {
 /// Reusable buffers of the tile lists.
 #[derive(Default, Debug)]
 pub struct TileBins {
-    /// Depth bits of each entry of `list` (the sort keys).
-    depths: Vec<u32>,
-    /// Gaussian indices, each tile's run front to back.
-    pub list: Vec<u32>,
+    /// Each tile's run front to back: per entry, the depth bits (the sort
+    /// key) above the Gaussian's index ([`entry_gaussian`]). One array of
+    /// pairs rather than two of halves: every write and move of the binning
+    /// and the sort is then one, not two.
+    pub list: Vec<u64>,
     /// Per tile: start and end in `list`.
     pub ranges: Vec<[u32; 2]>,
 }
@@ -111,17 +112,12 @@ impl TileBins {
         let total = next as usize;
         self.list.clear();
         self.list.resize(total, 0);
-        self.depths.clear();
-        self.depths.resize(total, 0);
-        let (list, depths) = (
-            SharedSlice(self.list.as_mut_ptr()),
-            SharedSlice(self.depths.as_mut_ptr()),
-        );
+        let list = SharedSlice(self.list.as_mut_ptr());
         keys.par_chunks(chunk)
             .enumerate()
             .zip(starts.par_iter_mut())
             .for_each(|((c, part), at)| {
-                let (list, depths) = (&list, &depths);
+                let list = &list;
                 for (j, k) in part.iter().enumerate().filter(|(_, k)| k[3] != 0) {
                     let (x0, y0, x1, y1) = rect(k);
                     for ty in y0..=y1 {
@@ -132,8 +128,10 @@ impl TileBins {
                             // from every other chunk's and tile's and inside
                             // both buffers, whose length is the total of all counts.
                             unsafe {
-                                list.0.add(*slot as usize).write((c * chunk + j) as u32);
-                                depths.0.add(*slot as usize).write(k[0] & mask);
+                                let depth = u64::from(k[0] & mask) << 32;
+                                list.0
+                                    .add(*slot as usize)
+                                    .write(depth | (c * chunk + j) as u64);
                             }
                             *slot += 1;
                         }
@@ -146,22 +144,18 @@ impl TileBins {
     /// Sorts each tile's run by depth, tiles in parallel.
     fn sort_tiles(&mut self) {
         let mut runs = Vec::with_capacity(self.ranges.len());
-        let (mut depths, mut list) = (&mut self.depths[..], &mut self.list[..]);
+        let mut list = &mut self.list[..];
         for &[start, end] in &self.ranges {
-            let len = (end - start) as usize;
-            let (d, rest_d) = std::mem::take(&mut depths).split_at_mut(len);
-            let (l, rest_l) = std::mem::take(&mut list).split_at_mut(len);
-            runs.push((d, l));
-            (depths, list) = (rest_d, rest_l);
+            let (run, rest) = std::mem::take(&mut list).split_at_mut((end - start) as usize);
+            runs.push(run);
+            list = rest;
         }
-        runs.into_par_iter().for_each_init(
-            || (Vec::new(), Vec::new()),
-            |scratch, (d, l)| radix_sort_pairs(d, l, scratch),
-        );
+        runs.into_par_iter()
+            .for_each_init(Vec::new, |scratch, run| radix_sort_entries(run, scratch));
     }
 
-    /// The front-to-back Gaussians of tile `t`.
-    pub fn tile(&self, t: usize) -> &[u32] {
+    /// The front-to-back entries of tile `t` (see [`entry_gaussian`]).
+    pub fn tile(&self, t: usize) -> &[u64] {
         &self.list[self.ranges[t][0] as usize..self.ranges[t][1] as usize]
     }
 }
@@ -179,34 +173,38 @@ enum Footprint {
     Rect(u32, u32, u32, u32),
 }
 
+/// The Gaussian a tile-list entry lists.
+#[inline]
+pub fn entry_gaussian(entry: u64) -> u32 {
+    entry as u32
+}
+
 /// A pointer the binning threads write disjoint slots through.
-struct SharedSlice(*mut u32);
+struct SharedSlice(*mut u64);
 // SAFETY: every thread writes only its own slots (see `TileBins::bin`).
 unsafe impl Sync for SharedSlice {}
 
 /// Runs this short are sorted by insertion (stable), cheaper than counting.
 const INSERTION_MAX: usize = 48;
 
-/// Sorts `values` by `keys` (stable), both reordered in place: LSD radix
+/// Sorts `entries` by their upper 32 bits (stable), in place: LSD radix
 /// passes of one byte, with all four histograms counted in one read and a
-/// pass skipped where every key has the same byte (depths in a narrow range
-/// share their high bytes). `scratch` holds the second buffers.
-pub fn radix_sort_pairs(keys: &mut [u32], values: &mut [u32], scratch: &mut (Vec<u32>, Vec<u32>)) {
-    let n = keys.len();
-    debug_assert_eq!(n, values.len());
+/// pass skipped where every entry has the same byte (depths in a narrow
+/// range share their high bytes). `scratch` holds the second buffer.
+pub fn radix_sort_entries(entries: &mut [u64], scratch: &mut Vec<u64>) {
+    let n = entries.len();
     if n <= INSERTION_MAX {
-        insertion_sort_pairs(keys, values);
+        insertion_sort_entries(entries);
         return;
     }
+    let byte_of = |e: u64, byte: usize| ((e >> (32 + 8 * byte)) & 0xff) as usize;
     let mut histograms = [[0u32; 256]; 4];
-    for &k in keys.iter() {
+    for &e in entries.iter() {
         for (byte, h) in histograms.iter_mut().enumerate() {
-            h[((k >> (8 * byte)) & 0xff) as usize] += 1;
+            h[byte_of(e, byte)] += 1;
         }
     }
-    let (keys_tmp, values_tmp) = scratch;
-    keys_tmp.resize(n, 0);
-    values_tmp.resize(n, 0);
+    scratch.resize(n, 0);
     // Which buffer holds the data: false = the caller's, true = scratch.
     let mut in_scratch = false;
     for (byte, counts) in histograms.iter().enumerate() {
@@ -219,43 +217,44 @@ pub fn radix_sort_pairs(keys: &mut [u32], values: &mut [u32], scratch: &mut (Vec
             *s = next;
             next += c;
         }
-        let (from_k, from_v, to_k, to_v): (&[u32], &[u32], &mut [u32], &mut [u32]) = if in_scratch {
-            (&keys_tmp[..n], &values_tmp[..n], &mut *keys, &mut *values)
+        let (from, to): (&[u64], &mut [u64]) = if in_scratch {
+            (&scratch[..n], &mut *entries)
         } else {
-            (&*keys, &*values, &mut keys_tmp[..n], &mut values_tmp[..n])
+            (&*entries, &mut scratch[..n])
         };
-        for (&k, &v) in from_k.iter().zip(from_v) {
-            let slot = &mut starts[((k >> (8 * byte)) & 0xff) as usize];
-            to_k[*slot as usize] = k;
-            to_v[*slot as usize] = v;
+        for &e in from {
+            let slot = &mut starts[byte_of(e, byte)];
+            to[*slot as usize] = e;
             *slot += 1;
         }
         in_scratch = !in_scratch;
     }
     if in_scratch {
-        keys.copy_from_slice(&keys_tmp[..n]);
-        values.copy_from_slice(&values_tmp[..n]);
+        entries.copy_from_slice(&scratch[..n]);
     }
 }
 
-/// Stable insertion sort of `values` by `keys`.
-fn insertion_sort_pairs(keys: &mut [u32], values: &mut [u32]) {
-    for i in 1..keys.len() {
-        let (k, v) = (keys[i], values[i]);
+/// Stable insertion sort of `entries` by their upper 32 bits.
+fn insertion_sort_entries(entries: &mut [u64]) {
+    for i in 1..entries.len() {
+        let e = entries[i];
         let mut j = i;
-        while j > 0 && keys[j - 1] > k {
-            keys[j] = keys[j - 1];
-            values[j] = values[j - 1];
+        while j > 0 && entries[j - 1] >> 32 > e >> 32 {
+            entries[j] = entries[j - 1];
             j -= 1;
         }
-        keys[j] = k;
-        values[j] = v;
+        entries[j] = e;
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The Gaussians tile `t` lists, front to back.
+    fn gaussians(bins: &TileBins, t: usize) -> Vec<u32> {
+        bins.tile(t).iter().map(|&e| entry_gaussian(e)).collect()
+    }
 
     #[test]
     fn binning_orders_by_depth_and_keeps_ties_in_index_order() {
@@ -272,8 +271,8 @@ mod tests {
         ];
         let mut bins = TileBins::default();
         bins.bin(&keys, (2, 1), 32);
-        assert_eq!(bins.tile(0), &[4, 0, 3, 5]);
-        assert_eq!(bins.tile(1), &[1, 0, 5]);
+        assert_eq!(gaussians(&bins, 0), [4, 0, 3, 5]);
+        assert_eq!(gaussians(&bins, 1), [1, 0, 5]);
     }
 
     /// Footprints of one tile, two side by side or stacked, two by two and
@@ -317,7 +316,7 @@ mod tests {
         let mut bins = TileBins::default();
         bins.bin(&keys, tiles, 32);
         for (t, want) in want.iter().enumerate() {
-            assert_eq!(bins.tile(t), &want[..], "tile {t}");
+            assert_eq!(gaussians(&bins, t), *want, "tile {t}");
         }
     }
 
@@ -332,7 +331,7 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (state >> 33) as u32
         };
-        let mut scratch = (Vec::new(), Vec::new());
+        let mut scratch = Vec::new();
         for (n, spread) in [
             (0, 1),
             (1, 1),
@@ -344,9 +343,14 @@ mod tests {
             let keys: Vec<u32> = (0..n).map(|_| 3.0f32.to_bits() + next() % spread).collect();
             let mut want: Vec<(u32, u32)> = keys.iter().copied().zip(0..).collect();
             want.sort_by_key(|p| p.0);
-            let (mut k, mut v) = (keys.clone(), (0..n as u32).collect::<Vec<_>>());
-            radix_sort_pairs(&mut k, &mut v, &mut scratch);
-            let got: Vec<(u32, u32)> = k.into_iter().zip(v).collect();
+            let mut entries: Vec<u64> = (keys.iter().zip(0u64..))
+                .map(|(&k, i)| u64::from(k) << 32 | i)
+                .collect();
+            radix_sort_entries(&mut entries, &mut scratch);
+            let got: Vec<(u32, u32)> = entries
+                .iter()
+                .map(|&e| ((e >> 32) as u32, entry_gaussian(e)))
+                .collect();
             assert_eq!(got, want, "n = {n}");
         }
     }
@@ -359,6 +363,6 @@ mod tests {
             .collect();
         let mut bins = TileBins::default();
         bins.bin(&keys, (1, 1), 16);
-        assert_eq!(bins.tile(0), &[1, 2, 0]);
+        assert_eq!(gaussians(&bins, 0), [1, 2, 0]);
     }
 }

@@ -171,7 +171,8 @@ fn project_all(
                         *key = [0; 4];
                         continue;
                     }
-                    splat.rgb = rgb_from_basis_f32(prepared.sh_of(first + lane), &bases[lane], degree);
+                    splat.rgb =
+                        rgb_from_basis_f32(prepared.sh_of(first + lane), &bases[lane], degree);
                     let [x0, y0, x1, y1] = splat.rect.map(u32::from);
                     *key = [
                         projected.depth[lane].to_bits(),

@@ -18,6 +18,7 @@ use wide::{f32x8, i32x8};
 use super::fastmath::{ceil, exp_nonpositive, exp_nonpositive_lanes, floor};
 use super::prefetch::prefetch;
 use super::project::Splat;
+use crate::render::tiles::entry_gaussian;
 
 /// Tile edge of the CPU rasteriser.
 pub const CPU_TILE: u32 = 16;
@@ -57,12 +58,12 @@ struct TileState {
     remaining: u32,
 }
 
-/// Blends one tile's splats (`splats[i]` for each `i` of `list`, front to
-/// back); returns its pixels, row-major (CPU_TILE wide).
+/// Blends one tile's splats (the Gaussians of the entries of `list`, front
+/// to back); returns its pixels, row-major (CPU_TILE wide).
 pub(super) fn blend_tile(
     origin: (u32, u32),
     size: (u32, u32),
-    list: &[u32],
+    list: &[u64],
     splats: &[Splat],
     background: [f32; 3],
     early_stop: f32,
@@ -76,13 +77,13 @@ pub(super) fn blend_tile(
         remaining: w * h,
     };
     let origin_f = (origin.0 as f32, origin.1 as f32);
-    for (k, &i) in list.iter().enumerate() {
+    for (k, &entry) in list.iter().enumerate() {
         if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
-            prefetch(&splats[ahead as usize]);
+            prefetch(&splats[entry_gaussian(ahead) as usize]);
         }
         blend_splat(
             &mut state,
-            &splats[i as usize],
+            &splats[entry_gaussian(entry) as usize],
             origin_f,
             (w, h),
             early_stop,

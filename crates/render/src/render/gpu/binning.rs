@@ -691,7 +691,7 @@ mod tests {
 
     use super::*;
     use crate::render::gpu::GpuRenderer;
-    use crate::render::tiles::{pack_tile, TileBins, TileKey};
+    use crate::render::tiles::{entry_gaussian, pack_tile, TileBins, TileKey};
 
     fn read_back(
         device: &wgpu::Device,
@@ -880,9 +880,11 @@ mod tests {
                 for t in 0..tile_count {
                     let (a, b) = (ranges[2 * t] as usize, ranges[2 * t + 1] as usize);
                     let gpu_tile = if a < b { &list[a..b] } else { &[][..] };
+                    let cpu_tile: Vec<u32> =
+                        cpu.tile(t).iter().map(|&e| entry_gaussian(e)).collect();
                     assert_eq!(
                         gpu_tile,
-                        cpu.tile(t),
+                        &cpu_tile[..],
                         "case {k} (compact {compact}): tile {t} differs"
                     );
                 }
