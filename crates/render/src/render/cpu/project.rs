@@ -339,8 +339,9 @@ impl Projector {
     }
 
     /// The conic, the larger eigenvalue of the dilated
-    /// 2D covariance J·W·(k R_f L)(k R_f L)ᵀ·Wᵀ·Jᵀ + 0.3 I, and the lanes
-    /// (bitmask) where it is finite and positive definite. With v₀, v₁ the
+    /// 2D covariance J·W·(k R_f L)(k R_f L)ᵀ·Wᵀ·Jᵀ + 0.3 I, the lanes
+    /// (bitmask) where it is finite and positive definite, and its diagonal
+    /// (a, c) for the box the ellipse reaches. With v₀, v₁ the
     /// rows of J·W·k R_f L: a = |v₀|² + d, c = |v₁|² + d, b = v₀·v₁ and
     /// det = |v₀ × v₁|² + d(|v₀|² + |v₁|²) + d² (Lagrange's identity), so
     /// nothing cancels.
