@@ -31,21 +31,30 @@ pub const C3: [f64; 7] = [
 ];
 
 /// Defines an SH basis function for one number type (f64 for the reference,
-/// f32 for the CPU renderer, the trainer's dual numbers): the same
-/// polynomials, written once. `$constant` turns an f64 constant into the type.
+/// f32 for the CPU renderer, the trainer's dual numbers), or for a type
+/// parameter (`name<L: Bound>, L, …`): the same polynomials, written once.
+/// `$constant` turns an f64 constant into the type. The generic form is for
+/// SIMD lanes and is always inlined, with no closures passed to array
+/// adaptors inside: a caller compiled for wider lanes (AVX2) then compiles
+/// all of it so, rather than calling out to code compiled without them.
 #[macro_export]
 macro_rules! sh_basis {
     ($(#[doc = $doc:expr])* $name:ident, $t:ty, $constant:expr) => {
+        $crate::sh_basis!(@define [inline] $(#[doc = $doc])* $name<>, $t, $constant);
+    };
+    ($(#[doc = $doc:expr])* $name:ident<$($g:ident: $bound:path),*>, $t:ty, $constant:expr) => {
+        $crate::sh_basis!(
+            @define [inline(always)] $(#[doc = $doc])* $name<$($g: $bound),*>, $t, $constant
+        );
+    };
+    (@define [$inline:meta] $(#[doc = $doc:expr])* $name:ident<$($g:ident: $bound:path),*>, $t:ty, $constant:expr) => {
         $(#[doc = $doc])*
         #[allow(clippy::unnecessary_cast, clippy::redundant_closure_call)]
-        #[inline]
-        pub fn $name(degree: u8, d: [$t; 3]) -> [$t; 16] {
+        #[$inline]
+        pub fn $name<$($g: $bound),*>(degree: u8, d: [$t; 3]) -> [$t; 16] {
             let k = $constant;
             let [x, y, z] = d;
-            let (c2, c3) = (
-                $crate::avatar::sh::C2.map(k),
-                $crate::avatar::sh::C3.map(k),
-            );
+            let (c2, c3) = ($crate::avatar::sh::C2, $crate::avatar::sh::C3);
             let c1 = k($crate::avatar::sh::C1);
             // −(c1·y) as (−c1)·y, the same bits, so that types without a
             // negation (SIMD lanes) can use the macro too.
@@ -60,19 +69,19 @@ macro_rules! sh_basis {
             if degree >= 2 {
                 let (xx, yy, zz) = (x * x, y * y, z * z);
                 let (two, three, four) = (k(2.0), k(3.0), k(4.0));
-                b[4] = c2[0] * x * y;
-                b[5] = c2[1] * y * z;
-                b[6] = c2[2] * (two * zz - xx - yy);
-                b[7] = c2[3] * x * z;
-                b[8] = c2[4] * (xx - yy);
+                b[4] = k(c2[0]) * x * y;
+                b[5] = k(c2[1]) * y * z;
+                b[6] = k(c2[2]) * (two * zz - xx - yy);
+                b[7] = k(c2[3]) * x * z;
+                b[8] = k(c2[4]) * (xx - yy);
                 if degree >= 3 {
-                    b[9] = c3[0] * y * (three * xx - yy);
-                    b[10] = c3[1] * x * y * z;
-                    b[11] = c3[2] * y * (four * zz - xx - yy);
-                    b[12] = c3[3] * z * (two * zz - three * xx - three * yy);
-                    b[13] = c3[4] * x * (four * zz - xx - yy);
-                    b[14] = c3[5] * z * (xx - yy);
-                    b[15] = c3[6] * x * (xx - three * yy);
+                    b[9] = k(c3[0]) * y * (three * xx - yy);
+                    b[10] = k(c3[1]) * x * y * z;
+                    b[11] = k(c3[2]) * y * (four * zz - xx - yy);
+                    b[12] = k(c3[3]) * z * (two * zz - three * xx - three * yy);
+                    b[13] = k(c3[4]) * x * (four * zz - xx - yy);
+                    b[14] = k(c3[5]) * z * (xx - yy);
+                    b[15] = k(c3[6]) * x * (xx - three * yy);
                 }
             }
             b

@@ -1,18 +1,18 @@
 //! The colour of a projected batch: the SH basis of its eight view
-//! directions at once in f32x8 lanes (the polynomials of `avatar::sh`, from
-//! the same macro, so every lane gets the bits the scalar basis gives), then
+//! directions at once in lanes (the polynomials of `avatar::sh`, from the
+//! same macro, so every lane gets the bits the scalar basis gives), then
 //! each visible Gaussian's sum over its own coefficients.
 
 use glam::Vec3;
-use wide::f32x8;
 
+use super::lanes::Lanes;
 use super::project::LANES;
 
 crate::sh_basis!(
     /// The SH basis of eight unit directions at once, up to `degree`.
-    basis_lanes,
-    f32x8,
-    |c: f64| f32x8::splat(c as f32)
+    basis_lanes<L: Lanes>,
+    L,
+    |c: f64| L::splat(c as f32)
 );
 
 /// The SH basis values of each lane's direction `from_eye` (any length;
@@ -20,26 +20,27 @@ crate::sh_basis!(
 ///
 /// Written as plain loops: the array adaptors (`map`, `from_fn`) were not
 /// always inlined here, and then cost more than the basis itself.
-#[inline]
-pub(super) fn batch_bases(from_eye: &[Vec3; LANES], degree: u8) -> [[f32; 16]; LANES] {
+#[inline(always)]
+pub(super) fn batch_bases<L: Lanes>(from_eye: &[Vec3; LANES], degree: u8) -> [[f32; 16]; LANES] {
     let mut axes = [[0.0f32; LANES]; 3];
     for (lane, v) in from_eye.iter().enumerate() {
         axes[0][lane] = v.x;
         axes[1][lane] = v.y;
         axes[2][lane] = v.z;
     }
-    let [x, y, z] = [
-        f32x8::new(axes[0]),
-        f32x8::new(axes[1]),
-        f32x8::new(axes[2]),
+    let [x, y, z] = [L::new(axes[0]), L::new(axes[1]), L::new(axes[2])];
+    let recip = L::splat(1.0) / (x * x + y * y + z * z).sqrt();
+    let usable = recip.is_finite() & recip.simd_gt(L::splat(0.0));
+    let zero = L::splat(0.0);
+    let unit = [
+        usable.bitselect(x * recip, zero),
+        usable.bitselect(y * recip, zero),
+        usable.bitselect(z * recip, zero),
     ];
-    let recip = f32x8::ONE / (x * x + y * y + z * z).sqrt();
-    let usable = recip.is_finite() & recip.simd_gt(f32x8::ZERO);
-    let unit = |c: f32x8| usable.bitselect(c * recip, f32x8::ZERO);
-    let basis = basis_lanes(degree, [unit(x), unit(y), unit(z)]);
+    let basis = basis_lanes(degree, unit);
     let mut bases = [[0.0f32; 16]; LANES];
     for (k, values) in basis.iter().enumerate() {
-        for (lane, value) in values.as_array().iter().enumerate() {
+        for (lane, value) in values.to_array().iter().enumerate() {
             bases[lane][k] = *value;
         }
     }
@@ -68,7 +69,7 @@ mod tests {
             from_eye[3] = Vec3::ZERO;
             from_eye[5] = Vec3::new(f32::NAN, 1.0, 0.0);
             for degree in 0..=3 {
-                let lanes = batch_bases(&from_eye, degree);
+                let lanes = batch_bases::<wide::f32x8>(&from_eye, degree);
                 for (lane, v) in from_eye.iter().enumerate() {
                     let scalar = basis_f32(degree, v.normalize_or_zero().to_array());
                     assert_eq!(

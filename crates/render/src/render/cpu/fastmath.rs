@@ -74,12 +74,6 @@ pub fn floor_lanes(x: f32x8) -> f32x8 {
     t - t.simd_gt(x).bitselect(f32x8::ONE, f32x8::ZERO)
 }
 
-/// ⌈x⌉ in each lane, on the terms of [`floor_lanes`].
-#[inline]
-pub fn ceil_lanes(x: f32x8) -> f32x8 {
-    -floor_lanes(-x)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -104,7 +98,6 @@ mod tests {
             let lanes = std::array::from_fn(|i| (k * 8 + i as i32) as f32 * 0.37 - 0.5);
             let x = f32x8::new(lanes);
             assert_eq!(floor_lanes(x).to_array(), lanes.map(f32::floor));
-            assert_eq!(ceil_lanes(x).to_array(), lanes.map(f32::ceil));
         }
         assert_eq!(floor(-1e12), i32::MIN as f32);
     }

@@ -16,6 +16,7 @@
 
 mod colour;
 mod fastmath;
+mod lanes;
 mod prefetch;
 mod prepared;
 mod project;
@@ -154,35 +155,98 @@ fn project_all(
         .zip(prepared.core.par_chunks(PROJECT_CHUNK))
         .enumerate()
         .for_each(|(chunk, ((splats, keys), cores))| {
-            let batches = splats
-                .chunks_mut(LANES)
-                .zip(keys.chunks_mut(LANES))
-                .zip(cores.chunks(LANES));
-            for (batch, ((splats, keys), cores)) in batches.enumerate() {
-                let first = chunk * PROJECT_CHUNK + batch * LANES;
-                let projected = projector.project_batch(cores, frames, splats);
-                if projected.live == 0 {
-                    keys.fill([0; 4]);
-                    continue;
-                }
-                let bases = batch_bases(&projected.from_eye, degree);
-                for (lane, (splat, key)) in splats.iter_mut().zip(keys.iter_mut()).enumerate() {
-                    if projected.live & (1 << lane) == 0 {
-                        *key = [0; 4];
-                        continue;
-                    }
-                    splat.rgb =
-                        rgb_from_basis_f32(prepared.sh_of(first + lane), &bases[lane], degree);
-                    let [x0, y0, x1, y1] = splat.rect.map(u32::from);
-                    *key = [
-                        projected.depth[lane].to_bits(),
-                        pack_tile(x0 / CPU_TILE, y0 / CPU_TILE),
-                        pack_tile(x1 / CPU_TILE, y1 / CPU_TILE),
-                        1,
-                    ];
-                }
-            }
+            let chunk = Chunk {
+                first: chunk * PROJECT_CHUNK,
+                cores,
+                splats,
+                keys,
+            };
+            project_chunk_fastest(&projector, prepared, frames, degree, chunk);
         });
+}
+
+/// One parallel task of the projection: Gaussians `first..` (their
+/// records) and where their splats and keys go.
+struct Chunk<'a> {
+    first: usize,
+    cores: &'a [prepared::Core],
+    splats: &'a mut [Splat],
+    keys: &'a mut [TileKey],
+}
+
+/// [`project_chunk`] in the fastest lanes this processor has: one AVX
+/// register where it has AVX2, two SSE2 halves elsewhere (the same bits).
+fn project_chunk_fastest(
+    projector: &Projector,
+    prepared: &Prepared,
+    frames: Option<&[TriangleFrame]>,
+    degree: u8,
+    chunk: Chunk,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if lanes::avx2_enabled() {
+        // SAFETY: the processor has AVX2 (just checked).
+        unsafe { project_chunk_avx2(projector, prepared, frames, degree, chunk) };
+        return;
+    }
+    project_chunk::<wide::f32x8>(projector, prepared, frames, degree, chunk);
+}
+
+/// [`project_chunk`] in AVX lanes, compiled for AVX2.
+///
+/// # Safety
+/// The processor must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,avx2")]
+unsafe fn project_chunk_avx2(
+    projector: &Projector,
+    prepared: &Prepared,
+    frames: Option<&[TriangleFrame]>,
+    degree: u8,
+    chunk: Chunk,
+) {
+    project_chunk::<lanes::Avx>(projector, prepared, frames, degree, chunk);
+}
+
+/// Projects a chunk's Gaussians a batch of [`LANES`] at a time, colours the
+/// live ones and writes their sort keys (zero for culled ones). Inlined into
+/// each caller, so that the AVX2 one compiles all of it for AVX2.
+#[inline(always)]
+fn project_chunk<L: lanes::Lanes>(
+    projector: &Projector,
+    prepared: &Prepared,
+    frames: Option<&[TriangleFrame]>,
+    degree: u8,
+    chunk: Chunk,
+) {
+    let batches = chunk
+        .splats
+        .chunks_mut(LANES)
+        .zip(chunk.keys.chunks_mut(LANES))
+        .zip(chunk.cores.chunks(LANES));
+    for (batch, ((splats, keys), cores)) in batches.enumerate() {
+        let first = chunk.first + batch * LANES;
+        let projected = projector.project_batch::<L>(cores, frames, splats);
+        if projected.live == 0 {
+            keys.fill([0; 4]);
+            continue;
+        }
+        let bases = batch_bases::<L>(&projected.from_eye, degree);
+        for (lane, (splat, key)) in splats.iter_mut().zip(keys.iter_mut()).enumerate() {
+            if projected.live & (1 << lane) == 0 {
+                *key = [0; 4];
+                continue;
+            }
+            splat.rgb = rgb_from_basis_f32(prepared.sh_of(first + lane), &bases[lane], degree);
+            let [x0, y0, x1, y1] = splat.rect.map(u32::from);
+            *key = [
+                projected.depth[lane].to_bits(),
+                pack_tile(x0 / CPU_TILE, y0 / CPU_TILE),
+                pack_tile(x1 / CPU_TILE, y1 / CPU_TILE),
+                1,
+            ];
+        }
+    }
 }
 
 /// Blends every tile (one task each: tiles cost very different amounts, each
@@ -231,5 +295,134 @@ fn rasterize(
         width,
         height,
         pixels: rgb,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Mat3, Quat, Vec3};
+    use rand::{Rng, SeedableRng};
+
+    use super::*;
+    use crate::scene::camera::Orbit;
+
+    /// Every field of a splat, as bits.
+    fn splat_bits(s: &Splat) -> Vec<u32> {
+        let floats = [
+            s.x, s.y, s.conic[0], s.conic[1], s.conic[2], s.inv_a, s.opacity, s.cutoff,
+        ];
+        let floats = floats.into_iter().chain(s.rgb).map(f32::to_bits);
+        floats.chain(s.rect.map(u32::from)).collect()
+    }
+
+    /// The splats and keys of every Gaussian of `prepared`, projected in
+    /// AVX lanes (`avx`) or `wide`'s SSE2 ones.
+    fn project_everything(
+        prepared: &Prepared,
+        frames: Option<&[TriangleFrame]>,
+        camera: &Camera,
+        avx: bool,
+    ) -> (Vec<Vec<u32>>, Vec<TileKey>) {
+        let projector = Projector::new(camera, 1.0);
+        let n = prepared.len();
+        let (mut splats, mut keys) = (vec![Splat::default(); n], vec![[0; 4]; n]);
+        let chunk = Chunk {
+            first: 0,
+            cores: &prepared.core,
+            splats: &mut splats,
+            keys: &mut keys,
+        };
+        if avx {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: only asked for where the processor has AVX2.
+            unsafe {
+                project_chunk_avx2(&projector, prepared, frames, 3, chunk)
+            };
+        } else {
+            project_chunk::<wide::f32x8>(&projector, prepared, frames, 3, chunk);
+        }
+        (splats.iter().map(splat_bits).collect(), keys)
+    }
+
+    /// The projection in AVX lanes gives the splats, colours and keys of
+    /// the SSE2 lanes bit for bit, on hard Gaussians (behind the camera and
+    /// at it, needles, huge and zero scales, zero quaternions, zero opacity,
+    /// NaN and infinite positions and coefficients), in world space and on a
+    /// triangle's frame. Without AVX2 there is nothing to compare.
+    #[test]
+    fn the_projection_gives_the_same_bits_in_avx_and_sse2_lanes() {
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = std::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx2 = false;
+        if !avx2 {
+            eprintln!("no AVX2 on this processor: only the SSE2 lanes exist here");
+            return;
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let mut scene = SplatScene::with_degree(3);
+        for i in 0..6_000 {
+            let mut position = Vec3::new(
+                rng.random_range(-6.0..6.0),
+                rng.random_range(-6.0..6.0),
+                rng.random_range(-6.0..6.0),
+            );
+            let mut scale = Vec3::new(
+                10f32.powf(rng.random_range(-6.0..1.0)),
+                10f32.powf(rng.random_range(-6.0..1.0)),
+                10f32.powf(rng.random_range(-6.0..1.0)),
+            );
+            let mut rotation = Quat::from_xyzw(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            let mut opacity = rng.random_range(0.0..1.0);
+            let mut sh: Vec<f32> = (0..48).map(|_| rng.random_range(-1.0..1.0)).collect();
+            match i % 40 {
+                0 => position = Vec3::new(f32::NAN, 0.0, 0.0),
+                1 => position = Vec3::splat(f32::INFINITY),
+                2 => scale = Vec3::ZERO,
+                3 => scale = Vec3::splat(1e4),
+                4 => rotation = Quat::from_xyzw(0.0, 0.0, 0.0, 0.0),
+                5 => opacity = 0.0,
+                6 => sh[7] = f32::NAN,
+                7 => sh[30] = f32::INFINITY,
+                8 => position = Orbit::STUDY.camera(160, 120).eye,
+                9 => scale = Vec3::new(1.0, 1e-7, 1e-7),
+                _ => {}
+            }
+            scene.push(position, rotation, scale, opacity, &sh);
+        }
+        let prepared = Prepared::of_scene(&scene);
+        let camera = Orbit {
+            radius: 4.0,
+            target: [0.0; 3],
+            ..Orbit::STUDY
+        }
+        .camera(160, 120);
+        let quat = Quat::from_axis_angle(Vec3::new(0.3, 1.0, -0.2).normalize(), 0.8);
+        let frame = [TriangleFrame {
+            center: Vec3::new(0.1, -0.2, 0.3),
+            rotation: Mat3::from_quat(quat),
+            quat,
+            scale: 0.7,
+        }];
+        for frames in [None, Some(&frame[..])] {
+            let (sse, sse_keys) = project_everything(&prepared, frames, &camera, false);
+            let (avx, avx_keys) = project_everything(&prepared, frames, &camera, true);
+            let live = sse_keys.iter().filter(|k| k[3] == 1).count();
+            assert!(
+                live > 1_000,
+                "only {live} Gaussians in view: the test proves little"
+            );
+            for (i, (key, other)) in sse_keys.iter().zip(&avx_keys).enumerate() {
+                assert_eq!(key, other, "Gaussian {i}'s key");
+                if key[3] == 1 {
+                    assert_eq!(sse[i], avx[i], "Gaussian {i}'s splat");
+                }
+            }
+        }
     }
 }
