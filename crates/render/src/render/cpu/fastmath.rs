@@ -4,7 +4,7 @@
 //! there, and `f32::exp` is far more accurate than a blend of 8-bit colour
 //! needs.
 
-use wide::{f32x8, i32x8};
+use super::lanes::Lanes;
 
 /// ⌊x⌋ for |x| < 2³¹ (beyond, the result saturates there, which the
 /// callers clamp to the image anyway; NaN gives 0).
@@ -51,27 +51,17 @@ pub fn exp_nonpositive(x: f32) -> f32 {
 /// [`exp_nonpositive`] in each lane, bit for bit (the same operations in
 /// the same order, so a pixel blended eight at a time gets exactly the value
 /// it would get alone).
-#[inline]
-pub fn exp_nonpositive_lanes(x: f32x8) -> f32x8 {
-    let c = f32x8::splat;
-    let n = floor_lanes(x * c(std::f32::consts::LOG2_E) + c(0.5));
+#[inline(always)]
+pub fn exp_nonpositive_lanes<L: Lanes>(x: L) -> L {
+    let c = L::splat;
+    let n = (x * c(std::f32::consts::LOG2_E) + c(0.5)).floor();
     let r = x - n * c(LN2_HI) - n * c(LN2_LO);
     let p = c(1.0)
         + r * (c(1.0)
             + r * (c(0.5)
                 + r * (c(1.0 / 6.0)
                     + r * (c(1.0 / 24.0) + r * (c(1.0 / 120.0) + r * c(1.0 / 720.0))))));
-    let two_to_n: f32x8 = bytemuck::cast((n.fast_trunc_int() + i32x8::splat(127)) << 23);
-    x.simd_lt(c(-87.0)).bitselect(f32x8::ZERO, p * two_to_n)
-}
-
-/// ⌊x⌋ in each lane, for |x| < 2³¹ (callers clamp to the image first);
-/// the same rule as [`floor`], a conversion each way and one compare, where
-/// `wide`'s own falls back to a library call per lane without SSE4.1.
-#[inline]
-pub fn floor_lanes(x: f32x8) -> f32x8 {
-    let t = f32x8::from_i32x8(x.fast_trunc_int());
-    t - t.simd_gt(x).bitselect(f32x8::ONE, f32x8::ZERO)
+    x.simd_lt(c(-87.0)).bitselect(c(0.0), p * n.exp2_integer())
 }
 
 #[cfg(test)]
@@ -94,11 +84,6 @@ mod tests {
             }
         }
         assert_eq!(floor(f32::NAN), 0.0);
-        for k in -500..500 {
-            let lanes = std::array::from_fn(|i| (k * 8 + i as i32) as f32 * 0.37 - 0.5);
-            let x = f32x8::new(lanes);
-            assert_eq!(floor_lanes(x).to_array(), lanes.map(f32::floor));
-        }
         assert_eq!(floor(-1e12), i32::MIN as f32);
     }
 
@@ -119,7 +104,7 @@ mod tests {
         assert!(exp_nonpositive(-80.0) > 0.0);
         for k in 0..25_000 {
             let lanes: [f32; 8] = std::array::from_fn(|i| -((k * 8 + i) as f32) * 5e-4);
-            let got = exp_nonpositive_lanes(f32x8::new(lanes)).to_array();
+            let got = exp_nonpositive_lanes(wide::f32x8::new(lanes)).to_array();
             assert_eq!(
                 got.map(f32::to_bits),
                 lanes.map(exp_nonpositive).map(f32::to_bits)
@@ -135,7 +120,7 @@ mod tests {
             f32::NEG_INFINITY,
             -0.0,
         ];
-        let got = exp_nonpositive_lanes(f32x8::new(ends)).to_array();
+        let got = exp_nonpositive_lanes(wide::f32x8::new(ends)).to_array();
         assert_eq!(
             got.map(f32::to_bits),
             ends.map(exp_nonpositive).map(f32::to_bits)

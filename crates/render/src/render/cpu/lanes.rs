@@ -10,9 +10,7 @@
 
 use std::ops::{Add, BitAnd, Div, Mul, Neg, Sub};
 
-use wide::f32x8;
-
-use super::fastmath::floor_lanes;
+use wide::{f32x8, i32x8};
 
 /// Eight f32 lanes; comparisons give masks (all bits set where true) of
 /// the same type.
@@ -54,8 +52,14 @@ pub(super) trait Lanes:
     fn bitselect(self, if_one: Self, if_zero: Self) -> Self;
     /// The lanes' sign bits (lane i in bit i).
     fn to_bitmask(self) -> u32;
-    /// ⌊x⌋ for |x| < 2³¹, by truncation (as `fastmath::floor_lanes`).
+    /// ⌊x⌋ for |x| < 2³¹ (callers clamp first), by truncation and one
+    /// compare, as `fastmath::floor` (`wide`'s own floor calls the library
+    /// per lane without SSE4.1).
     fn floor(self) -> Self;
+    /// 2ⁿ in each lane for whole n in −126..=127, from its exponent bits.
+    fn exp2_integer(self) -> Self;
+    /// A mask with lane i set where bit i of `bits` is.
+    fn lane_mask(bits: u32) -> Self;
 
     /// ⌈x⌉ for |x| < 2³¹, as −⌊−x⌋.
     #[inline(always)]
@@ -123,7 +127,17 @@ impl Lanes for f32x8 {
     }
     #[inline(always)]
     fn floor(self) -> Self {
-        floor_lanes(self)
+        let t = f32x8::from_i32x8(self.fast_trunc_int());
+        t - t.simd_gt(self).bitselect(f32x8::ONE, f32x8::ZERO)
+    }
+    #[inline(always)]
+    fn exp2_integer(self) -> Self {
+        bytemuck::cast((self.fast_trunc_int() + i32x8::splat(127)) << 23)
+    }
+    #[inline(always)]
+    fn lane_mask(bits: u32) -> Self {
+        let lane_bits = i32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
+        bytemuck::cast((i32x8::splat(bits as i32) & lane_bits).simd_eq(lane_bits))
     }
 }
 
@@ -305,6 +319,20 @@ mod avx {
                     .simd_gt(self)
                     .bitselect(Self::splat(1.0), Self::splat(0.0))
         }
+        #[inline(always)]
+        fn exp2_integer(self) -> Self {
+            avx!(_mm256_castsi256_ps(_mm256_slli_epi32::<23>(
+                _mm256_add_epi32(_mm256_cvttps_epi32(self.0), _mm256_set1_epi32(127))
+            )))
+        }
+        #[inline(always)]
+        fn lane_mask(bits: u32) -> Self {
+            avx!({
+                let lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+                let set = _mm256_and_si256(_mm256_set1_epi32(bits as i32), lane_bits);
+                _mm256_castsi256_ps(_mm256_cmpeq_epi32(set, lane_bits))
+            })
+        }
     }
 }
 
@@ -366,6 +394,13 @@ mod tests {
             bits(small.floor()),
             bits(small.ceil()),
             [x.to_bitmask(), x.simd_lt(y).to_bitmask(), 0, 0, 0, 0, 0, 0],
+            bits(
+                small
+                    .min(L::splat(127.0))
+                    .max(L::splat(-126.0))
+                    .exp2_integer(),
+            ),
+            bits(L::lane_mask(a[0].to_bits() & 0xff)),
         ]
     }
 

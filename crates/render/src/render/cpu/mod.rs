@@ -249,6 +249,41 @@ fn project_chunk<L: lanes::Lanes>(
     }
 }
 
+/// [`blend_tile`] in the fastest lanes this processor has (as
+/// [`project_chunk_fastest`]).
+fn blend_tile_fastest(
+    origin: (u32, u32),
+    size: (u32, u32),
+    list: &[u64],
+    splats: &[Splat],
+    background: [f32; 3],
+    early_stop: f32,
+) -> [[u8; 3]; TILE_PIXELS] {
+    #[cfg(target_arch = "x86_64")]
+    if lanes::avx2_enabled() {
+        // SAFETY: the processor has AVX2 (just checked).
+        return unsafe { blend_tile_avx2(origin, size, list, splats, background, early_stop) };
+    }
+    blend_tile::<wide::f32x8>(origin, size, list, splats, background, early_stop)
+}
+
+/// [`blend_tile`] in AVX lanes, compiled for AVX2.
+///
+/// # Safety
+/// The processor must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,avx2")]
+unsafe fn blend_tile_avx2(
+    origin: (u32, u32),
+    size: (u32, u32),
+    list: &[u64],
+    splats: &[Splat],
+    background: [f32; 3],
+    early_stop: f32,
+) -> [[u8; 3]; TILE_PIXELS] {
+    blend_tile::<lanes::Avx>(origin, size, list, splats, background, early_stop)
+}
+
 /// Blends every tile (one task each: tiles cost very different amounts, each
 /// into its own small buffer) and assembles the image; a tile blends
 /// `splats` in the order of its list in `bins`.
@@ -268,7 +303,7 @@ fn rasterize(
         .into_par_iter()
         .with_max_len(1)
         .map(|tile| {
-            let pixels = blend_tile(
+            let pixels = blend_tile_fastest(
                 tile_origin(tile),
                 (width, height),
                 bins.tile(tile as usize),

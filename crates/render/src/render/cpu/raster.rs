@@ -3,7 +3,7 @@
 //! rule) and in the ellipse where α = o·e^power reaches 1/255: a row at a time,
 //! the ellipse's span is solved for, so sub-pixel splats visit the handful of
 //! pixels they reach rather than their whole square; long spans are blended
-//! eight pixels at a time in f32x8 lanes, bit for bit as one by one. The
+//! eight pixels at a time in lanes, bit for bit as one by one. The
 //! exponential is a short polynomial accurate to an f32 step or two
 //! (`fastmath.rs`). Splats are read through the tile's list of indices and
 //! fetched a few entries ahead: copying them into list order first cost a
@@ -13,9 +13,8 @@
 use crate::render::image::quantize;
 use crate::render::projection::{MAX_ALPHA, MIN_ALPHA};
 
-use wide::{f32x8, i32x8};
-
 use super::fastmath::{ceil, exp_nonpositive, exp_nonpositive_lanes, floor};
+use super::lanes::Lanes;
 use super::prefetch::prefetch;
 use super::project::Splat;
 use crate::render::tiles::entry_gaussian;
@@ -59,8 +58,11 @@ struct TileState {
 }
 
 /// Blends one tile's splats (the Gaussians of the entries of `list`, front
-/// to back); returns its pixels, row-major (CPU_TILE wide).
-pub(super) fn blend_tile(
+/// to back); returns its pixels, row-major (CPU_TILE wide). Long rows are
+/// blended in lanes `L` (see `lanes.rs`); inlined whole into each caller, so
+/// the one compiled for AVX2 compiles all of it so.
+#[inline(always)]
+pub(super) fn blend_tile<L: Lanes>(
     origin: (u32, u32),
     size: (u32, u32),
     list: &[u64],
@@ -81,7 +83,7 @@ pub(super) fn blend_tile(
         if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
             prefetch(&splats[entry_gaussian(ahead) as usize]);
         }
-        blend_splat(
+        blend_splat::<L>(
             &mut state,
             &splats[entry_gaussian(entry) as usize],
             origin_f,
@@ -105,8 +107,8 @@ pub(super) fn blend_tile(
 }
 
 /// Blends one splat into the tile at `origin` (of `w × h` pixels inside the image).
-#[inline]
-fn blend_splat(
+#[inline(always)]
+fn blend_splat<L: Lanes>(
     state: &mut TileState,
     s: &Splat,
     origin: (f32, f32),
@@ -166,7 +168,7 @@ fn blend_splat(
             ox,
         };
         if row.span.1 - row.span.0 + 1 >= LANE_SPAN {
-            blend_row_lanes(state, s, &row, early_stop);
+            blend_row_lanes::<L>(state, s, &row, early_stop);
         } else {
             blend_row(state, s, &row, early_stop);
         }
@@ -186,7 +188,7 @@ struct Row {
 }
 
 /// Blends a row's span a pixel at a time.
-#[inline]
+#[inline(always)]
 fn blend_row(state: &mut TileState, s: &Splat, row: &Row, early_stop: f32) {
     let a = s.conic[0];
     let done = &mut state.done[row.ly as usize];
@@ -222,9 +224,9 @@ fn blend_row(state: &mut TileState, s: &Splat, row: &Row, early_stop: f32) {
 /// Blends a row's span eight pixels at a time with exactly the pixel loop's
 /// arithmetic: lane masks stand in for its `continue`s, so every pixel gets
 /// the bits it would get alone.
-#[inline]
-fn blend_row_lanes(state: &mut TileState, s: &Splat, row: &Row, early_stop: f32) {
-    let c = f32x8::splat;
+#[inline(always)]
+fn blend_row_lanes<L: Lanes>(state: &mut TileState, s: &Splat, row: &Row, early_stop: f32) {
+    let c = L::splat;
     let half_a = c(0.5 * s.conic[0]);
     let span_bits = (u32::MAX >> (31 - row.span.1)) & !((1u32 << row.span.0) - 1);
     for group in row.span.0 as usize / LANES..=row.span.1 as usize / LANES {
@@ -234,24 +236,23 @@ fn blend_row_lanes(state: &mut TileState, s: &Splat, row: &Row, early_stop: f32)
         if candidates == 0 {
             continue;
         }
-        let columns = f32x8::new(std::array::from_fn(|i| (base + i) as f32));
+        let columns = L::new(std::array::from_fn(|i| (base + i) as f32));
         let dx = c(row.ox) + columns + c(0.5) - c(s.x);
         let power = c(row.q0) + dx * (c(row.q1) - half_a * dx);
         let alpha = (c(s.opacity) * exp_nonpositive_lanes(power)).min(c(MAX_ALPHA as f32));
-        let counts = power.simd_le(f32x8::ZERO)
-            & power.simd_ge(c(s.cutoff))
-            & alpha.simd_ge(c(MIN_ALPHA as f32));
+        let counts =
+            power.simd_le(c(0.0)) & power.simd_ge(c(s.cutoff)) & alpha.simd_ge(c(MIN_ALPHA as f32));
         let active = candidates & counts.to_bitmask();
         if active == 0 {
             continue;
         }
         let p = row.ly as usize * CPU_TILE as usize + base;
-        let t = load(&state.transmittance, p);
-        let next = t * (f32x8::ONE - alpha);
+        let t: L = load(&state.transmittance, p);
+        let next = t * (c(1.0) - alpha);
         let saturated = active & next.simd_lt(c(early_stop)).to_bitmask();
         *done |= (saturated << base) as u16;
         state.remaining -= saturated.count_ones();
-        let blend = lane_mask(active & !saturated);
+        let blend = L::lane_mask(active & !saturated);
         let weight = alpha * t;
         for (plane, rgb) in state.colour.iter_mut().zip(s.rgb) {
             let old = load(plane, p);
@@ -262,23 +263,16 @@ fn blend_row_lanes(state: &mut TileState, s: &Splat, row: &Row, early_stop: f32)
 }
 
 /// Eight pixels' values from `p` on.
-#[inline]
-fn load(plane: &[f32; TILE_PIXELS], p: usize) -> f32x8 {
+#[inline(always)]
+fn load<L: Lanes>(plane: &[f32; TILE_PIXELS], p: usize) -> L {
     let lanes: [f32; LANES] = plane[p..p + LANES].try_into().expect("eight lanes");
-    f32x8::new(lanes)
+    L::new(lanes)
 }
 
 /// Writes eight pixels' values from `p` on.
-#[inline]
-fn store(plane: &mut [f32; TILE_PIXELS], p: usize, values: f32x8) {
-    plane[p..p + LANES].copy_from_slice(values.as_array());
-}
-
-/// A lane mask (all bits set where `bits` has the lane's bit) for `bitselect`.
-#[inline]
-fn lane_mask(bits: u32) -> f32x8 {
-    let lane_bits = i32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
-    bytemuck::cast((i32x8::splat(bits as i32) & lane_bits).simd_eq(lane_bits))
+#[inline(always)]
+fn store<L: Lanes>(plane: &mut [f32; TILE_PIXELS], p: usize, values: L) {
+    plane[p..p + LANES].copy_from_slice(&values.to_array());
 }
 
 #[cfg(test)]
@@ -296,14 +290,25 @@ mod tests {
         }
     }
 
-    /// A row blended eight pixels at a time leaves exactly the bits the
+    /// [`blend_row_lanes`] in AVX lanes.
+    ///
+    /// # Safety
+    /// The processor must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2")]
+    unsafe fn blend_row_lanes_avx2(state: &mut TileState, s: &Splat, row: &Row, early_stop: f32) {
+        blend_row_lanes::<crate::render::cpu::lanes::Avx>(state, s, row, early_stop);
+    }
+
+    /// A row blended eight pixels at a time (in `wide`'s lanes and, where
+    /// the processor has AVX2, in AVX ones) leaves exactly the bits the
     /// pixel loop leaves: colours, transmittance, saturation and the count of
     /// pixels left, over random splats (opaque ones included, so pixels
     /// saturate part-way) and spans that start and end anywhere in the row.
     #[test]
     fn lanes_blend_a_row_bit_for_bit_as_the_pixel_loop() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let (mut one, mut eight) = (empty_state(), empty_state());
+        let (mut one, mut eight, mut avx) = (empty_state(), empty_state(), empty_state());
         for _ in 0..4_000 {
             let opacity = if rng.random_bool(0.3) {
                 0.99
@@ -330,7 +335,12 @@ mod tests {
                 ox: 16.0,
             };
             blend_row(&mut one, &s, &row, 1e-4);
-            blend_row_lanes(&mut eight, &s, &row, 1e-4);
+            blend_row_lanes::<wide::f32x8>(&mut eight, &s, &row, 1e-4);
+            #[cfg(target_arch = "x86_64")]
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the processor has AVX2 (just checked).
+                unsafe { blend_row_lanes_avx2(&mut avx, &s, &row, 1e-4) };
+            }
         }
         let bits = |plane: &[f32; TILE_PIXELS]| plane.map(f32::to_bits);
         for (a, b) in one.colour.iter().zip(&eight.colour) {
@@ -343,5 +353,13 @@ mod tests {
             one.remaining < TILE_PIXELS as u32,
             "nothing saturated: the test proves less"
         );
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            for (a, b) in one.colour.iter().zip(&avx.colour) {
+                assert_eq!(bits(a), bits(b), "AVX lanes");
+            }
+            assert_eq!(bits(&one.transmittance), bits(&avx.transmittance));
+            assert_eq!((one.done, one.remaining), (avx.done, avx.remaining));
+        }
     }
 }
