@@ -181,46 +181,30 @@ mod avx {
         };
     }
 
-    impl Add for Avx {
-        type Output = Self;
-        #[inline(always)]
-        fn add(self, o: Self) -> Self {
-            avx!(_mm256_add_ps(self.0, o.0))
-        }
+    /// An operator of `Avx` lanes as one AVX instruction.
+    macro_rules! operator {
+        ($trait:ident, $method:ident, $instruction:ident) => {
+            impl $trait for Avx {
+                type Output = Self;
+                #[inline(always)]
+                fn $method(self, o: Self) -> Self {
+                    avx!($instruction(self.0, o.0))
+                }
+            }
+        };
     }
-    impl Sub for Avx {
-        type Output = Self;
-        #[inline(always)]
-        fn sub(self, o: Self) -> Self {
-            avx!(_mm256_sub_ps(self.0, o.0))
-        }
-    }
-    impl Mul for Avx {
-        type Output = Self;
-        #[inline(always)]
-        fn mul(self, o: Self) -> Self {
-            avx!(_mm256_mul_ps(self.0, o.0))
-        }
-    }
-    impl Div for Avx {
-        type Output = Self;
-        #[inline(always)]
-        fn div(self, o: Self) -> Self {
-            avx!(_mm256_div_ps(self.0, o.0))
-        }
-    }
+
+    operator!(Add, add, _mm256_add_ps);
+    operator!(Sub, sub, _mm256_sub_ps);
+    operator!(Mul, mul, _mm256_mul_ps);
+    operator!(Div, div, _mm256_div_ps);
+    operator!(BitAnd, bitand, _mm256_and_ps);
+
     impl Neg for Avx {
         type Output = Self;
         #[inline(always)]
         fn neg(self) -> Self {
             avx!(_mm256_xor_ps(self.0, _mm256_set1_ps(-0.0)))
-        }
-    }
-    impl BitAnd for Avx {
-        type Output = Self;
-        #[inline(always)]
-        fn bitand(self, o: Self) -> Self {
-            avx!(_mm256_and_ps(self.0, o.0))
         }
     }
 

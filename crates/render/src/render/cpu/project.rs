@@ -475,6 +475,18 @@ fn last_pixel<L: Lanes>(centre: L, radius: L, size: f32) -> L {
     L::floor((centre + radius - L::splat(0.5)).min(L::splat(size))).min(L::splat(size - 1.0))
 }
 
+/// The camera the projection's tests look through: 4 units from the
+/// origin, 160×120.
+#[cfg(test)]
+pub(super) fn test_camera() -> Camera {
+    crate::scene::camera::Orbit {
+        radius: 4.0,
+        target: [0.0; 3],
+        ..crate::scene::camera::Orbit::STUDY
+    }
+    .camera(160, 120)
+}
+
 #[cfg(test)]
 mod tests {
     use glam::Quat;
@@ -483,7 +495,6 @@ mod tests {
     use super::*;
     use crate::render::cpu::prepared::Prepared;
     use crate::render::projection::ProjectionCamera;
-    use crate::scene::camera::Orbit;
     use crate::scene::splats::SplatScene;
 
     /// The box a splat is listed and blended in (the square's part the
@@ -515,12 +526,7 @@ mod tests {
             );
         }
         let prepared = Prepared::of_scene(&scene);
-        let camera = Orbit {
-            radius: 4.0,
-            target: [0.0; 3],
-            ..Orbit::STUDY
-        }
-        .camera(160, 120);
+        let camera = test_camera();
         let projector = Projector::new(&camera, 1.0);
         let reference = ProjectionCamera::new(&camera);
         let footprints: Vec<Option<Splat>> = prepared

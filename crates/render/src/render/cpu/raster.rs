@@ -57,19 +57,36 @@ struct TileState {
     remaining: u32,
 }
 
-/// Blends one tile's splats (the Gaussians of the entries of `list`, front
-/// to back); returns its pixels, row-major (CPU_TILE wide). Long rows are
+/// One tile to blend.
+pub(super) struct Tile<'a> {
+    /// Its top-left pixel.
+    pub origin: (u32, u32),
+    /// The image's size.
+    pub size: (u32, u32),
+    /// Its list's entries, front to back (see `tiles::entry_gaussian`).
+    pub list: &'a [u64],
+    /// Every splat of the frame.
+    pub splats: &'a [Splat],
+    /// Colour behind everything.
+    pub background: [f32; 3],
+    /// A pixel is saturated once its transmittance would fall below this.
+    pub early_stop: f32,
+}
+
+/// Blends one tile's splats (the Gaussians of its list's entries, front to
+/// back); returns its pixels, row-major (CPU_TILE wide). Long rows are
 /// blended in lanes `L` (see `lanes.rs`); inlined whole into each caller, so
 /// the one compiled for AVX2 compiles all of it so.
 #[inline(always)]
-pub(super) fn blend_tile<L: Lanes>(
-    origin: (u32, u32),
-    size: (u32, u32),
-    list: &[u64],
-    splats: &[Splat],
-    background: [f32; 3],
-    early_stop: f32,
-) -> [[u8; 3]; TILE_PIXELS] {
+pub(super) fn blend_tile<L: Lanes>(tile: &Tile) -> [[u8; 3]; TILE_PIXELS] {
+    let Tile {
+        origin,
+        size,
+        list,
+        splats,
+        background,
+        early_stop,
+    } = *tile;
     let w = (size.0 - origin.0).min(CPU_TILE);
     let h = (size.1 - origin.1).min(CPU_TILE);
     let mut state = TileState {
