@@ -2,11 +2,11 @@
 //! (SSE2) runs as two four-wide halves, and [`Avx`], one 256-bit AVX register,
 //! for processors that have AVX2 (checked at run time: one binary serves
 //! both). `wide` picks its SSE2 or AVX code when it is compiled, so a
-//! function cloned for AVX2 still runs its SSE2 halves; the projection is
-//! therefore written once against [`Lanes`] and compiled for each type. Every
-//! operation is the same IEEE operation on either (the same comparisons,
-//! the same NaN rules for min and max, truncation for floor), so both give
-//! the same bits (a test compares them).
+//! function cloned for AVX2 still runs its SSE2 halves; the projection and
+//! the blend's rows are therefore written once against [`Lanes`] and compiled
+//! for each type. Every operation is the same IEEE operation on either (the
+//! same comparisons, the same NaN rules for min and max, truncation for
+//! floor), so both give the same bits (a test compares them).
 
 use std::ops::{Add, BitAnd, Div, Mul, Neg, Sub};
 
