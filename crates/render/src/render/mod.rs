@@ -175,7 +175,8 @@ impl SplatRenderer {
                 None => format!("wgpu on {}", g.adapter_description()),
             },
             SplatRenderer::Cpu(_) => {
-                format!("CPU renderer ({} threads)", rayon::current_num_threads())
+                let threads = rayon::current_num_threads();
+                format!("CPU renderer ({threads} threads, {})", cpu::lanes_in_use())
             }
         }
     }

@@ -46,6 +46,24 @@ pub use self::raster::CPU_TILE;
 /// 16-bit pixel coordinates).
 pub const MAX_SIDE: u32 = 1 << 16;
 
+/// The lanes the CPU renderer projects and blends in on this processor:
+/// "AVX2", or "SSE2" where an x86-64 processor lacks AVX2 or
+/// `VISAGE_SIMD=baseline` asks for them ("NEON" on 64-bit Arm, "scalar"
+/// elsewhere, as `wide` compiles there).
+pub fn lanes_in_use() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    if lanes::avx2_enabled() {
+        return "AVX2";
+    }
+    if cfg!(target_arch = "x86_64") {
+        "SSE2"
+    } else if cfg!(target_arch = "aarch64") {
+        "NEON"
+    } else {
+        "scalar"
+    }
+}
+
 /// The CPU renderer; same interface as the GPU one.
 #[derive(Default)]
 pub struct CpuRenderer {
