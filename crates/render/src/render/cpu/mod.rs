@@ -173,19 +173,28 @@ fn project_all(
         .zip(prepared.core.par_chunks(PROJECT_CHUNK))
         .enumerate()
         .for_each(|(chunk, ((splats, keys), cores))| {
-            let chunk = Chunk {
+            project_chunk_fastest(Chunk {
+                projector: &projector,
+                prepared,
+                frames,
+                degree,
                 first: chunk * PROJECT_CHUNK,
                 cores,
                 splats,
                 keys,
-            };
-            project_chunk_fastest(&projector, prepared, frames, degree, chunk);
+            });
         });
 }
 
-/// One parallel task of the projection: Gaussians `first..` (their
-/// records) and where their splats and keys go.
+/// One parallel task of the projection: the frame's camera, Gaussians,
+/// triangle frames (`None` for a world-space scene) and SH degree, and the
+/// chunk's Gaussians `first..` (their records) and where their splats and
+/// keys go.
 struct Chunk<'a> {
+    projector: &'a Projector,
+    prepared: &'a Prepared,
+    frames: Option<&'a [TriangleFrame]>,
+    degree: u8,
     first: usize,
     cores: &'a [prepared::Core],
     splats: &'a mut [Splat],
@@ -194,20 +203,14 @@ struct Chunk<'a> {
 
 /// [`project_chunk`] in the fastest lanes this processor has: one AVX
 /// register where it has AVX2, two SSE2 halves elsewhere (the same bits).
-fn project_chunk_fastest(
-    projector: &Projector,
-    prepared: &Prepared,
-    frames: Option<&[TriangleFrame]>,
-    degree: u8,
-    chunk: Chunk,
-) {
+fn project_chunk_fastest(chunk: Chunk) {
     #[cfg(target_arch = "x86_64")]
     if lanes::avx2_enabled() {
         // SAFETY: the processor has AVX2 (just checked).
-        unsafe { project_chunk_avx2(projector, prepared, frames, degree, chunk) };
+        unsafe { project_chunk_avx2(chunk) };
         return;
     }
-    project_chunk::<wide::f32x8>(projector, prepared, frames, degree, chunk);
+    project_chunk::<wide::f32x8>(chunk);
 }
 
 /// [`project_chunk`] in AVX lanes, compiled for AVX2.
@@ -216,27 +219,22 @@ fn project_chunk_fastest(
 /// The processor must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx,avx2")]
-unsafe fn project_chunk_avx2(
-    projector: &Projector,
-    prepared: &Prepared,
-    frames: Option<&[TriangleFrame]>,
-    degree: u8,
-    chunk: Chunk,
-) {
-    project_chunk::<lanes::Avx>(projector, prepared, frames, degree, chunk);
+unsafe fn project_chunk_avx2(chunk: Chunk) {
+    project_chunk::<lanes::Avx>(chunk);
 }
 
 /// Projects a chunk's Gaussians a batch of [`LANES`] at a time, colours the
 /// live ones and writes their sort keys (zero for culled ones). Inlined into
 /// each caller, so that the AVX2 one compiles all of it for AVX2.
 #[inline(always)]
-fn project_chunk<L: lanes::Lanes>(
-    projector: &Projector,
-    prepared: &Prepared,
-    frames: Option<&[TriangleFrame]>,
-    degree: u8,
-    chunk: Chunk,
-) {
+fn project_chunk<L: lanes::Lanes>(chunk: Chunk) {
+    let Chunk {
+        projector,
+        prepared,
+        frames,
+        degree,
+        ..
+    } = chunk;
     let batches = chunk
         .splats
         .chunks_mut(LANES)
@@ -365,6 +363,10 @@ mod tests {
         let n = prepared.len();
         let (mut splats, mut keys) = (vec![Splat::default(); n], vec![[0; 4]; n]);
         let chunk = Chunk {
+            projector: &projector,
+            prepared,
+            frames,
+            degree: 3,
             first: 0,
             cores: &prepared.core,
             splats: &mut splats,
@@ -374,10 +376,10 @@ mod tests {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: only asked for where the processor has AVX2.
             unsafe {
-                project_chunk_avx2(&projector, prepared, frames, 3, chunk)
+                project_chunk_avx2(chunk)
             };
         } else {
-            project_chunk::<wide::f32x8>(&projector, prepared, frames, 3, chunk);
+            project_chunk::<wide::f32x8>(chunk);
         }
         (splats.iter().map(splat_bits).collect(), keys)
     }
