@@ -2,14 +2,16 @@
 //! docs/method.md §7.11): how surely each Gaussian is skin, how much of each
 //! triangle a source shows is skin, and how fully the base's skin takes over
 //! there — so that a swapped region shows its source's lips, brows, lashes,
-//! iris, hair and beard over the base's own skin where the base's shape and
-//! both sides' skin allow it.
+//! iris, hair and beard over the base's own skin where the base's Gaussians
+//! fit the composite's surface and both sides' skin allow it.
 
 use glam::Vec3;
 use rayon::prelude::*;
 
 use super::colour::{semantic_skin_likeness, SkinStats};
 use super::recipe::ResolvedRecipe;
+use super::selection::Csr;
+use crate::avatar::binding::triangle_frame;
 use crate::model::geometry::smoothstep;
 use crate::model::regions::Region;
 
@@ -17,6 +19,13 @@ use crate::model::regions::Region;
 /// the base's skin to take over (smoothly between the two): where either
 /// shows a feature (lips, brows, beard, a collar) the source keeps its own.
 pub const BOTH_SKIN: (f32, f32) = (0.5, 0.9);
+
+/// The misfit ([`similarity_misfit`]) of the composite's surface to the
+/// base's at which the base's skin starts to take over by fit (first) and
+/// takes over in full (second), whatever the base's shape weight (method
+/// §7.11). Swapped ears measure 0.16-0.33, noses 0.04-0.08, necks
+/// 0.005-0.05; (0.2, 0.1) took ears over too and lost 1-4 dB there.
+pub const BASE_FIT: (f32, f32) = (0.08, 0.03);
 
 /// Under `skin = "base"` (docs/method.md §7.11): the share of its opacity a
 /// Gaussian of a swapped region keeps. A source's Gaussian gives up the part
@@ -100,29 +109,122 @@ pub fn triangle_skin(
         .collect()
 }
 
+/// The mesh topology [`base_skin_confidence`] looks round a triangle with.
+#[derive(Clone, Copy)]
+pub struct Topology<'a> {
+    /// Corner vertices of each triangle.
+    pub triangles: &'a [[u32; 3]],
+    /// Per vertex, the triangles that have it as a corner.
+    pub vertex_triangles: &'a Csr,
+}
+
 /// Per triangle (region `regions[t]`): how fully the base's skin takes over
-/// from the skin of the source the triangle's region shows — the base's
-/// share of the group's shape (Gaussians fit the shape they were trained on)
-/// times how surely both show skin there; 0 where the region shows the base.
-/// `skin_of(s)` is source s's [`triangle_skin`].
+/// from the skin of the source the triangle's region shows — how well the
+/// base's Gaussians fit the composite's surface there (the larger of the
+/// base's share of the group's shape and the fit its `misfit` gives, see
+/// [`BASE_FIT`]; the fit counts nowhere beside a feature) times how surely
+/// both show skin there; 0 where the region shows the base. `skin_of(s)` is
+/// source s's [`triangle_skin`]; `misfit` is [`similarity_misfit`] from the
+/// base's neutral to the composite's, None to judge by the shape weight
+/// alone.
 pub fn base_skin_confidence<'a>(
     recipe: &ResolvedRecipe,
     regions: &[Region],
     skin_of: impl Fn(usize) -> &'a [f32],
+    misfit: Option<(&[f32], Topology)>,
 ) -> Vec<f32> {
     let base = skin_of(recipe.base);
-    regions
-        .iter()
-        .enumerate()
-        .map(|(t, &region)| {
-            let group = region.group().index();
-            let f = recipe.gaussians[group];
-            if f == recipe.base {
+    // How surely both sides show skin on triangle t.
+    let both = |t: usize| {
+        let f = recipe.gaussians[regions[t].group().index()];
+        skin_of(f)[t].min(base[t])
+    };
+    let beside_feature = misfit.map(|(_, topology)| beside_feature(topology, regions.len(), both));
+    (0..regions.len())
+        .map(|t| {
+            let group = regions[t].group().index();
+            if recipe.gaussians[group] == recipe.base {
                 return 0.0;
             }
             let shape = recipe.shape[group].get(recipe.base).copied().unwrap_or(0.0) as f32;
-            let both = skin_of(f)[t].min(base[t]);
-            shape * smoothstep(BOTH_SKIN.0, BOTH_SKIN.1, both)
+            let fit = match (misfit, &beside_feature) {
+                (Some((m, _)), Some(beside)) if !beside[t] => m
+                    .get(t)
+                    .map_or(0.0, |&m| smoothstep(BASE_FIT.0, BASE_FIT.1, m)),
+                _ => 0.0,
+            };
+            shape.max(fit) * smoothstep(BOTH_SKIN.0, BOTH_SKIN.1, both(t))
+        })
+        .collect()
+}
+
+/// Per triangle: whether it shares a corner with a triangle where either side
+/// shows a feature (`both` under [`BOTH_SKIN`]'s lower edge) — a collar's
+/// edge, a beard's, a lip's. The fitted part of the base's skin stays off
+/// those: the base's skin Gaussians there were trained beside the base's own
+/// features, not the source's (every-group's neck lost 3.2 dB to a light line
+/// along cleo's collar without this).
+fn beside_feature(topology: Topology, triangles: usize, both: impl Fn(usize) -> f32) -> Vec<bool> {
+    let feature: Vec<bool> = (0..triangles).map(|t| both(t) < BOTH_SKIN.0).collect();
+    topology
+        .triangles
+        .iter()
+        .take(triangles)
+        .map(|corners| {
+            corners.iter().any(|&v| {
+                topology
+                    .vertex_triangles
+                    .row(v as usize)
+                    .iter()
+                    .any(|&u| feature.get(u as usize).copied().unwrap_or(false))
+            })
+        })
+        .collect()
+}
+
+/// Per triangle: how far the surface round it on mesh `to` is from a similar
+/// copy of the same place on mesh `from` (the same topology), in units of
+/// the triangle's size on `to` — what Gaussians trained on `from` and
+/// carried by the triangle's similarity (method §6.7) get wrong on `to`. The
+/// triangle's similarity (its frame's rotation, size and centroid, method
+/// §3.1) carries every corner of the triangles sharing a corner with it from
+/// `from`; the misfit is the root mean square of their distances to where
+/// `to` has them, over the triangle's size on `to`. 0 for a mesh moved,
+/// turned or scaled whole; infinite where the triangle has no size on either
+/// mesh, a corner is past either mesh or the result is not finite.
+pub fn similarity_misfit(from: &[Vec3], to: &[Vec3], topology: Topology) -> Vec<f32> {
+    let triangles = topology.triangles;
+    triangles
+        .par_iter()
+        .map(|tri| {
+            let misfit = (|| {
+                let corners = |mesh: &[Vec3]| -> Option<[Vec3; 3]> {
+                    Some([
+                        *mesh.get(tri[0] as usize)?,
+                        *mesh.get(tri[1] as usize)?,
+                        *mesh.get(tri[2] as usize)?,
+                    ])
+                };
+                let ([a, b, c], [a2, b2, c2]) = (corners(from)?, corners(to)?);
+                let (old, new) = (triangle_frame(a, b, c), triangle_frame(a2, b2, c2));
+                if !(old.scale > 0.0 && new.scale > 0.0) {
+                    return None;
+                }
+                let carry = new.rotation * old.rotation.transpose() * (new.scale / old.scale);
+                let (mut sum, mut count) = (0.0f32, 0u32);
+                for &v in tri {
+                    for &u in topology.vertex_triangles.row(v as usize) {
+                        let ring = triangles.get(u as usize)?;
+                        for w in ring.map(|w| w as usize) {
+                            let (p, q) = (*from.get(w)?, *to.get(w)?);
+                            sum += (new.center + carry * (p - old.center) - q).length_squared();
+                            count += 1;
+                        }
+                    }
+                }
+                Some((sum / count.max(1) as f32).sqrt() / new.scale)
+            })();
+            misfit.filter(|m| m.is_finite()).unwrap_or(f32::INFINITY)
         })
         .collect()
 }
@@ -209,7 +311,7 @@ mod tests {
             (vec![0.0, 1.0, 0.0], [0.0; 4]),
         ] {
             recipe.shape[nose] = weights;
-            let c = base_skin_confidence(&recipe, &regions, skin_of);
+            let c = base_skin_confidence(&recipe, &regions, skin_of, None);
             for (got, want) in c.iter().zip(expected) {
                 assert!((got - want).abs() < 1e-6, "{c:?} against {expected:?}");
             }
@@ -234,5 +336,123 @@ mod tests {
         assert_eq!((source.of(2, 1), base.of(2, 1)), (0.875, 0.125));
         assert_eq!(showing(source, &[0, 1, 2], &[0, 0, 1]), [1, 2]);
         assert_eq!(showing(base, &[0, 1, 2], &[0, 0, 1]), [0, 2]);
+    }
+
+    /// A 4×4-vertex grid of unit squares in the z = 0 plane, two triangles
+    /// each (18 triangles), with its vertex-to-triangle table.
+    fn grid() -> (Vec<Vec3>, Vec<[u32; 3]>, Csr) {
+        let vertices: Vec<Vec3> = (0..16)
+            .map(|i| Vec3::new((i % 4) as f32, (i / 4) as f32, 0.0))
+            .collect();
+        let mut triangles = Vec::new();
+        for y in 0..3u32 {
+            for x in 0..3u32 {
+                let v = y * 4 + x;
+                triangles.push([v, v + 1, v + 5]);
+                triangles.push([v, v + 5, v + 4]);
+            }
+        }
+        let pairs: Vec<(usize, u32)> = triangles
+            .iter()
+            .enumerate()
+            .flat_map(|(t, tri)| tri.map(|v| (v as usize, t as u32)))
+            .collect();
+        let csr = Csr::from_pairs(vertices.len(), pairs.into_iter());
+        (vertices, triangles, csr)
+    }
+
+    #[test]
+    fn the_misfit_is_zero_for_a_mesh_moved_turned_or_scaled_whole_and_grows_with_a_bend() {
+        let (from, triangles, csr) = grid();
+        let topology = Topology {
+            triangles: &triangles,
+            vertex_triangles: &csr,
+        };
+        let turn = glam::Quat::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), 1.1);
+        let whole: Vec<Vec3> = from
+            .iter()
+            .map(|&v| turn * (v * 2.5) + Vec3::new(1e3, -7.0, 0.5))
+            .collect();
+        let m = similarity_misfit(&from, &whole, topology);
+        assert!(m.iter().all(|&m| m < 1e-3), "{m:?}");
+        // Lift the far column: the triangles beside it bend, the far side stays.
+        let mut bent = from.clone();
+        for v in bent.iter_mut().filter(|v| v.x == 3.0) {
+            v.z = 0.5;
+        }
+        let m = similarity_misfit(&from, &bent, topology);
+        assert!(m[4] > 0.05 && m[0] < 1e-6, "{m:?}");
+        assert!(m[5] > m[0]);
+    }
+
+    #[test]
+    fn the_misfit_is_infinite_for_degenerate_triangles_broken_or_missing_corners() {
+        let (from, triangles, csr) = grid();
+        let topology = Topology {
+            triangles: &triangles,
+            vertex_triangles: &csr,
+        };
+        let mut collapsed = from.clone();
+        collapsed[0] = Vec3::ZERO;
+        collapsed[1] = Vec3::ZERO;
+        collapsed[5] = Vec3::ZERO;
+        assert_eq!(
+            similarity_misfit(&from, &collapsed, topology)[0],
+            f32::INFINITY
+        );
+        let mut broken = from.clone();
+        broken[15] = Vec3::NAN;
+        let m = similarity_misfit(&from, &broken, topology);
+        assert_eq!(m[17], f32::INFINITY);
+        assert!(m[0].is_finite());
+        assert!(similarity_misfit(&from, &from[..8], topology)
+            .iter()
+            .all(|&m| m == f32::INFINITY));
+    }
+
+    #[test]
+    fn the_base_takes_over_where_its_gaussians_fit_but_not_beside_a_feature() {
+        let (_, triangles, csr) = grid();
+        let topology = Topology {
+            triangles: &triangles,
+            vertex_triangles: &csr,
+        };
+        let recipe = ResolvedRecipe {
+            base: 0,
+            gaussians: std::array::from_fn(|g| usize::from(g == Group::Nose.index())),
+            shape: std::array::from_fn(|_| vec![0.0, 1.0]),
+            post: Default::default(),
+            motion: None,
+            frame: 0,
+            mode: Default::default(),
+            offsets: Default::default(),
+            camera: Default::default(),
+        };
+        let regions = vec![Region::Nose; triangles.len()];
+        // The source shows a feature (a beard) on the last triangle only.
+        let mut source_skin = vec![1.0f32; triangles.len()];
+        source_skin[17] = 0.0;
+        let base_skin = vec![1.0f32; triangles.len()];
+        let skin_of = |s: usize| -> &[f32] {
+            if s == 0 {
+                &base_skin
+            } else {
+                &source_skin
+            }
+        };
+        let mut misfit = vec![0.0f32; triangles.len()];
+        misfit[2] = BASE_FIT.0 + 0.01; // an ear's bend: the source keeps it
+        misfit[3] = 0.5 * (BASE_FIT.0 + BASE_FIT.1);
+        let c = base_skin_confidence(&recipe, &regions, skin_of, Some((&misfit, topology)));
+        assert_eq!(c[0], 1.0, "fits: the base's skin in full at shape weight 0");
+        assert_eq!(c[2], 0.0, "too far from the base's shape");
+        assert!((c[3] - 0.5).abs() < 1e-6, "half way: {}", c[3]);
+        // Triangle 17 and those sharing a corner with it keep the source.
+        assert_eq!(c[17], 0.0);
+        assert_eq!(c[16], 0.0);
+        assert_eq!(c[11], 0.0);
+        // Judged by the shape weight alone, the base takes nothing.
+        let c = base_skin_confidence(&recipe, &regions, skin_of, None);
+        assert!(c.iter().all(|&c| c == 0.0));
     }
 }

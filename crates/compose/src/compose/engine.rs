@@ -8,7 +8,10 @@ use std::sync::{Arc, Mutex, OnceLock};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
-use super::base_skin::{base_skin_confidence, showing, skin_likeness, triangle_skin, SkinShare};
+use super::base_skin::{
+    base_skin_confidence, showing, similarity_misfit, skin_likeness, triangle_skin, SkinShare,
+    Topology,
+};
 use super::blend::{Blender, SparseRhs};
 use super::colour::{
     apply_gain, colour_weight, hair_chromaticity, seen_colours, semantic_skin_gain, skin_stats,
@@ -145,6 +148,10 @@ pub struct Composite {
     /// composite's shape (empty until relighting first needs it): an edit
     /// of the Gaussians alone reuses them.
     relight_gains: Vec<Vec<Vec3>>,
+    /// Per triangle, how far this composite's surface is from the base's
+    /// (`similarity_misfit`; empty until `skin = "base"` first needs it):
+    /// an edit of the Gaussians alone reuses it.
+    base_misfit: Vec<f32>,
 }
 
 /// What an update had to redo.
@@ -329,6 +336,7 @@ impl Engine {
             anchored: Vec::new(),
             colour_gains: [Vec3::ONE; Region::COUNT],
             relight_gains: Vec::new(),
+            base_misfit: Vec::new(),
         };
         self.select_into(recipe, &mut composite);
         composite
@@ -347,13 +355,16 @@ impl Engine {
                 || old.base != recipe.base
                 || old.post != recipe.post
                 || (shape && Self::follows_reshaping(&recipe.post))
-                || (shape && recipe.post.shading == Shading::Relit),
+                || (shape && recipe.post.shading == Shading::Relit)
+                // Where the base's skin fits depends on the shape.
+                || (shape && recipe.post.skin == SkinSource::Base),
         };
         if changes.shape {
             let (neutral, residual) = self.blend_neutral(recipe);
             composite.neutral = neutral;
             composite.residual = residual;
             composite.relight_gains.clear();
+            composite.base_misfit.clear();
         }
         if changes.gaussians {
             self.select_into(recipe, composite);
@@ -643,12 +654,23 @@ impl Engine {
         }
         let anchors =
             |f: usize| (recipe.post.anchor == Anchor::Nearest).then(|| self.anchors_of(f));
+        let topology = Topology {
+            triangles: &self.db.model.triangles,
+            vertex_triangles: &self.vertex_triangles,
+        };
+        if recipe.post.skin == SkinSource::Base && composite.base_misfit.is_empty() {
+            composite.base_misfit =
+                similarity_misfit(&self.neutrals[recipe.base], &composite.neutral, topology);
+        }
         let skin = (recipe.post.skin == SkinSource::Base).then(|| BaseSkin {
             engine: self,
             membership,
-            confidence: base_skin_confidence(recipe, &self.db.model.triangle_regions, |s| {
-                self.triangle_skin_of(s, membership)
-            }),
+            confidence: base_skin_confidence(
+                recipe,
+                &self.db.model.triangle_regions,
+                |s| self.triangle_skin_of(s, membership),
+                Some((&composite.base_misfit, topology)),
+            ),
         });
         // Per region, the source's Gaussians counted for it; under `skin =
         // "base"` in a swapped region, those of them that still show and
