@@ -8,13 +8,15 @@ use glam::Vec3;
 use visage::avatar::database::Database;
 use visage::avatar::gaussians::{dc_to_rgb, rgb_to_dc, sigmoid};
 use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
+use visage::compose::base_skin::{similarity_misfit, Topology, BASE_FIT};
 use visage::compose::blend::Blender;
 use visage::compose::colour::{weighted_mean_colour, GAIN_RANGE};
 use visage::compose::engine::{Engine, PosedMesh};
 use visage::compose::recipe::{
-    AnimationMode, ColourCorrection, GroupEdit, PostProcess, Recipe, ResolvedRecipe, SkinSource,
-    Smoothing,
+    Anchor, AnimationMode, ColourCorrection, GroupEdit, PostProcess, Recipe, ResolvedRecipe,
+    Shading, SkinSource, Smoothing,
 };
+use visage::compose::selection::Csr;
 use visage::compose::state_hash;
 use visage::model::builtin::build_head;
 use visage::model::head::{Joint, Pose};
@@ -633,6 +635,22 @@ fn a_composite_is_the_same_on_any_number_of_threads_and_after_any_edit() {
         assert_eq!(edited.gaussians, one.gaussians);
         assert_eq!(edited.blocks, one.blocks);
     }
+    // A shape edit alone moves where the base's skin fits (method §7.11):
+    // the update re-selects even where nothing else follows the shape.
+    let mut plain = best.clone();
+    plain.post.anchor = Anchor::Parent;
+    plain.post.shading = Shading::Kept;
+    let mut reshaped = plain.clone();
+    for row in reshaped.shape.iter_mut() {
+        *row = (0..row.len())
+            .map(|s| f64::from(u8::from(s == 3)))
+            .collect();
+    }
+    let mut edited = e.compose(&reshaped);
+    assert!(e.update(&mut edited, &plain).gaussians);
+    let fresh = e.compose(&plain);
+    assert_eq!(edited.gaussians, fresh.gaussians);
+    assert_eq!(edited.blocks, fresh.blocks);
     // A cross-fade appends extras after the own Gaussians; back to colour
     // seams they are gone.
     let mut crossfade = best.clone();
@@ -644,7 +662,7 @@ fn a_composite_is_the_same_on_any_number_of_threads_and_after_any_edit() {
 }
 
 #[test]
-fn skin_from_the_base_takes_over_swapped_skin_only_where_the_base_shapes_it() {
+fn skin_from_the_base_takes_over_swapped_skin_only_where_the_base_shapes_or_fits_it() {
     let e = engine();
     let n = names(e);
     let (base, other) = (0, 1);
@@ -660,12 +678,48 @@ fn skin_from_the_base_takes_over_swapped_skin_only_where_the_base_shapes_it() {
         e.compose(&resolve(e, &r))
     };
     let source_gaussians = &e.database().sources[other].gaussians;
-    // The source's own shape (the base's weight 0): nothing changes, to the bit.
+    let block = |c: &visage::compose::engine::Composite, region: Region, source: usize| {
+        c.blocks
+            .iter()
+            .find(|b| b.region == region && b.source == source && b.extra_from.is_none())
+            .copied()
+    };
+    // The source's own shape (the base's weight 0): the base's skin shows
+    // only where the composite's surface fits the base's (method §7.11).
     let own_shape = [(n[other].as_str(), 1.0)];
-    let kept = compose(&own_shape, SkinSource::Source);
-    let same = compose(&own_shape, SkinSource::Base);
-    assert_eq!(same.gaussians, kept.gaussians);
-    assert_eq!(same.blocks, kept.blocks);
+    let own = compose(&own_shape, SkinSource::Base);
+    let model = &e.database().model;
+    let vertex_triangles = Csr::from_pairs(
+        model.vertex_count(),
+        model
+            .triangles
+            .iter()
+            .enumerate()
+            .flat_map(|(t, tri)| tri.map(|v| (v as usize, t as u32))),
+    );
+    let topology = Topology {
+        triangles: &model.triangles,
+        vertex_triangles: &vertex_triangles,
+    };
+    let misfit = similarity_misfit(e.source_neutral(base), &own.neutral, topology);
+    let mut shown = 0;
+    for region in [Region::Nose, Region::Lips] {
+        let Some(b) = block(&own, region, base) else {
+            continue;
+        };
+        let fits = (b.start..b.end)
+            .filter(|&i| misfit[own.gaussians.binding[i] as usize] < BASE_FIT.0)
+            .count();
+        assert!(
+            fits * 20 >= (b.end - b.start) * 19,
+            "{region:?}: {fits} of {b:?} fit"
+        );
+        shown += b.end - b.start;
+    }
+    assert!(
+        shown > 0,
+        "the base's skin fits somewhere on the swapped nose"
+    );
     // The base's shape: the base's skin shows in the swapped regions and
     // the source's skin gives way, its lips do not.
     let base_shape = [(n[base].as_str(), 1.0)];
@@ -676,12 +730,6 @@ fn skin_from_the_base_takes_over_swapped_skin_only_where_the_base_shapes_it() {
         .validate(e.database().model.triangle_count())
         .unwrap();
     assert!(after.gaussians.opacity_logit.iter().all(|x| x.is_finite()));
-    let block = |c: &visage::compose::engine::Composite, region: Region, source: usize| {
-        c.blocks
-            .iter()
-            .find(|b| b.region == region && b.source == source && b.extra_from.is_none())
-            .copied()
-    };
     let base_nose = block(&after, Region::Nose, base).expect("the base's skin on the nose");
     assert!(base_nose.end - base_nose.start > 20, "{base_nose:?}");
     assert!(block(&before, Region::Nose, base).is_none());
