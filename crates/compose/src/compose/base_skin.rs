@@ -277,21 +277,26 @@ mod tests {
         assert_eq!(t, [0.75, 0.0, 0.0]);
     }
 
-    #[test]
-    fn the_base_takes_over_by_its_shape_weight_where_both_show_skin() {
-        let mut recipe = ResolvedRecipe {
+    /// A recipe on base 0 whose nose shows source 1, every group's shape
+    /// weighted by `shape`.
+    fn nose_from_source_one(shape: Vec<f64>) -> ResolvedRecipe {
+        ResolvedRecipe {
             base: 0,
-            gaussians: [0; Group::COUNT],
-            shape: std::array::from_fn(|_| vec![1.0, 0.0, 0.0]),
+            gaussians: std::array::from_fn(|g| usize::from(g == Group::Nose.index())),
+            shape: std::array::from_fn(|_| shape.clone()),
             post: Default::default(),
             motion: None,
             frame: 0,
             mode: Default::default(),
             offsets: Default::default(),
             camera: Default::default(),
-        };
+        }
+    }
+
+    #[test]
+    fn the_base_takes_over_by_its_shape_weight_where_both_show_skin() {
         let nose = Group::Nose.index();
-        recipe.gaussians[nose] = 1;
+        let mut recipe = nose_from_source_one(vec![1.0, 0.0, 0.0]);
         let regions = [Region::Nose, Region::Nose, Region::Skin, Region::Nose];
         let skin_of = |s: usize| -> &'static [f32] {
             match s {
@@ -340,7 +345,22 @@ mod tests {
 
     /// A 4×4-vertex grid of unit squares in the z = 0 plane, two triangles
     /// each (18 triangles), with its vertex-to-triangle table.
-    fn grid() -> (Vec<Vec3>, Vec<[u32; 3]>, Csr) {
+    struct Grid {
+        vertices: Vec<Vec3>,
+        triangles: Vec<[u32; 3]>,
+        vertex_triangles: Csr,
+    }
+
+    impl Grid {
+        fn topology(&self) -> Topology<'_> {
+            Topology {
+                triangles: &self.triangles,
+                vertex_triangles: &self.vertex_triangles,
+            }
+        }
+    }
+
+    fn grid() -> Grid {
         let vertices: Vec<Vec3> = (0..16)
             .map(|i| Vec3::new((i % 4) as f32, (i / 4) as f32, 0.0))
             .collect();
@@ -357,17 +377,18 @@ mod tests {
             .enumerate()
             .flat_map(|(t, tri)| tri.map(|v| (v as usize, t as u32)))
             .collect();
-        let csr = Csr::from_pairs(vertices.len(), pairs.into_iter());
-        (vertices, triangles, csr)
+        let vertex_triangles = Csr::from_pairs(vertices.len(), pairs.into_iter());
+        Grid {
+            vertices,
+            triangles,
+            vertex_triangles,
+        }
     }
 
     #[test]
     fn the_misfit_is_zero_for_a_mesh_moved_turned_or_scaled_whole_and_grows_with_a_bend() {
-        let (from, triangles, csr) = grid();
-        let topology = Topology {
-            triangles: &triangles,
-            vertex_triangles: &csr,
-        };
+        let grid = grid();
+        let (from, topology) = (&grid.vertices, grid.topology());
         let turn = glam::Quat::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), 1.1);
         let whole: Vec<Vec3> = from
             .iter()
@@ -387,11 +408,8 @@ mod tests {
 
     #[test]
     fn the_misfit_is_infinite_for_degenerate_triangles_broken_or_missing_corners() {
-        let (from, triangles, csr) = grid();
-        let topology = Topology {
-            triangles: &triangles,
-            vertex_triangles: &csr,
-        };
+        let grid = grid();
+        let (from, topology) = (&grid.vertices, grid.topology());
         let mut collapsed = from.clone();
         collapsed[0] = Vec3::ZERO;
         collapsed[1] = Vec3::ZERO;
@@ -412,22 +430,9 @@ mod tests {
 
     #[test]
     fn the_base_takes_over_where_its_gaussians_fit_but_not_beside_a_feature() {
-        let (_, triangles, csr) = grid();
-        let topology = Topology {
-            triangles: &triangles,
-            vertex_triangles: &csr,
-        };
-        let recipe = ResolvedRecipe {
-            base: 0,
-            gaussians: std::array::from_fn(|g| usize::from(g == Group::Nose.index())),
-            shape: std::array::from_fn(|_| vec![0.0, 1.0]),
-            post: Default::default(),
-            motion: None,
-            frame: 0,
-            mode: Default::default(),
-            offsets: Default::default(),
-            camera: Default::default(),
-        };
+        let grid = grid();
+        let (triangles, topology) = (&grid.triangles, grid.topology());
+        let recipe = nose_from_source_one(vec![0.0, 1.0]);
         let regions = vec![Region::Nose; triangles.len()];
         // The source shows a feature (a beard) on the last triangle only.
         let mut source_skin = vec![1.0f32; triangles.len()];
