@@ -394,14 +394,14 @@ mod tests {
             .iter()
             .map(|&v| turn * (v * 2.5) + Vec3::new(1e3, -7.0, 0.5))
             .collect();
-        let m = similarity_misfit(&from, &whole, topology);
+        let m = similarity_misfit(from, &whole, topology);
         assert!(m.iter().all(|&m| m < 1e-3), "{m:?}");
         // Lift the far column: the triangles beside it bend, the far side stays.
         let mut bent = from.clone();
         for v in bent.iter_mut().filter(|v| v.x == 3.0) {
             v.z = 0.5;
         }
-        let m = similarity_misfit(&from, &bent, topology);
+        let m = similarity_misfit(from, &bent, topology);
         assert!(m[4] > 0.05 && m[0] < 1e-6, "{m:?}");
         assert!(m[5] > m[0]);
     }
@@ -415,15 +415,15 @@ mod tests {
         collapsed[1] = Vec3::ZERO;
         collapsed[5] = Vec3::ZERO;
         assert_eq!(
-            similarity_misfit(&from, &collapsed, topology)[0],
+            similarity_misfit(from, &collapsed, topology)[0],
             f32::INFINITY
         );
         let mut broken = from.clone();
         broken[15] = Vec3::NAN;
-        let m = similarity_misfit(&from, &broken, topology);
+        let m = similarity_misfit(from, &broken, topology);
         assert_eq!(m[17], f32::INFINITY);
         assert!(m[0].is_finite());
-        assert!(similarity_misfit(&from, &from[..8], topology)
+        assert!(similarity_misfit(from, &from[..8], topology)
             .iter()
             .all(|&m| m == f32::INFINITY));
     }
