@@ -689,14 +689,7 @@ fn skin_from_the_base_takes_over_swapped_skin_only_where_the_base_shapes_or_fits
     let own_shape = [(n[other].as_str(), 1.0)];
     let own = compose(&own_shape, SkinSource::Base);
     let model = &e.database().model;
-    let vertex_triangles = Csr::from_pairs(
-        model.vertex_count(),
-        model
-            .triangles
-            .iter()
-            .enumerate()
-            .flat_map(|(t, tri)| tri.map(|v| (v as usize, t as u32))),
-    );
+    let vertex_triangles = Csr::vertex_triangles(model.vertex_count(), &model.triangles);
     let topology = Topology {
         triangles: &model.triangles,
         vertex_triangles: &vertex_triangles,

@@ -372,12 +372,7 @@ mod tests {
                 triangles.push([v, v + 5, v + 4]);
             }
         }
-        let pairs: Vec<(usize, u32)> = triangles
-            .iter()
-            .enumerate()
-            .flat_map(|(t, tri)| tri.map(|v| (v as usize, t as u32)))
-            .collect();
-        let vertex_triangles = Csr::from_pairs(vertices.len(), pairs.into_iter());
+        let vertex_triangles = Csr::vertex_triangles(vertices.len(), &triangles);
         Grid {
             vertices,
             triangles,

@@ -268,14 +268,7 @@ impl Engine {
                 )
             })
             .collect();
-        let vertex_triangles = Csr::from_pairs(
-            db.model.vertex_count(),
-            db.model
-                .triangles
-                .iter()
-                .enumerate()
-                .flat_map(|(t, tri)| tri.map(|v| (v as usize, t as u32))),
-        );
+        let vertex_triangles = Csr::vertex_triangles(db.model.vertex_count(), &db.model.triangles);
         let placements = parent_placements
             .into_iter()
             .map(|parent| {

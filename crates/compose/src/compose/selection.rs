@@ -40,6 +40,18 @@ impl Csr {
         }
     }
 
+    /// Per vertex (of `vertices`), the triangles that have it as a corner,
+    /// in triangle order.
+    pub fn vertex_triangles(vertices: usize, triangles: &[[u32; 3]]) -> Self {
+        Self::from_pairs(
+            vertices,
+            triangles
+                .iter()
+                .enumerate()
+                .flat_map(|(t, tri)| tri.map(|v| (v as usize, t as u32))),
+        )
+    }
+
     /// The items of row `r`.
     pub fn row(&self, r: usize) -> &[u32] {
         &self.items[self.start[r] as usize..self.start[r + 1] as usize]
