@@ -1149,6 +1149,62 @@ fn colour_seams_blend_black_and_white_across_a_border_and_touch_nothing_else() {
     );
 }
 
+/// At the hairline a seam mixes hair with the other source's hair, not with
+/// its skin (method §7.8, as the truth's cross-fade does, §13.1): swapped
+/// grey hair beside a base with black hair and white skin darkens towards
+/// black, at most half way, and only a Gaussian painting mostly over the
+/// base's forehead (its footprint) takes the white skin there.
+#[test]
+fn a_hair_seam_blends_towards_the_other_sources_hair_not_its_skin() {
+    let mut db = small_db();
+    let model = db.model.clone();
+    let on_hair = |t: u32| model.triangle_regions[t as usize] == Region::Hair;
+    for (f, (skin, hair)) in [(1.0, 0.0), (0.0, 0.5)].into_iter().enumerate() {
+        let set = &mut db.sources[f].gaussians;
+        paint(set, skin);
+        let stride = set.sh_stride();
+        for i in (0..set.len()).filter(|&i| on_hair(set.binding[i])) {
+            set.sh[i * stride..i * stride + 3].fill(rgb_to_dc(hair));
+        }
+    }
+    let e = Engine::new(db).unwrap();
+    let n = names(&e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups.insert("hair".into(), edit(&n[1], &[]));
+    r.post.smoothing = Smoothing::Blend;
+    // Each Gaussian counts for the triangle it was painted by.
+    r.post.membership = visage::compose::recipe::Membership::Parent;
+    let c = e.compose(&resolve(&e, &r));
+    let (mut darker, mut painters) = (0, 0);
+    for block in c.blocks.iter().filter(|b| b.source == 1) {
+        for i in block.start..block.end {
+            if !on_hair(c.gaussians.binding[i]) {
+                continue;
+            }
+            let rgb = dc_to_rgb(c.gaussians.sh_of(i)[0]);
+            if rgb > 0.5 + 1e-4 {
+                // Footprint painters take at least three quarters of white.
+                assert!(
+                    rgb >= 0.75 * 1.0 + 0.25 * 0.0 - 1e-4,
+                    "grey hair lightened to {rgb}"
+                );
+                painters += 1;
+            } else {
+                assert!(rgb >= 0.25 - 1e-4, "more than half way to black: {rgb}");
+                darker += usize::from(rgb < 0.5 - 1e-3);
+            }
+        }
+    }
+    assert!(
+        darker > 20,
+        "{darker} hair Gaussians moved towards the base's hair"
+    );
+    assert!(
+        painters * 4 < darker,
+        "{painters} painters, {darker} blended"
+    );
+}
+
 /// Where a Gaussian paints: its footprint's four points lie on or beside a
 /// small Gaussian's own triangle, and a Gaussian whose centre, scale
 /// (overflowing included) or rotation is broken has none.

@@ -62,12 +62,22 @@ pub struct SeamColours<'a> {
     near: Vec<bool>,
 }
 
+/// Which side of the hairline a triangle of `region` lies on. A seam's
+/// target is the other source's colour on the Gaussian's own side: the
+/// truth's cross-fade (method §13.1) mixes hair with the other source's
+/// hair and skin with its skin, while a vertex on the hairline has
+/// triangles of both around it.
+fn side_of(region: Region) -> usize {
+    usize::from(region == Region::Hair)
+}
+
 /// One thread's memory of the local colours and corrections it looked up.
 #[derive(Default)]
 pub struct SeamCache {
-    /// Per source shown (as the field's sources), per vertex, filled on first
-    /// use: that source's local colour, corrected as the composite corrects it.
-    vertex_colour: Vec<Vec<Option<Option<Vec3>>>>,
+    /// Per source shown (as the field's sources), per vertex, per side of the
+    /// hairline ([`side_of`]), filled on first use: that source's local
+    /// colour there, corrected as the composite corrects it.
+    vertex_colour: Vec<Vec<[Option<Option<Vec3>>; 2]>>,
     /// Colour corrections by (source, region), made on first use.
     corrections: HashMap<(usize, Region), Correction>,
 }
@@ -128,6 +138,7 @@ impl<'a> SeamColours<'a> {
             return true;
         }
         let tri = sources.model().triangles[t as usize];
+        let side = side_of(sources.model().triangle_regions[t as usize]);
         let bary = sources.placements(membership, f)[i as usize];
         let Some(seam) = self.field.blend_at(tri, bary, f as u32) else {
             return true;
@@ -135,7 +146,7 @@ impl<'a> SeamColours<'a> {
         let mut sum = Vec3::ZERO;
         let mut total = 0.0;
         for (k, &v) in tri.iter().enumerate() {
-            if let Some(c) = self.colour_at(sources, cache, seam.other as usize, v) {
+            if let Some(c) = self.colour_at(sources, cache, seam.other as usize, v, side) {
                 sum += bary[k] * c;
                 total += bary[k];
             }
@@ -177,8 +188,9 @@ impl<'a> SeamColours<'a> {
             if o != Some(other) {
                 continue;
             }
+            let side = side_of(sources.model().triangle_regions[t as usize]);
             for v in sources.model().triangles[t as usize] {
-                if let Some(c) = self.colour_at(sources, cache, other as usize, v) {
+                if let Some(c) = self.colour_at(sources, cache, other as usize, v, side) {
                     sum += c;
                     total += 1.0;
                 }
@@ -191,25 +203,43 @@ impl<'a> SeamColours<'a> {
         true
     }
 
-    /// Source `s`'s local colour at vertex `v`: the mean colour of its
-    /// Gaussians counted for the triangles around `v`, each weighted by its
-    /// opacity and size (method §7.5) and by its barycentric share of `v`.
+    /// Source `s`'s local colour at vertex `v` on `side` of the hairline:
+    /// the mean colour of its Gaussians counted for the triangles around `v`
+    /// on that side, each weighted by its opacity and size (method §7.5) and
+    /// by its barycentric share of `v`; none where it has no Gaussians on
+    /// that side.
     fn colour_at(
         &self,
         sources: &impl SourceTables,
         cache: &mut SeamCache,
         s: usize,
         v: u32,
+        side: usize,
     ) -> Option<Vec3> {
         let k = self.field.sources().binary_search(&(s as u32)).ok()?;
-        let model = sources.model();
         let known = &mut cache.vertex_colour[k];
         if known.is_empty() {
-            *known = vec![None; model.vertex_count()];
+            *known = vec![[None; 2]; sources.model().vertex_count()];
         }
-        if let Some(colour) = known[v as usize] {
+        if let Some(colour) = known[v as usize][side] {
             return colour;
         }
+        let colour = self.colour_around(sources, cache, s, v, side);
+        cache.vertex_colour[k][v as usize][side] = Some(colour);
+        colour
+    }
+
+    /// The weighted mean colour of source `s`'s Gaussians counted for the
+    /// triangles around vertex `v` on `side` of the hairline.
+    fn colour_around(
+        &self,
+        sources: &impl SourceTables,
+        cache: &mut SeamCache,
+        s: usize,
+        v: u32,
+        side: usize,
+    ) -> Option<Vec3> {
+        let model = sources.model();
         let membership = self.recipe.post.membership;
         let bary = sources.placements(membership, s);
         let weights = sources.colour_weights(s);
@@ -219,6 +249,9 @@ impl<'a> SeamColours<'a> {
             let corner = model.triangles[t as usize].iter().position(|&u| u == v);
             let Some(corner) = corner else { continue };
             let region = model.triangle_regions[t as usize];
+            if side_of(region) != side {
+                continue;
+            }
             let correction = cache
                 .corrections
                 .entry((s, region))
@@ -235,8 +268,6 @@ impl<'a> SeamColours<'a> {
                 total += w;
             }
         }
-        let colour = (total > 0.0 && sum.is_finite()).then(|| sum / total);
-        cache.vertex_colour[k][v as usize] = Some(colour);
-        colour
+        (total > 0.0 && sum.is_finite()).then(|| sum / total)
     }
 }
