@@ -8,8 +8,8 @@
 //! shape = { bram = 0.7, ada = 0.3 } # convex shape weights (normalised if they don't sum to 1)
 //!
 //! [post]
-//! smoothing = "thesis"              # off | thesis | crossfade
-//! colour = "thesis"                 # off | thesis | skin
+//! smoothing = "thesis"              # off | thesis | crossfade | blend
+//! colour = "thesis"                 # off | thesis | skin | semantic
 //!
 //! [animation]
 //! motion = "talk"                   # a database motion, or "rest"
