@@ -224,21 +224,6 @@ impl<'a> SeamColours<'a> {
         if let Some(colour) = known[v as usize][side] {
             return colour;
         }
-        let colour = self.colour_around(sources, cache, s, v, side);
-        cache.vertex_colour[k][v as usize][side] = Some(colour);
-        colour
-    }
-
-    /// The weighted mean colour of source `s`'s Gaussians counted for the
-    /// triangles around vertex `v` on `side` of the hairline.
-    fn colour_around(
-        &self,
-        sources: &impl SourceTables,
-        cache: &mut SeamCache,
-        s: usize,
-        v: u32,
-        side: usize,
-    ) -> Option<Vec3> {
         let model = sources.model();
         let membership = self.recipe.post.membership;
         let bary = sources.placements(membership, s);
@@ -268,6 +253,8 @@ impl<'a> SeamColours<'a> {
                 total += w;
             }
         }
-        (total > 0.0 && sum.is_finite()).then(|| sum / total)
+        let colour = (total > 0.0 && sum.is_finite()).then(|| sum / total);
+        cache.vertex_colour[k][v as usize][side] = Some(colour);
+        colour
     }
 }
