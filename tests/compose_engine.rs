@@ -1183,11 +1183,10 @@ fn a_hair_seam_blends_towards_the_other_sources_hair_not_its_skin() {
             }
             let rgb = dc_to_rgb(c.gaussians.sh_of(i)[0]);
             if rgb > 0.5 + 1e-4 {
-                // Footprint painters take at least three quarters of white.
-                assert!(
-                    rgb >= 0.75 * 1.0 + 0.25 * 0.0 - 1e-4,
-                    "grey hair lightened to {rgb}"
-                );
+                // A footprint painter takes three quarters or all of the
+                // white forehead: 0.875 or 1 from its own grey, never a
+                // seam's mix of hair and skin (0.63 before the sides).
+                assert!(rgb >= 0.75 - 1e-4, "grey hair lightened to {rgb}");
                 painters += 1;
             } else {
                 assert!(rgb >= 0.25 - 1e-4, "more than half way to black: {rgb}");

@@ -217,14 +217,14 @@ impl<'a> SeamColours<'a> {
         side: usize,
     ) -> Option<Vec3> {
         let k = self.field.sources().binary_search(&(s as u32)).ok()?;
+        let model = sources.model();
         let known = &mut cache.vertex_colour[k];
         if known.is_empty() {
-            *known = vec![[None; 2]; sources.model().vertex_count()];
+            *known = vec![[None; 2]; model.vertex_count()];
         }
         if let Some(colour) = known[v as usize][side] {
             return colour;
         }
-        let model = sources.model();
         let membership = self.recipe.post.membership;
         let bary = sources.placements(membership, s);
         let weights = sources.colour_weights(s);
