@@ -120,6 +120,13 @@ fn an_unedited_recipe_is_its_source_in_capture_and_evaluation() {
     assert!(psnr > 20.0, "{psnr}");
     assert_eq!(report["border"]["pixels"], 0, "one source: no border band");
     assert_eq!(report["ceiling_border"]["pixels"], 0, "nor in the ceiling");
+    // On the views no source was trained on, too, the composite is its source.
+    let held_out = report["held_out"]["psnr_db"].as_f64().unwrap();
+    let ceiling_held_out = report["ceiling_held_out"]["psnr_db"].as_f64().unwrap();
+    assert!(
+        (held_out - ceiling_held_out).abs() < 0.02,
+        "{held_out} against the source's own {ceiling_held_out} on held-out views"
+    );
     // Every region is its source's own: as good as its ceiling everywhere.
     let regions = report["regions"].as_array().unwrap();
     assert!(regions.len() > 5, "{regions:?}");
@@ -240,6 +247,20 @@ fn an_edited_composite_reports_regions_band_leak_ceiling_and_steps() {
     );
     assert!(px(&report["ceiling_border"]) > 0 && px(&report["ceiling_interior"]) > 0);
     assert!(text.contains("ceiling band"), "{text}");
+    // Per split the ceiling covers its pixels too, and the held-out figures
+    // are the val and test views together.
+    let splits = report["ceiling_splits"].as_object().unwrap();
+    assert!(splits.contains_key("train") && splits.contains_key("val"));
+    assert_eq!(splits.values().map(px).sum::<u64>(), px(&report["ceiling"]));
+    let split = |name: &str| report["splits"].get(name).map_or(0, px);
+    assert_eq!(px(&report["held_out"]), split("val") + split("test"));
+    let ceiling_split = |name: &str| splits.get(name).map_or(0, px);
+    assert_eq!(
+        px(&report["ceiling_held_out"]),
+        ceiling_split("val") + ceiling_split("test")
+    );
+    assert!(px(&report["held_out"]) > 0, "{report}");
+    assert!(text.contains("held out"), "{text}");
     // Per region, band and interior: together the groups' pixels, the
     // costliest first, and the swapped nose's border has a band.
     let regions = report["regions"].as_array().unwrap();

@@ -86,9 +86,21 @@ fn print_report(r: &CompositeReport) {
         r.views, r.border_px
     );
     println!("{}", row("head", &r.quality));
+    // Each split beside the ceiling on the same views: on "train" the
+    // sources are scored on images they were fitted to.
+    let with_ceiling = |name: &str, q: &Quality, ceiling: Option<&Quality>| match ceiling {
+        Some(c) if c.pixels > 0 && q.pixels > 0 => {
+            format!("{}  ceiling {:.2} dB", row(name, q), c.psnr_db)
+        }
+        _ => row(name, q),
+    };
     for (split, q) in &r.splits {
-        println!("{}", row(split, q));
+        println!("{}", with_ceiling(split, q, r.ceiling_splits.get(split)));
     }
+    println!(
+        "{}",
+        with_ceiling("held out", &r.held_out, Some(&r.ceiling_held_out))
+    );
     println!("{}", row("ceiling", &r.ceiling));
     println!("{}", row("border band", &r.border));
     println!("{}", row("interior", &r.interior));

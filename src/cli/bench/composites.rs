@@ -111,6 +111,8 @@ struct Means {
     ceiling_non_skin_delta_e: f64,
     ceiling_border_psnr_db: f64,
     ceiling_interior_psnr_db: f64,
+    held_out_psnr_db: f64,
+    ceiling_held_out_psnr_db: f64,
 }
 
 /// The whole bench.
@@ -321,6 +323,8 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
             ceiling_non_skin_delta_e: mean_of(&|r| r.ceiling_non_skin.delta_e),
             ceiling_border_psnr_db: mean_of(&|r| r.ceiling_border.psnr_db),
             ceiling_interior_psnr_db: mean_of(&|r| r.ceiling_interior.psnr_db),
+            held_out_psnr_db: mean_of(&|r| r.held_out.psnr_db),
+            ceiling_held_out_psnr_db: mean_of(&|r| r.ceiling_held_out.psnr_db),
         },
         sources,
         recipes: rows,
@@ -417,5 +421,10 @@ fn print_table(b: &CompositesBench) {
         figure(m.ceiling_non_skin_delta_e),
         figure(m.ceiling_border_psnr_db),
         figure(m.ceiling_interior_psnr_db)
+    );
+    println!(
+        "held-out views (val, test; no source trained on them): composite {} dB, ceiling {} dB",
+        figure(m.held_out_psnr_db),
+        figure(m.ceiling_held_out_psnr_db)
     );
 }

@@ -221,6 +221,10 @@ pub struct CompositeReport {
     pub quality: Quality,
     /// Per split.
     pub splits: BTreeMap<&'static str, Quality>,
+    /// Over the held-out views (val and test), which no source was trained
+    /// on when the sources were captured with the ground truth's rig and
+    /// motion (as `bench composites` does).
+    pub held_out: Quality,
     /// Per view.
     pub per_view: Vec<ViewQuality>,
     /// Per group.
@@ -257,6 +261,13 @@ pub struct CompositeReport {
     pub ceiling_border: Quality,
     /// The ceiling over the rest of the assigned groups' pixels.
     pub ceiling_interior: Quality,
+    /// The ceiling per split. On the training split a source is scored on
+    /// the very images it was fitted to, which no composite's new appearance
+    /// was; the held-out splits tell what training reaches on views it has
+    /// not seen.
+    pub ceiling_splits: BTreeMap<&'static str, Quality>,
+    /// The ceiling over the held-out views (val and test).
+    pub ceiling_held_out: Quality,
     /// Each source's own figures.
     pub sources: Vec<SourceCeiling>,
     /// swap → +shape → +smoothing → +colour.
@@ -674,6 +685,7 @@ pub fn evaluate_variants(
     let mut ceiling_parts = [Sums::default(); 2];
     // [band, interior] pixels of the ceiling.
     let mut ceiling_zones = [Sums::default(); 2];
+    let mut ceiling_splits: BTreeMap<&'static str, Sums> = BTreeMap::new();
     let mut source_sums = vec![Sums::default(); own.len()];
     let mut step_sums = vec![[Sums::default(); 5]; variants.len()];
     let (mut leak_sum, mut leak_over, mut leak_pixels) = (0.0, 0usize, 0usize);
@@ -753,6 +765,7 @@ pub fn evaluate_variants(
             leak_pixels += 1;
         }
         // The ceiling: each used source on its own ground truth.
+        let mut view_ceiling = Sums::default();
         for (k, ((s, trainable, sitter), surface)) in own.iter().zip(&surfaces).enumerate() {
             let truth = model.forward(
                 &sitter.shape,
@@ -788,6 +801,7 @@ pub fn evaluate_variants(
                 let g = region.group();
                 if resolved.gaussians[g.index()] == *s {
                     ceilings[g.index()].add(sq, ssim[p], de);
+                    view_ceiling.add(sq, ssim[p], de);
                     ceiling_parts[usize::from(!is_skin(region))].add(sq, ssim[p], de);
                     ceiling_zones[usize::from(!own_band[p])].add(sq, ssim[p], de);
                     region_ceilings[region.index()][usize::from(!own_band[p])].add(sq, ssim[p], de);
@@ -798,6 +812,10 @@ pub fn evaluate_variants(
         let jaw_deg = (t.pose.joints[Joint::Jaw as usize].length() as f64).to_degrees();
         mouth_sums[usize::from(jaw_deg >= OPEN_MOUTH_DEG)].merge(&view_sums);
         splits.entry(*split).or_default().merge(&view_sums);
+        ceiling_splits
+            .entry(*split)
+            .or_default()
+            .merge(&view_ceiling);
         per_view.push(ViewQuality {
             split,
             timestep: view.timestep,
@@ -811,11 +829,20 @@ pub fn evaluate_variants(
     let mut ceiling = Sums::default();
     ceilings.iter().for_each(|c| ceiling.merge(c));
     let final_step = &step_sums[last];
+    let held_out = |by_split: &BTreeMap<&'static str, Sums>| {
+        let mut sums = Sums::default();
+        by_split
+            .iter()
+            .filter(|(split, _)| **split != "train")
+            .for_each(|(_, s)| sums.merge(s));
+        sums.quality()
+    };
     let report = CompositeReport {
         views: views.len(),
         border_px: options.border_px,
         quality: overall.quality(),
         splits: splits.iter().map(|(k, v)| (*k, v.quality())).collect(),
+        held_out: held_out(&splits),
         per_view,
         groups: Group::ALL
             .iter()
@@ -849,6 +876,11 @@ pub fn evaluate_variants(
         ceiling_non_skin: ceiling_parts[1].quality(),
         ceiling_border: ceiling_zones[0].quality(),
         ceiling_interior: ceiling_zones[1].quality(),
+        ceiling_splits: ceiling_splits
+            .iter()
+            .map(|(k, v)| (*k, v.quality()))
+            .collect(),
+        ceiling_held_out: held_out(&ceiling_splits),
         sources: own
             .iter()
             .zip(&source_sums)
