@@ -1579,3 +1579,133 @@ fn relighting_follows_the_turn_and_the_hollows_under_each_gaussian() {
     next.post.shading = Shading::Kept;
     assert!(!e.update(&mut c, &next).gaussians);
 }
+
+/// A dark source's brow mixed into the skin Gaussians round its eyes, moved
+/// to a light base (method §7.7, `dark_features`): plain skin takes the
+/// base's tone in full, a half-brow Gaussian only its skin's share — near
+/// half the base's skin plus half the brow in linear light, not the pale
+/// brow the whole transfer makes. Moved the other way, to a darker base, the
+/// same mix takes the whole transfer, as plain skin does; so does a source
+/// whose hair is too light to tell from its skin by lightness.
+#[test]
+fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
+    use visage::compose::recipe::Membership;
+    let linear = |c: f32| {
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let display = |c: f32| {
+        if c <= 0.003_130_8 {
+            c * 12.92
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        }
+    };
+    let luma = |rgb: Vec3| 0.2126 * linear(rgb.x) + 0.7152 * linear(rgb.y) + 0.0722 * linear(rgb.z);
+    let half_and_half = |skin: Vec3, brow: Vec3| {
+        Vec3::from_array(std::array::from_fn(|c| {
+            display(0.5 * linear(skin[c]) + 0.5 * linear(brow[c]))
+        }))
+    };
+    let eyes = |r: Region| matches!(r, Region::LeftEyeRegion | Region::RightEyeRegion);
+    let fair = Vec3::new(0.90, 0.75, 0.65);
+    let dark = Vec3::new(0.45, 0.30, 0.21);
+    let brown = Vec3::new(0.12, 0.07, 0.04);
+    // A hair half as dark again as the skin in display terms (over half its
+    // brightness in linear light): too light to be told by lightness.
+    let light_brown = dark * 0.85;
+    // Source 0 is the base, source 1 gives the eyes: (skin, hair) each; the
+    // source's even eye-region Gaussians are half skin, half hair.
+    // Returns the mean linear luminance of source 1's plain and mixed eye
+    // Gaussians in the composite.
+    let composed = |base: (Vec3, Vec3), eyes_of: (Vec3, Vec3)| -> (f32, f32) {
+        let mut db = small_db();
+        let regions = db.model.triangle_regions.clone();
+        let mixed_at = |set: &visage::avatar::gaussians::GaussianSet, i: usize| {
+            eyes(regions[set.binding[i] as usize]) && i % 2 == 0
+        };
+        for (f, (skin, hair)) in [base, eyes_of].into_iter().enumerate() {
+            let set = &mut db.sources[f].gaussians;
+            let stride = set.sh_stride();
+            for i in 0..set.len() {
+                let rgb = if regions[set.binding[i] as usize] == Region::Hair {
+                    hair
+                } else if mixed_at(set, i) {
+                    half_and_half(skin, hair)
+                } else {
+                    skin
+                };
+                let sh = &mut set.sh[i * stride..(i + 1) * stride];
+                sh.fill(0.0);
+                (0..3).for_each(|c| sh[c] = rgb_to_dc(rgb[c]));
+            }
+        }
+        let source = db.sources[1].gaussians.clone();
+        let e = Engine::new(db).unwrap();
+        let n = names(&e);
+        let mut r = Recipe::unedited(&n[0]);
+        r.groups.insert("eyes".into(), edit(&n[1], &[]));
+        r.post.colour = ColourCorrection::Semantic;
+        r.post.membership = Membership::Parent;
+        let c = e.compose(&resolve(&e, &r));
+        let (mut plain, mut mixed) = (Vec::new(), Vec::new());
+        // The region's own Gaussians were copied in the source's order.
+        for block in c.blocks.iter().filter(|b| b.source == 1 && eyes(b.region)) {
+            let own: Vec<usize> = (0..source.len())
+                .filter(|&i| regions[source.binding[i] as usize] == block.region)
+                .collect();
+            assert_eq!(own.len(), block.end - block.start);
+            for (k, &i) in own.iter().enumerate() {
+                let sh = c.gaussians.sh_of(block.start + k);
+                let rgb = Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]));
+                if mixed_at(&source, i) {
+                    &mut mixed
+                } else {
+                    &mut plain
+                }
+                .push(luma(rgb));
+            }
+        }
+        assert!(
+            plain.len() > 20 && mixed.len() > 20,
+            "{} plain, {} mixed",
+            plain.len(),
+            mixed.len()
+        );
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+        (mean(&plain), mean(&mixed))
+    };
+    // Dark skin with a brown brow onto a fair base.
+    let (plain, mixed) = composed((fair, brown), (dark, brown));
+    assert!(
+        (plain - luma(fair)).abs() < 0.03 * luma(fair),
+        "plain skin at {plain}"
+    );
+    let ideal = luma(half_and_half(fair, brown));
+    let whole = luma(half_and_half(dark, brown)) * luma(fair) / luma(dark);
+    assert!(
+        (mixed - ideal).abs() < 0.35 * (whole - ideal),
+        "half-brow at {mixed}: the skin's share moved gives {ideal}, the whole transfer {whole}"
+    );
+    // The other way, and a hair too light to tell: the whole transfer, the
+    // mix scaled as plain skin is.
+    for (base, eyes_of) in [
+        ((dark, brown), (fair, brown)),
+        ((fair, brown), (dark, light_brown)),
+    ] {
+        let (plain, mixed) = composed(base, eyes_of);
+        let ratio = luma(base.0) / luma(eyes_of.0);
+        let want = luma(half_and_half(eyes_of.0, eyes_of.1)) * ratio;
+        assert!(
+            (plain - luma(base.0)).abs() < 0.03 * luma(base.0),
+            "plain skin at {plain}"
+        );
+        assert!(
+            (mixed - want).abs() < 0.1 * want,
+            "mix at {mixed}, the whole transfer {want}"
+        );
+    }
+}

@@ -387,6 +387,32 @@ pub fn semantic_skin_gain(rgb: Vec3, region: Region, from: &SkinStats, to: &Skin
     }
 }
 
+/// [`semantic_skin_gain`] taken a share `share` (0 to 1) of the way in
+/// linear light, c + share·(c' − c) for the colour c and its whole transfer
+/// c': the part of the colour's brightness that is skin where a dark feature
+/// is mixed in (`dark_features::skin_share_of_brightness`). A share that is
+/// not a number counts as the whole way.
+pub fn semantic_skin_gain_shared(
+    rgb: Vec3,
+    region: Region,
+    from: &SkinStats,
+    to: &SkinStats,
+    share: f32,
+) -> Vec3 {
+    let whole = semantic_skin_gain(rgb, region, from, to);
+    // A share that is not a number takes the whole way too.
+    if share.is_nan() || share >= 1.0 || whole == Vec3::ONE {
+        return whole;
+    }
+    let current = rgb.clamp(Vec3::ZERO, Vec3::ONE).max(Vec3::splat(DARK_MEAN));
+    let (before, after) = (srgb_to_linear(current), srgb_to_linear(current * whole));
+    let shared = linear_to_srgb(before.lerp(after, share.max(0.0)));
+    (shared / current).clamp(
+        Vec3::splat(TRANSFER_GAIN_RANGE.0),
+        Vec3::splat(TRANSFER_GAIN_RANGE.1),
+    )
+}
+
 /// How surely a Gaussian of `region` with display colour `rgb` is skin, by
 /// the source's skin statistics `stats` (0 to 1): nothing in regions that
 /// hold no skin ([`holds_no_skin`]), the skin mode's likeness in regions

@@ -14,11 +14,13 @@ use super::base_skin::{
 };
 use super::blend::{Blender, SparseRhs};
 use super::colour::{
-    apply_gain, colour_weight, hair_chromaticity, seen_colours, semantic_skin_gain, skin_stats,
-    skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
+    apply_gain, colour_weight, hair_chromaticity, seen_colours, semantic_skin_gain_shared,
+    skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats,
+    SKIN_REFERENCE_REGIONS,
 };
 use super::copying::{copy_own, relight_sh, CopyOwn, OpacityEdit, OwnBlock};
 use super::correction::{Correction, SharedGains};
+use super::dark_features;
 use super::membership::{footprint_triangles, placements};
 use super::recipe::{
     Anchor, AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe,
@@ -56,6 +58,10 @@ pub struct Engine {
     seen: Vec<Vec<Vec3>>,
     /// The light baked into each source's colours, fitted to its skin.
     lights: Vec<Option<BakedLight>>,
+    /// Per source, its hair's brightness relative to its skin tone: the
+    /// darkest brows and lashes its eye regions' skin Gaussians may mix with
+    /// (`dark_features`, method §7.7).
+    hair_brightness: Vec<Option<f32>>,
     /// `[source]` → the exposure where each Gaussian sits on its parent
     /// triangle of the source's neutral mesh.
     gaussian_exposures: Vec<Vec<Exposure>>,
@@ -256,6 +262,13 @@ impl Engine {
                     .map(|s| s.beside_hair(hair_chromaticity(set, &seen[f], hair)))
             })
             .collect();
+        let hair_brightness: Vec<Option<f32>> = (0..db.sources.len())
+            .map(|f| {
+                let hair = tables.region(Membership::Parent, f, Region::Hair);
+                let stats = skin[f].as_ref()?;
+                dark_features::hair_brightness(&db.sources[f].gaussians, &seen[f], hair, stats)
+            })
+            .collect();
         let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
             .into_par_iter()
             .map(|f| {
@@ -289,6 +302,7 @@ impl Engine {
             skin,
             seen,
             lights,
+            hair_brightness,
             gaussian_exposures,
             skin_gains: Mutex::new(HashMap::new()),
             vertex_triangles,
@@ -569,6 +583,7 @@ impl Engine {
                 let set = &self.db.sources[source].gaussians;
                 let regions = &self.db.model.triangle_regions;
                 let colours = &self.seen[source];
+                let brightens = dark_features::transfer_brightens(&from, &to);
                 let gains = (0..set.len())
                     .into_par_iter()
                     .map(|i| {
@@ -576,7 +591,14 @@ impl Engine {
                         match semantic {
                             Some(m) => {
                                 let t = self.tables.counted_triangles(m, source)[i];
-                                semantic_skin_gain(rgb, regions[t as usize], &from, &to)
+                                let region = regions[t as usize];
+                                let share =
+                                    if brightens && dark_features::holds_dark_features(region) {
+                                        self.skin_share_of_brightness(source, i)
+                                    } else {
+                                        1.0
+                                    };
+                                semantic_skin_gain_shared(rgb, region, &from, &to, share)
                             }
                             None => skin_transfer_gain(rgb, &from, &to),
                         }
@@ -585,6 +607,19 @@ impl Engine {
                 Arc::new(gains)
             });
         Some(gains.clone())
+    }
+
+    /// The share of Gaussian `i` of source `f`'s brightness that is skin,
+    /// where a brow or lash of the source's hair's brightness may be mixed
+    /// in (`dark_features`); one where the source has no hair or no light.
+    fn skin_share_of_brightness(&self, f: usize, i: usize) -> f32 {
+        let (Some(feature), Some(light)) = (self.hair_brightness[f], self.lights[f].as_ref())
+        else {
+            return 1.0;
+        };
+        let at = self.gaussian_exposures[f][i];
+        dark_features::relative_brightness(light, at, self.seen[f][i])
+            .map_or(1.0, |r| dark_features::skin_share_of_brightness(r, feature))
     }
 
     /// The colour correction of Gaussians of source `f` bound in `region`.

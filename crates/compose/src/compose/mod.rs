@@ -7,6 +7,7 @@ pub mod colour;
 pub mod composition;
 pub mod copying;
 pub mod correction;
+pub mod dark_features;
 pub mod deform;
 pub mod engine;
 pub mod membership;

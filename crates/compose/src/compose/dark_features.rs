@@ -1,0 +1,235 @@
+//! Dark features mixed into skin Gaussians under a brightening skin transfer
+//! (docs/method.md §7.7, "Brows and lashes under a brightening transfer").
+//!
+//! A trained Gaussian on a brow's edge shows part skin, part brow. The skin
+//! transfer scales its colour by the ratio of the two skins' tones, which
+//! from a dark source to a light base is 2-3 per channel in display terms:
+//! the brow's share of the colour is scaled with the skin's and the brow
+//! comes out pale. In linear light a colour c mixing the source's skin S
+//! (a share 1 − k) with a feature F (a share k) should become
+//! c + (1 − k)(S' − S) for the base's skin S': only the skin's share moves.
+//! With r = c / S and h = F / S (brightnesses relative to the skin at the
+//! Gaussian's place), the part of c's brightness that is skin is
+//! t = (1 − k)·S / c = (r − h) / ((1 − h)·r): the transfer is taken a share
+//! t of the way. A black feature (h = 0) gives t = 1 — scaling a mix of skin
+//! and black by the skin's ratio is exact — and a colour as bright as skin
+//! gives t = 1 too; a colour as dark as the feature gives t = 0.
+
+use glam::Vec3;
+
+use super::colour::{lab_to_srgb, srgb_to_linear, SkinStats};
+use super::shading::{BakedLight, Exposure};
+use crate::avatar::gaussians::{sigmoid, GaussianSet};
+use crate::model::regions::Region;
+
+/// Features at most this bright relative to the skin (linear luminance) are
+/// told from skin by lightness; a lighter one (grey or blond hair on a fair
+/// skin) differs from skin too little in lightness for its share to be read,
+/// and the transfer moves such a Gaussian in full, as before.
+pub const DARK_FEATURE: f32 = 0.5;
+
+/// Linear luminance (Rec. 709) of a display colour; NaN for a broken one.
+fn luminance(display: Vec3) -> f32 {
+    if !display.is_finite() {
+        return f32::NAN;
+    }
+    let linear = srgb_to_linear(display.clamp(Vec3::ZERO, Vec3::ONE));
+    0.2126 * linear.x + 0.7152 * linear.y + 0.0722 * linear.z
+}
+
+/// The regions whose skin Gaussians mix with the source's brows and lashes
+/// (the hair's colour or darker): the skin round the eyes.
+pub fn holds_dark_features(region: Region) -> bool {
+    matches!(region, Region::LeftEyeRegion | Region::RightEyeRegion)
+}
+
+/// Whether the transfer from `from` to `to` brightens the skin (the base's
+/// tone is lighter): only then does scaling a dark feature with the skin
+/// pale it. Darkening a mix of skin and a darker feature by the skin's ratio
+/// errs by the feature's share times its own brightness, small beside the
+/// error of leaving a light skin's share light on a dark base.
+pub fn transfer_brightens(from: &SkinStats, to: &SkinStats) -> bool {
+    luminance(lab_to_srgb(to.tone)) > luminance(lab_to_srgb(from.tone))
+}
+
+/// The brightness of a source's hair relative to its skin tone: the
+/// opacity-weighted mean linear luminance of its hair region's Gaussians
+/// (`indices`, display colours `colours[i]`) over the tone's. Brows and
+/// lashes are the hair's colour or darker, so this is the feature a skin
+/// Gaussian round the eyes may be mixed with. `None` where the region is
+/// empty or the tone is black.
+pub fn hair_brightness(
+    set: &GaussianSet,
+    colours: &[Vec3],
+    indices: &[u32],
+    skin: &SkinStats,
+) -> Option<f32> {
+    let (mut sum, mut total) = (0.0f32, 0.0f32);
+    for &i in indices {
+        let i = i as usize;
+        let (Some(&rgb), Some(&logit)) = (colours.get(i), set.opacity_logit.get(i)) else {
+            continue;
+        };
+        let (y, a) = (luminance(rgb), sigmoid(logit));
+        if y.is_finite() && a.is_finite() {
+            sum += a * y;
+            total += a;
+        }
+    }
+    let tone = luminance(lab_to_srgb(skin.tone));
+    let ratio = sum / total / tone;
+    (total > 1e-6 && tone > 1e-4 && ratio.is_finite()).then_some(ratio)
+}
+
+/// How bright a Gaussian of display colour `seen` is relative to the
+/// source's skin where it sits (`at`), by the source's fitted light: 1 for
+/// skin as the light predicts it, less for a darker colour. `None` where the
+/// light predicts (near) black there or the colour is broken.
+pub fn relative_brightness(light: &BakedLight, at: Exposure, seen: Vec3) -> Option<f32> {
+    let skin = luminance(light.brightness(at));
+    let r = luminance(seen) / skin;
+    (skin > 1e-3 && r.is_finite()).then_some(r)
+}
+
+/// The share of a colour's brightness that is skin, for a colour at
+/// brightness `r` relative to the skin mixing skin with a feature of
+/// relative brightness `feature` (module doc): (r − h) / ((1 − h)·r) in
+/// [0, 1]. One where the feature is not dark enough to tell
+/// ([`DARK_FEATURE`]), where the colour is at least as bright as skin, and
+/// for values that are not numbers.
+pub fn skin_share_of_brightness(r: f32, feature: f32) -> f32 {
+    let tellable = (0.0..DARK_FEATURE).contains(&feature);
+    if !tellable || r.is_nan() || r >= 1.0 {
+        return 1.0;
+    }
+    ((r - feature) / ((1.0 - feature) * r.max(f32::MIN_POSITIVE))).clamp(0.0, 1.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compose::colour::srgb_to_lab;
+
+    #[test]
+    fn the_skin_share_is_what_moving_only_the_skin_needs() {
+        // Half brow (a quarter of the skin's brightness), half skin.
+        let (h, k) = (0.25, 0.5);
+        let r = (1.0 - k) + k * h;
+        assert!((skin_share_of_brightness(r, h) - 0.8).abs() < 1e-6);
+        // Scaling the colour by 1 + t(g − 1) moves exactly the skin's share.
+        let (skin, gain) = (0.2f32, 3.0f32);
+        let c = r * skin;
+        let t = skin_share_of_brightness(r, h);
+        let want = c + (1.0 - k) * (gain * skin - skin);
+        assert!((c * (1.0 + t * (gain - 1.0)) - want).abs() < 1e-6);
+        // Plain skin and anything lighter move in full; pure feature not at all.
+        assert_eq!(skin_share_of_brightness(1.0, h), 1.0);
+        assert_eq!(skin_share_of_brightness(1.7, h), 1.0);
+        assert_eq!(skin_share_of_brightness(h, h), 0.0);
+        assert_eq!(skin_share_of_brightness(0.5 * h, h), 0.0);
+        // A black feature: the skin's ratio is exact for any mix.
+        assert_eq!(skin_share_of_brightness(0.3, 0.0), 1.0);
+    }
+
+    #[test]
+    fn light_features_black_and_broken_values_leave_the_transfer_whole() {
+        for h in [DARK_FEATURE, 0.8, 1.2, f32::NAN, f32::INFINITY, -0.1] {
+            assert_eq!(skin_share_of_brightness(0.4, h), 1.0, "{h}");
+        }
+        for r in [f32::NAN, f32::INFINITY] {
+            assert_eq!(skin_share_of_brightness(r, 0.3), 1.0, "{r}");
+        }
+        // Black: no brightness to share, the feature's.
+        assert_eq!(skin_share_of_brightness(0.0, 0.3), 0.0);
+        assert_eq!(skin_share_of_brightness(-0.0, 0.3), 0.0);
+    }
+
+    #[test]
+    fn a_shared_transfer_goes_that_share_of_the_way_in_linear_light() {
+        use crate::compose::colour::{semantic_skin_gain, semantic_skin_gain_shared};
+        let at = |rgb: Vec3| SkinStats::at(srgb_to_lab(rgb));
+        let (from, to) = (
+            at(Vec3::new(0.45, 0.30, 0.21)),
+            at(Vec3::new(0.9, 0.75, 0.65)),
+        );
+        let skin = Vec3::new(0.45, 0.30, 0.21);
+        let region = Region::LeftEyeRegion;
+        let whole = semantic_skin_gain(skin, region, &from, &to);
+        assert!(whole.x > 1.5, "{whole}");
+        for share in [1.0, 2.0, f32::NAN] {
+            assert_eq!(
+                semantic_skin_gain_shared(skin, region, &from, &to, share),
+                whole
+            );
+        }
+        for share in [0.0, -1.0] {
+            let none = semantic_skin_gain_shared(skin, region, &from, &to, share);
+            assert!((none - Vec3::ONE).abs().max_element() < 1e-5, "{none}");
+        }
+        let half = semantic_skin_gain_shared(skin, region, &from, &to, 0.5);
+        let (before, after) = (srgb_to_linear(skin), srgb_to_linear(skin * whole));
+        let got = srgb_to_linear(skin * half);
+        assert!(
+            (got - (before + after) * 0.5).abs().max_element() < 1e-4,
+            "{got}"
+        );
+    }
+
+    #[test]
+    fn only_a_lighter_base_brightens() {
+        let at = |rgb: Vec3| SkinStats::at(srgb_to_lab(rgb));
+        let (dark, light) = (
+            at(Vec3::new(0.53, 0.36, 0.25)),
+            at(Vec3::new(0.96, 0.83, 0.74)),
+        );
+        assert!(transfer_brightens(&dark, &light));
+        assert!(!transfer_brightens(&light, &dark));
+        assert!(!transfer_brightens(&light, &light));
+    }
+
+    #[test]
+    fn hair_brightness_is_the_hairs_weighted_luminance_over_the_tone() {
+        let mut set = GaussianSet::with_degree(0);
+        for _ in 0..3 {
+            set.push(
+                0,
+                Vec3::ZERO,
+                glam::Quat::IDENTITY,
+                Vec3::ZERO,
+                0.0,
+                &[0.0; 3],
+            );
+        }
+        set.opacity_logit = vec![10.0, 10.0, -30.0];
+        let skin = SkinStats::at(srgb_to_lab(Vec3::splat(0.8)));
+        let grey = Vec3::splat(0.4);
+        let colours = [grey, grey, Vec3::ONE];
+        let h = hair_brightness(&set, &colours, &[0, 1, 2], &skin).unwrap();
+        let want = luminance(grey) / luminance(Vec3::splat(0.8));
+        assert!((h - want).abs() < 1e-3, "{h} {want}");
+        // No hair, a black tone, broken colours: none.
+        assert_eq!(hair_brightness(&set, &colours, &[], &skin), None);
+        let black = SkinStats::at(srgb_to_lab(Vec3::ZERO));
+        assert_eq!(hair_brightness(&set, &colours, &[0, 1], &black), None);
+        assert_eq!(hair_brightness(&set, &[Vec3::NAN; 3], &[0, 1], &skin), None);
+    }
+
+    #[test]
+    fn relative_brightness_reads_against_the_light_where_the_gaussian_sits() {
+        let light = BakedLight::new([[0.5, 0.0, 0.2, 0.0]; 3], Vec3::ZERO);
+        let up = Exposure {
+            normal: Vec3::Y,
+            cavity: 0.0,
+        };
+        let skin = light.brightness(up);
+        assert!((relative_brightness(&light, up, skin).unwrap() - 1.0).abs() < 1e-5);
+        let half = relative_brightness(&light, up, lab_to_srgb(srgb_to_lab(skin))).unwrap();
+        assert!((half - 1.0).abs() < 1e-3);
+        let darker = relative_brightness(&light, up, skin * 0.5).unwrap();
+        assert!(darker < 0.5, "{darker}");
+        // Where the light is black, or the colour broken: none.
+        let black = BakedLight::new([[0.0; 4]; 3], Vec3::ZERO);
+        assert_eq!(relative_brightness(&black, up, skin), None);
+        assert_eq!(relative_brightness(&light, up, Vec3::NAN), None);
+    }
+}
