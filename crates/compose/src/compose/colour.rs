@@ -400,7 +400,6 @@ pub fn semantic_skin_gain_shared(
     share: f32,
 ) -> Vec3 {
     let whole = semantic_skin_gain(rgb, region, from, to);
-    // A share that is not a number takes the whole way too.
     if share.is_nan() || share >= 1.0 || whole == Vec3::ONE {
         return whole;
     }
