@@ -1,5 +1,5 @@
 //! Dark features mixed into skin Gaussians under a brightening skin transfer
-//! (docs/method.md §7.7, "Brows and lashes under a brightening transfer").
+//! (docs/method.md §7.7, its last bullet).
 //!
 //! A trained Gaussian on a brow's edge shows part skin, part brow. The skin
 //! transfer scales its colour by the ratio of the two skins' tones, which
