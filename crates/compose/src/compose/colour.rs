@@ -239,11 +239,12 @@ pub fn skin_stats(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Optio
     })
 }
 
-/// The chromaticity of the Gaussians `indices` of a set (a source's hair
-/// region), each of display colour `colours[i]`: their opacity-weighted mean
-/// colour in linear RGB over its sum, or `None` where they show too little
-/// colour to have one (an empty region, black or broken colours).
-pub fn hair_chromaticity(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Option<Vec3> {
+/// The opacity-weighted mean colour, in linear RGB, of the Gaussians
+/// `indices` of a set (a source's hair region), each of display colour
+/// `colours[i]`; broken colours are left out. `None` where nothing is left
+/// to weigh (an empty region). Its [`chromaticity`] tells a hairline's skin
+/// from hair, its brightness a brow from skin (`dark_features`).
+pub fn hair_colour(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Option<Vec3> {
     let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
     for &i in indices {
         let i = i as usize;
@@ -254,17 +255,17 @@ pub fn hair_chromaticity(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -
             srgb_to_linear(rgb.clamp(Vec3::ZERO, Vec3::ONE)),
             sigmoid(logit),
         );
-        if linear.is_finite() && a.is_finite() {
+        if rgb.is_finite() && linear.is_finite() && a.is_finite() {
             sum += a * linear;
             total += a;
         }
     }
-    (total > 1e-6).then(|| sum / total).and_then(chromaticity)
+    (total > 1e-6).then(|| sum / total)
 }
 
 /// A linear colour over the sum of its channels: what shading (a common
 /// factor) leaves alone. `None` for colours too dark or broken to have one.
-fn chromaticity(linear: Vec3) -> Option<Vec3> {
+pub fn chromaticity(linear: Vec3) -> Option<Vec3> {
     let sum = linear.x + linear.y + linear.z;
     (sum > CHROMATICITY_FLOOR && linear.is_finite()).then(|| linear / sum)
 }
@@ -941,7 +942,7 @@ mod tests {
                 assert_eq!(gain, strict, "{hair_of:?} {rgb}");
             }
         }
-        assert_eq!(hair_chromaticity(&GaussianSet::default(), &[], &[]), None);
+        assert_eq!(hair_colour(&GaussianSet::default(), &[], &[]), None);
     }
 
     #[test]

@@ -19,7 +19,6 @@ use glam::Vec3;
 
 use super::colour::{lab_to_srgb, srgb_to_linear, SkinStats};
 use super::shading::{BakedLight, Exposure};
-use crate::avatar::gaussians::{sigmoid, GaussianSet};
 use crate::model::regions::Region;
 
 /// Features at most this bright relative to the skin (linear luminance) are
@@ -28,13 +27,17 @@ use crate::model::regions::Region;
 /// and the transfer moves such a Gaussian in full, as before.
 pub const DARK_FEATURE: f32 = 0.5;
 
-/// Linear luminance (Rec. 709) of a display colour; NaN for a broken one.
+/// Luminance (Rec. 709) of a linear colour.
+fn linear_luminance(linear: Vec3) -> f32 {
+    0.2126 * linear.x + 0.7152 * linear.y + 0.0722 * linear.z
+}
+
+/// Linear luminance of a display colour; NaN for a broken one.
 fn luminance(display: Vec3) -> f32 {
     if !display.is_finite() {
         return f32::NAN;
     }
-    let linear = srgb_to_linear(display.clamp(Vec3::ZERO, Vec3::ONE));
-    0.2126 * linear.x + 0.7152 * linear.y + 0.0722 * linear.z
+    linear_luminance(srgb_to_linear(display.clamp(Vec3::ZERO, Vec3::ONE)))
 }
 
 /// The regions whose skin Gaussians mix with the source's brows and lashes
@@ -52,33 +55,15 @@ pub fn transfer_brightens(from: &SkinStats, to: &SkinStats) -> bool {
     luminance(lab_to_srgb(to.tone)) > luminance(lab_to_srgb(from.tone))
 }
 
-/// The brightness of a source's hair relative to its skin tone: the
-/// opacity-weighted mean linear luminance of its hair region's Gaussians
-/// (`indices`, display colours `colours[i]`) over the tone's. Brows and
-/// lashes are the hair's colour or darker, so this is the feature a skin
-/// Gaussian round the eyes may be mixed with. `None` where the region is
-/// empty or the tone is black.
-pub fn hair_brightness(
-    set: &GaussianSet,
-    colours: &[Vec3],
-    indices: &[u32],
-    skin: &SkinStats,
-) -> Option<f32> {
-    let (mut sum, mut total) = (0.0f32, 0.0f32);
-    for &i in indices {
-        let i = i as usize;
-        let (Some(&rgb), Some(&logit)) = (colours.get(i), set.opacity_logit.get(i)) else {
-            continue;
-        };
-        let (y, a) = (luminance(rgb), sigmoid(logit));
-        if y.is_finite() && a.is_finite() {
-            sum += a * y;
-            total += a;
-        }
-    }
+/// The brightness of a source's hair relative to its skin tone: the linear
+/// luminance of its hair's mean colour (`colour::hair_colour`, linear RGB)
+/// over the tone's. Brows and lashes are the hair's colour or darker, so
+/// this is the feature a skin Gaussian round the eyes may be mixed with.
+/// `None` where the tone is black or the colour broken.
+pub fn hair_brightness(hair: Vec3, skin: &SkinStats) -> Option<f32> {
     let tone = luminance(lab_to_srgb(skin.tone));
-    let ratio = sum / total / tone;
-    (total > 1e-6 && tone > 1e-4 && ratio.is_finite()).then_some(ratio)
+    let ratio = linear_luminance(hair) / tone;
+    (tone > 1e-4 && ratio.is_finite()).then_some(ratio)
 }
 
 /// How bright a Gaussian of display colour `seen` is relative to the
@@ -189,6 +174,8 @@ mod tests {
 
     #[test]
     fn hair_brightness_is_the_hairs_weighted_luminance_over_the_tone() {
+        use crate::avatar::gaussians::GaussianSet;
+        use crate::compose::colour::hair_colour;
         let mut set = GaussianSet::with_degree(0);
         for _ in 0..3 {
             set.push(
@@ -204,14 +191,18 @@ mod tests {
         let skin = SkinStats::at(srgb_to_lab(Vec3::splat(0.8)));
         let grey = Vec3::splat(0.4);
         let colours = [grey, grey, Vec3::ONE];
-        let h = hair_brightness(&set, &colours, &[0, 1, 2], &skin).unwrap();
+        let of = |colours: &[Vec3], indices: &[u32], skin: &SkinStats| {
+            hair_brightness(hair_colour(&set, colours, indices)?, skin)
+        };
+        let h = of(&colours, &[0, 1, 2], &skin).unwrap();
         let want = luminance(grey) / luminance(Vec3::splat(0.8));
         assert!((h - want).abs() < 1e-3, "{h} {want}");
         // No hair, a black tone, broken colours: none.
-        assert_eq!(hair_brightness(&set, &colours, &[], &skin), None);
+        assert_eq!(of(&colours, &[], &skin), None);
         let black = SkinStats::at(srgb_to_lab(Vec3::ZERO));
-        assert_eq!(hair_brightness(&set, &colours, &[0, 1], &black), None);
-        assert_eq!(hair_brightness(&set, &[Vec3::NAN; 3], &[0, 1], &skin), None);
+        assert_eq!(of(&colours, &[0, 1], &black), None);
+        assert_eq!(of(&[Vec3::NAN; 3], &[0, 1], &skin), None);
+        assert_eq!(hair_brightness(Vec3::NAN, &skin), None);
     }
 
     #[test]

@@ -14,7 +14,7 @@ use super::base_skin::{
 };
 use super::blend::{Blender, SparseRhs};
 use super::colour::{
-    apply_gain, colour_weight, hair_chromaticity, seen_colours, semantic_skin_gain_shared,
+    apply_gain, chromaticity, colour_weight, hair_colour, seen_colours, semantic_skin_gain_shared,
     skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats,
     SKIN_REFERENCE_REGIONS,
 };
@@ -253,21 +253,21 @@ impl Engine {
             .iter()
             .map(|source| seen_colours(&source.gaussians))
             .collect();
+        let hair: Vec<Option<Vec3>> = (0..db.sources.len())
+            .map(|f| {
+                let indices = tables.region(Membership::Parent, f, Region::Hair);
+                hair_colour(&db.sources[f].gaussians, &seen[f], indices)
+            })
+            .collect();
         let skin: Vec<Option<SkinStats>> = (0..db.sources.len())
             .into_par_iter()
             .map(|f| {
-                let set = &db.sources[f].gaussians;
-                let hair = tables.region(Membership::Parent, f, Region::Hair);
-                skin_stats(set, &seen[f], &skin_indices[f])
-                    .map(|s| s.beside_hair(hair_chromaticity(set, &seen[f], hair)))
+                skin_stats(&db.sources[f].gaussians, &seen[f], &skin_indices[f])
+                    .map(|s| s.beside_hair(hair[f].and_then(chromaticity)))
             })
             .collect();
         let hair_brightness: Vec<Option<f32>> = (0..db.sources.len())
-            .map(|f| {
-                let hair = tables.region(Membership::Parent, f, Region::Hair);
-                let stats = skin[f].as_ref()?;
-                dark_features::hair_brightness(&db.sources[f].gaussians, &seen[f], hair, stats)
-            })
+            .map(|f| dark_features::hair_brightness(hair[f]?, skin[f].as_ref()?))
             .collect();
         let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
             .into_par_iter()
