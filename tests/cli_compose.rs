@@ -81,6 +81,65 @@ fn export_ply_writes_every_gaussian_of_the_frame() {
         .all(|p| p.is_finite() && p.length() < 1.0));
 }
 
+/// `export --seam-fit` writes the same Gaussians in the same places with
+/// the seams' colours and opacities fitted (method §7.12).
+#[test]
+fn export_with_a_seam_fit_changes_only_colours_and_opacities() {
+    let export = |fit: &[&str]| {
+        let path = std::env::temp_dir().join(format!(
+            "visage-export-fit{}-{}.ply",
+            fit.len(),
+            std::process::id()
+        ));
+        let mut args = vec![
+            "export",
+            "--recipe",
+            "recipes/three-sources.toml",
+            "--format",
+            "ply",
+            "-o",
+            path.to_str().unwrap(),
+        ];
+        args.extend(fit);
+        args.extend(SMALL);
+        let out = visage(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let scene = visage::io::ply::read_splat_ply(&path).unwrap();
+        std::fs::remove_file(&path).ok();
+        (scene, String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let (plain, _) = export(&[]);
+    let (fitted, said) = export(&["--seam-fit", "20"]);
+    assert!(
+        said.contains("fitted") && said.contains("seam Gaussians"),
+        "{said}"
+    );
+    assert_eq!(plain.len(), fitted.len());
+    assert_eq!(plain.position, fitted.position);
+    assert_eq!(plain.scale, fitted.scale);
+    assert_eq!(plain.rotation, fitted.rotation);
+    let stride = plain.sh.len() / plain.len();
+    let recoloured = (0..plain.len())
+        .filter(|&i| {
+            plain.sh[i * stride..(i + 1) * stride] != fitted.sh[i * stride..(i + 1) * stride]
+        })
+        .count();
+    assert!(
+        recoloured > 0 && recoloured < plain.len() / 4,
+        "{recoloured} of {} recoloured: the seams only",
+        plain.len()
+    );
+    assert!(fitted
+        .sh
+        .iter()
+        .chain(&fitted.opacity)
+        .all(|x| x.is_finite()));
+}
+
 #[test]
 fn bad_recipes_fail_with_one_line_and_exit_2() {
     let dir = std::env::temp_dir().join(format!("visage-bad-recipes-{}", std::process::id()));

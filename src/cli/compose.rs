@@ -14,6 +14,7 @@ use crate::io::ply::write_splat_ply;
 use crate::model::regions::{Group, Region};
 use crate::pipeline::composer::{BuildTimings, Composer};
 use crate::text::printable;
+use crate::train::seam_fit::{fit_seams, SeamFit};
 
 /// Arguments of `visage compose`.
 #[derive(Args, Debug, Clone)]
@@ -58,6 +59,12 @@ pub struct ExportArgs {
     /// Output path.
     #[arg(short = 'o', long = "output", value_name = "PATH")]
     output: PathBuf,
+    /// Fit the composite's seams with this many steps before writing it
+    /// (method §7.12: colour and opacity of the Gaussians beside a change of
+    /// source, fitted to what the sources draw there; 200 is what
+    /// `bench composites --pipeline ours` measures); 0: no fit.
+    #[arg(long, value_name = "STEPS", default_value_t = 0)]
+    seam_fit: usize,
 }
 
 /// Loads the database and a recipe file, builds the composite and poses `frame`.
@@ -94,7 +101,19 @@ pub fn run_compose(args: &ComposeArgs) -> Result<()> {
 
 /// Runs `visage export`.
 pub fn run_export(args: &ExportArgs) -> Result<()> {
-    let (composer, _) = build(&args.db, &args.recipe, args.frame)?;
+    let (mut composer, _) = build(&args.db, &args.recipe, args.frame)?;
+    if args.seam_fit > 0 {
+        let fit = SeamFit {
+            iterations: args.seam_fit,
+            ..SeamFit::default()
+        };
+        let (fitted, report) = fit_seams(composer.engine(), composer.composite(), &fit)?;
+        composer.refit(fitted)?;
+        eprintln!(
+            "visage: fitted {} seam Gaussians over {} views: error against the sources' own seams {:.2e} → {:.2e}",
+            report.fitted, report.views, report.mse_before, report.mse_after
+        );
+    }
     match args.format {
         ExportFormat::Ply => {
             let scene = composer.scene();

@@ -7,6 +7,7 @@ use crate::error::{Error, Result};
 use crate::pipeline::DatabaseSpec;
 use crate::train::composite_eval::{evaluate_composite, CompositeReport, EvalOptions, Quality};
 use crate::train::dataset::Dataset;
+use crate::train::seam_fit::SeamFit;
 
 /// Runs `visage eval --composite --db TRAINED RECIPE DATASET`.
 pub fn run(args: &EvalArgs) -> Result<()> {
@@ -33,6 +34,10 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let options = EvalOptions {
         border_px: args.border_px,
         picture_views: if args.picture.is_some() { 3 } else { 0 },
+        fit: (args.seam_fit > 0).then(|| SeamFit {
+            iterations: args.seam_fit,
+            ..SeamFit::default()
+        }),
     };
     let (report, pictures) = evaluate_composite(&trained, &recipe, &dataset, &options)?;
     if let Some(path) = &args.picture {

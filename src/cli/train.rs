@@ -257,6 +257,16 @@ pub struct EvalArgs {
     /// side for a few views, as PNG.
     #[arg(long, value_name = "PNG", requires = "composite")]
     pub(super) picture: Option<PathBuf>,
+    /// With --composite: fit the composite's seams with this many steps
+    /// (method §7.12; 200 is what `bench composites --pipeline ours` runs)
+    /// and measure the fitted composite; 0: no fit.
+    #[arg(
+        long,
+        value_name = "STEPS",
+        default_value_t = 0,
+        requires = "composite"
+    )]
+    pub(super) seam_fit: usize,
     #[command(flatten)]
     head: HeadArgs,
     /// Side-by-side grid (render | ground truth) of the first views, as PNG.

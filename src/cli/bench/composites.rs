@@ -21,6 +21,7 @@ use crate::render::Backend;
 use crate::train::capture::{capture, capture_sitter, CaptureOptions};
 use crate::train::composite_eval::{evaluate_composite, CompositeReport, EvalOptions};
 use crate::train::dataset::Dataset;
+use crate::train::seam_fit::SeamFit;
 use crate::train::sitter::{Seams, Sitter, Tone};
 use crate::train::trainer::{TrainOptions, Trainer};
 
@@ -57,6 +58,10 @@ pub struct CompositesBenchArgs {
     /// or ours (the best measured: by place, colour seams, semantic colour).
     #[arg(long, value_enum, default_value = "recipe")]
     pipeline: Pipeline,
+    /// Steps of the seam fit (method §7.12) that `--pipeline ours` runs
+    /// after the recipe; 0: none (the other pipelines never fit).
+    #[arg(long, value_name = "STEPS", default_value_t = SeamFit::default().iterations)]
+    seam_fit: usize,
     /// Print one JSON document.
     #[arg(long)]
     json: bool,
@@ -124,6 +129,8 @@ struct CompositesBench {
     frames: usize,
     iterations: usize,
     pipeline: Pipeline,
+    /// Steps of the seam fit run on each composite (0: none).
+    seam_fit: usize,
     sources: Vec<SourceRow>,
     recipes: Vec<RecipeRow>,
     mean: Means,
@@ -261,6 +268,10 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
     let options = EvalOptions {
         border_px: args.border_px,
         picture_views: 0,
+        fit: (args.pipeline == Pipeline::Ours && args.seam_fit > 0).then(|| SeamFit {
+            iterations: args.seam_fit,
+            ..SeamFit::default()
+        }),
     };
     let mut rows = Vec::new();
     for (name, recipe) in &recipes {
@@ -308,6 +319,7 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
         frames: args.frames,
         iterations: args.iterations,
         pipeline: args.pipeline,
+        seam_fit: options.fit.map_or(0, |f| f.iterations),
         mean: Means {
             psnr_db: mean_of(&|r| r.quality.psnr_db),
             ceiling_psnr_db: mean_of(&|r| r.ceiling.psnr_db),
@@ -335,8 +347,18 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
 
 fn print_table(b: &CompositesBench) {
     println!(
-        "composites against their ground truth: {}x{}, {} cameras, {} timesteps, sources trained {} iterations, {:?} post-processing",
-        b.size[0], b.size[1], b.cameras, b.frames, b.iterations, b.pipeline
+        "composites against their ground truth: {}x{}, {} cameras, {} timesteps, sources trained {} iterations, {:?} post-processing{}",
+        b.size[0],
+        b.size[1],
+        b.cameras,
+        b.frames,
+        b.iterations,
+        b.pipeline,
+        if b.seam_fit > 0 {
+            format!(", seams fitted in {} steps", b.seam_fit)
+        } else {
+            String::new()
+        }
     );
     for s in &b.sources {
         if !s.cached {

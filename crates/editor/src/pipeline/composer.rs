@@ -132,6 +132,30 @@ impl Composer {
         ))
     }
 
+    /// Gives the composite's Gaussians the colours and opacities of
+    /// `refitted`, the same Gaussians changed by a finishing step (the seam
+    /// fit, method §7.12). Refuses a set that is not the same Gaussians in
+    /// the same places.
+    pub fn refit(&mut self, refitted: GaussianSet) -> Result<()> {
+        let c = self
+            .composite
+            .as_mut()
+            .expect("a composer is updated before it is refitted");
+        let g = &c.gaussians;
+        if refitted.len() != g.len()
+            || refitted.sh_degree != g.sh_degree
+            || refitted.binding != g.binding
+            || refitted.position != g.position
+        {
+            return Err(Error::input(
+                "a refitted composite must keep its Gaussians and their places",
+            ));
+        }
+        c.gaussians = refitted;
+        self.generation += 1;
+        Ok(())
+    }
+
     /// Fails unless the composite's motion has every frame of `frames` (the
     /// rest pose has frame 0 only): a frame past the end is an error, never a
     /// silent wrap.

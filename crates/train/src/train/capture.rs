@@ -204,7 +204,7 @@ pub fn surface_depth(vertices: &[Vec3], triangles: &[[u32; 3]], camera: &TrainCa
 
 /// For each pixel centre, the nearest triangle, its perspective-correct
 /// barycentric coordinates and its view depth.
-fn rasterize(
+pub fn rasterize(
     vertices: &[Vec3],
     triangles: &[[u32; 3]],
     camera: &TrainCamera,

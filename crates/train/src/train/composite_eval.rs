@@ -22,6 +22,7 @@ use super::model::{Render, Trainable, SH_STRIDE};
 use super::posing::{posed_vertices, timestep_params};
 use super::project::TrainCamera;
 use super::raster::Rasterizer;
+use super::seam_fit::{fit_seams, SeamFit};
 use super::sitter::Sitter;
 use super::target::load_target;
 use crate::avatar::database::Database;
@@ -42,6 +43,9 @@ pub struct EvalOptions {
     pub border_px: u32,
     /// Views drawn for the picture (ground truth, composite, error), at most.
     pub picture_views: usize,
+    /// Fit the composite's seams (method §7.12) after the recipe: a fifth
+    /// step of the decomposition, "+seam fit", and the composite measured.
+    pub fit: Option<SeamFit>,
 }
 
 /// Image quality over a set of pixels (every figure NaN — `null` in JSON —
@@ -600,6 +604,14 @@ pub fn decomposition(engine: &Engine, recipe: &Recipe) -> Result<Vec<(&'static s
         .collect()
 }
 
+/// `composite` with its seams fitted (method §7.12).
+pub fn seam_fitted(engine: &Engine, composite: &Composite, fit: &SeamFit) -> Result<Composite> {
+    let (gaussians, _) = fit_seams(engine, composite, fit)?;
+    let mut fitted = composite.clone();
+    fitted.gaussians = gaussians;
+    Ok(fitted)
+}
+
 /// Evaluates the composite of `recipe` over the sources of `trained` against
 /// the ground truth `dataset`.
 pub fn evaluate_composite(
@@ -609,12 +621,19 @@ pub fn evaluate_composite(
     options: &EvalOptions,
 ) -> Result<(CompositeReport, Pictures)> {
     let engine = Engine::new(trained.clone())?;
-    let variants = decomposition(&engine, recipe)?;
+    let mut variants = decomposition(&engine, recipe)?;
+    if let Some(fit) = &options.fit {
+        variants.push((
+            "+seam fit",
+            seam_fitted(&engine, &variants[variants.len() - 1].1, fit)?,
+        ));
+    }
     evaluate_variants(&engine, recipe, dataset, options, &variants)
 }
 
 /// [`evaluate_composite`] of composites already built (the decomposition's
-/// four, the full recipe last) on `engine`.
+/// four, the full recipe last, or five with its seams fitted last) on
+/// `engine`.
 pub fn evaluate_variants(
     engine: &Engine,
     recipe: &Recipe,

@@ -19,6 +19,7 @@ pub mod model;
 pub mod posing;
 pub mod project;
 pub mod raster;
+pub mod seam_fit;
 pub mod sitter;
 pub mod target;
 pub mod trainer;
