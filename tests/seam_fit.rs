@@ -72,7 +72,7 @@ fn same_places(a: &GaussianSet, b: &GaussianSet) -> bool {
 #[test]
 fn a_fit_draws_the_seams_closer_to_the_sources_and_moves_nothing_else() {
     let c = composite(&[("face", 1), ("hair", 2)]);
-    let (fitted, report) = fit_seams(engine(), &c, &QUICK).unwrap();
+    let (fitted, report) = fit_seams(engine(), &c, &QUICK, &mut |_| {}).unwrap();
     assert!(
         report.fitted > 0 && report.fitted < c.gaussians.len() / 2,
         "{report:?}"
@@ -97,7 +97,7 @@ fn a_fit_draws_the_seams_closer_to_the_sources_and_moves_nothing_else() {
 #[test]
 fn one_source_and_zero_steps_leave_the_composite_as_it_is() {
     let unedited = composite(&[]);
-    let (same, report) = fit_seams(engine(), &unedited, &QUICK).unwrap();
+    let (same, report) = fit_seams(engine(), &unedited, &QUICK, &mut |_| {}).unwrap();
     assert_eq!(report.fitted, 0);
     assert!(changed(&unedited.gaussians, &same).is_empty());
     let edited = composite(&[("nose", 1)]);
@@ -105,7 +105,7 @@ fn one_source_and_zero_steps_leave_the_composite_as_it_is() {
         iterations: 0,
         ..QUICK
     };
-    let (same, _) = fit_seams(engine(), &edited, &none).unwrap();
+    let (same, _) = fit_seams(engine(), &edited, &none, &mut |_| {}).unwrap();
     assert!(changed(&edited.gaussians, &same).is_empty());
 }
 
@@ -115,14 +115,14 @@ fn one_source_and_zero_steps_leave_the_composite_as_it_is() {
 #[test]
 fn non_finite_gaussians_are_kept_as_they_came_and_spread_nothing() {
     let mut c = composite(&[("face", 1)]);
-    let (clean, _) = fit_seams(engine(), &c, &QUICK).unwrap();
+    let (clean, _) = fit_seams(engine(), &c, &QUICK, &mut |_| {}).unwrap();
     let moved = changed(&c.gaussians, &clean);
     let stride = c.gaussians.sh_stride();
     let bad = [moved[0], moved[moved.len() / 2], moved[moved.len() - 1]];
     c.gaussians.position[bad[0]].x = f32::NAN;
     c.gaussians.log_scale[bad[1]] = glam::Vec3::splat(f32::INFINITY);
     c.gaussians.sh[bad[2] * stride] = f32::NAN;
-    let (fitted, report) = fit_seams(engine(), &c, &QUICK).unwrap();
+    let (fitted, report) = fit_seams(engine(), &c, &QUICK, &mut |_| {}).unwrap();
     assert!(report.mse_after.is_finite(), "{report:?}");
     assert!(report.mse_after < report.mse_before, "{report:?}");
     let finite = |i: usize| {

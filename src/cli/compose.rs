@@ -107,7 +107,16 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
             iterations: args.seam_fit,
             ..SeamFit::default()
         };
-        let (fitted, report) = fit_seams(composer.engine(), composer.composite(), &fit)?;
+        let bar = super::train::training_bar(fit.iterations, "seam fit ");
+        bar.set_message("drawing the sources' own seams");
+        let (fitted, report) =
+            fit_seams(composer.engine(), composer.composite(), &fit, &mut |step| {
+                bar.set_position(step as u64);
+                if step == 0 {
+                    bar.set_message("");
+                }
+            })?;
+        bar.finish_and_clear();
         composer.refit(fitted)?;
         eprintln!(
             "visage: fitted {} seam Gaussians over {} views: error against the sources' own seams {:.2e} → {:.2e}",

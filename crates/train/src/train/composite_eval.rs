@@ -606,7 +606,7 @@ pub fn decomposition(engine: &Engine, recipe: &Recipe) -> Result<Vec<(&'static s
 
 /// `composite` with its seams fitted (method §7.12).
 pub fn seam_fitted(engine: &Engine, composite: &Composite, fit: &SeamFit) -> Result<Composite> {
-    let (gaussians, _) = fit_seams(engine, composite, fit)?;
+    let (gaussians, _) = fit_seams(engine, composite, fit, &mut |_| {})?;
     let mut fitted = composite.clone();
     fitted.gaussians = gaussians;
     Ok(fitted)

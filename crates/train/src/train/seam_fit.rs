@@ -247,10 +247,13 @@ fn mean_error(model: &Trainable, views: &[View]) -> Result<f64> {
 
 /// The composite's Gaussians with those on a seam fitted (see the module
 /// documentation); unchanged where the composite shows one source.
+/// `progress` hears the steps done: 0 once the targets are drawn, then
+/// after each step.
 pub fn fit_seams(
     engine: &Engine,
     composite: &Composite,
     options: &SeamFit,
+    progress: &mut dyn FnMut(usize),
 ) -> Result<(GaussianSet, FitReport)> {
     let model = &engine.database().model;
     let looks = looks(model, composite);
@@ -279,6 +282,7 @@ pub fn fit_seams(
     }
     let views = views(engine, composite, &field, &looks, options)?;
     let mse_before = mean_error(&trainable, &views)?;
+    progress(0);
     let per_view = views
         .iter()
         .map(|v| v.head.iter().filter(|&&h| h).count())
@@ -312,6 +316,7 @@ pub fn fit_seams(
         }
         sh_steps.step(&mut trainable.sh, &grads.sh);
         opacity_steps.step(&mut trainable.opacity_logit, &grads.opacity_logit);
+        progress(step + 1);
     }
     let mse_after = mean_error(&trainable, &views)?;
     let mut out = composite.gaussians.clone();
