@@ -49,20 +49,24 @@ fn compose_reports_the_composite_and_a_stable_state_hash() {
     );
 }
 
-#[test]
-fn export_ply_writes_every_gaussian_of_the_frame() {
-    let out_path = std::env::temp_dir().join(format!("visage-export-{}.ply", std::process::id()));
+/// `visage export --format ply` of the three-sources recipe with `extra`
+/// arguments: the scene written and what it said on stderr.
+fn export_ply(extra: &[&str]) -> (visage::scene::splats::SplatScene, String) {
+    let path = std::env::temp_dir().join(format!(
+        "visage-export-{}-{}.ply",
+        extra.join("").replace('-', ""),
+        std::process::id()
+    ));
     let mut args = vec![
         "export",
         "--recipe",
         "recipes/three-sources.toml",
         "--format",
         "ply",
-        "--frame",
-        "12",
         "-o",
-        out_path.to_str().unwrap(),
+        path.to_str().unwrap(),
     ];
+    args.extend(extra);
     args.extend(SMALL);
     let out = visage(&args);
     assert!(
@@ -70,8 +74,14 @@ fn export_ply_writes_every_gaussian_of_the_frame() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let scene = visage::io::ply::read_splat_ply(&out_path).unwrap();
-    std::fs::remove_file(&out_path).ok();
+    let scene = visage::io::ply::read_splat_ply(&path).unwrap();
+    std::fs::remove_file(&path).ok();
+    (scene, String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+#[test]
+fn export_ply_writes_every_gaussian_of_the_frame() {
+    let (scene, _) = export_ply(&["--frame", "12"]);
     let report = compose_json("recipes/three-sources.toml");
     assert_eq!(scene.len() as u64, report["gaussians"].as_u64().unwrap());
     assert_eq!(scene.sh_degree, 3);
@@ -85,35 +95,8 @@ fn export_ply_writes_every_gaussian_of_the_frame() {
 /// the seams' colours and opacities fitted (method §7.12).
 #[test]
 fn export_with_a_seam_fit_changes_only_colours_and_opacities() {
-    let export = |fit: &[&str]| {
-        let path = std::env::temp_dir().join(format!(
-            "visage-export-fit{}-{}.ply",
-            fit.len(),
-            std::process::id()
-        ));
-        let mut args = vec![
-            "export",
-            "--recipe",
-            "recipes/three-sources.toml",
-            "--format",
-            "ply",
-            "-o",
-            path.to_str().unwrap(),
-        ];
-        args.extend(fit);
-        args.extend(SMALL);
-        let out = visage(&args);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let scene = visage::io::ply::read_splat_ply(&path).unwrap();
-        std::fs::remove_file(&path).ok();
-        (scene, String::from_utf8_lossy(&out.stderr).into_owned())
-    };
-    let (plain, _) = export(&[]);
-    let (fitted, said) = export(&["--seam-fit", "20"]);
+    let (plain, _) = export_ply(&[]);
+    let (fitted, said) = export_ply(&["--seam-fit", "20", "--seam-fit-size", "64"]);
     assert!(
         said.contains("fitted") && said.contains("seam Gaussians"),
         "{said}"

@@ -65,6 +65,10 @@ pub struct ExportArgs {
     /// `bench composites --pipeline ours` measures); 0: no fit.
     #[arg(long, value_name = "STEPS", default_value_t = 0)]
     seam_fit: usize,
+    /// With --seam-fit: the width and height of the fit's views, in pixels
+    /// (the fit needs the resolution the composite will be looked at).
+    #[arg(long, value_name = "PX", default_value_t = crate::train::seam_fit::SeamFit::default().size, requires = "seam_fit")]
+    seam_fit_size: u32,
 }
 
 /// Loads the database and a recipe file, builds the composite and poses `frame`.
@@ -105,6 +109,7 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
     if args.seam_fit > 0 {
         let fit = SeamFit {
             iterations: args.seam_fit,
+            size: args.seam_fit_size,
             ..SeamFit::default()
         };
         let bar = super::train::training_bar(fit.iterations, "seam fit ");

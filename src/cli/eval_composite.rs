@@ -36,6 +36,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         picture_views: if args.picture.is_some() { 3 } else { 0 },
         fit: (args.seam_fit > 0).then(|| SeamFit {
             iterations: args.seam_fit,
+            size: args.seam_fit_size,
             ..SeamFit::default()
         }),
     };

@@ -267,6 +267,10 @@ pub struct EvalArgs {
         requires = "composite"
     )]
     pub(super) seam_fit: usize,
+    /// With --seam-fit: the width and height of the fit's views, in pixels
+    /// (the fit needs the resolution the composite is looked at).
+    #[arg(long, value_name = "PX", default_value_t = crate::train::seam_fit::SeamFit::default().size, requires = "seam_fit")]
+    pub(super) seam_fit_size: u32,
     #[command(flatten)]
     head: HeadArgs,
     /// Side-by-side grid (render | ground truth) of the first views, as PNG.

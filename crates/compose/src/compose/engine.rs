@@ -755,6 +755,23 @@ impl Engine {
                 .collect();
             SeamColours::new(self, recipe, looks)
         });
+        // The copy reads these tables of every source shown from inside its
+        // rayon jobs, and each is built on first use by an initialiser that
+        // itself runs rayon. Built there, a job waiting on its initialiser
+        // can steal another job that enters the same OnceLock: the thread
+        // waits on itself (seen as a hang when two composites were made at
+        // once on one engine). So they are built here, before the copy.
+        let mut shown: Vec<usize> = Region::ALL
+            .iter()
+            .map(|&r| Self::source_of(recipe, r))
+            .collect();
+        shown.sort_unstable();
+        shown.dedup();
+        for &f in &shown {
+            self.placements_of(membership, f);
+            self.footprints_of(f);
+            self.colour_weights_of(f);
+        }
         let copying = CopyOwn {
             blocks: &own,
             membership,
