@@ -431,7 +431,7 @@ pub fn semantic_skin_likeness(rgb: Vec3, region: Region, stats: &SkinStats) -> O
     } else if matches!(region, Region::LeftEyeball | Region::RightEyeball) {
         // Lightness counted fully: a brown iris in shade is a dark skin's
         // hue and chroma, but far darker than the lid skin over the rim.
-        smoothstep(14.0, 8.0, (lab - stats.mean).length())
+        smoothstep(14.0, 8.0, (lab - stats.mean).length()) * keeps_skin_chroma(lab, stats)
     } else if region == Region::Remainder {
         hairline_skin_likeness(rgb, lab, stats)
     } else if matches!(region, Region::Lips | Region::LipsInside) {
@@ -439,6 +439,20 @@ pub fn semantic_skin_likeness(rgb: Vec3, region: Region, stats: &SkinStats) -> O
     } else {
         strict_skin_likeness(lab, stats)
     })
+}
+
+/// How surely a colour on an eyeball keeps the colourfulness of the
+/// source's skin: 0 under 0.4 of the skin's CIELAB chroma, 1 over 0.7 of it
+/// (and 1 for a skin too grey for chroma to say anything, under
+/// [`HUE_CHROMA`]). The white of a light source's eye in the lid's shade
+/// falls to its skin's lightness but stays near grey; lid skin in the same
+/// shade keeps its colour (method §7.7).
+pub fn keeps_skin_chroma(lab: Vec3, stats: &SkinStats) -> f32 {
+    let skin = stats.mean.y.hypot(stats.mean.z);
+    if skin.is_nan() || skin < HUE_CHROMA {
+        return 1.0;
+    }
+    smoothstep(0.4 * skin, 0.7 * skin, lab.y.hypot(lab.z))
 }
 
 /// How surely a colour is not redder than the source's skin tone: 1 within
@@ -822,6 +836,17 @@ mod tests {
                 let gain = semantic_skin_gain(eye, region, &stats(light), &stats(dark));
                 assert_eq!(gain, Vec3::ONE, "{region:?} {eye}");
             }
+            // The white in the lid's shade, at the skin's lightness with
+            // under half its chroma, is no skin either (it was 0.43).
+            let shaded = srgb_to_lab(light) * Vec3::new(1.0, 0.45, 0.45);
+            let white = semantic_skin_likeness(lab_to_srgb(shaded), region, &stats(light));
+            assert!(white.unwrap() < 0.1, "{region:?}: {white:?}");
+            // The skin's own colour keeps its chroma; a skin too grey for
+            // chroma to tell anything leaves the likeness to lightness.
+            let own = srgb_to_lab(light);
+            assert_eq!(keeps_skin_chroma(own, &stats(light)), 1.0);
+            let grey = Vec3::splat(0.6);
+            assert_eq!(keeps_skin_chroma(srgb_to_lab(grey), &stats(grey)), 1.0);
             // A dark skin's brown iris is near its skin in hue and chroma,
             // and stays: it is much darker.
             let (skin, iris) = (Vec3::new(0.53, 0.36, 0.25), Vec3::new(0.3, 0.17, 0.08));
