@@ -67,7 +67,7 @@ pub struct ExportArgs {
     seam_fit: usize,
     /// With --seam-fit: the width and height of the fit's views, in pixels
     /// (the fit needs the resolution the composite will be looked at).
-    #[arg(long, value_name = "PX", default_value_t = crate::train::seam_fit::SeamFit::default().size, requires = "seam_fit")]
+    #[arg(long, value_name = "PX", default_value_t = crate::train::seam_fit::SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096), requires = "seam_fit")]
     seam_fit_size: u32,
 }
 

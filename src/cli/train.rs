@@ -269,7 +269,7 @@ pub struct EvalArgs {
     pub(super) seam_fit: usize,
     /// With --seam-fit: the width and height of the fit's views, in pixels
     /// (the fit needs the resolution the composite is looked at).
-    #[arg(long, value_name = "PX", default_value_t = crate::train::seam_fit::SeamFit::default().size, requires = "seam_fit")]
+    #[arg(long, value_name = "PX", default_value_t = crate::train::seam_fit::SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096), requires = "seam_fit")]
     pub(super) seam_fit_size: u32,
     #[command(flatten)]
     head: HeadArgs,
