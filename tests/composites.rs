@@ -77,15 +77,23 @@ fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 }
 
 fn eval(recipe: &Path, dataset: &Path) -> serde_json::Value {
-    let o = visage(&[
+    eval_with(recipe, dataset, &[])
+}
+
+/// `eval --composite --json` with `extra` arguments.
+fn eval_with(recipe: &Path, dataset: &Path, extra: &[&str]) -> serde_json::Value {
+    let db = trained().to_str().unwrap();
+    let mut args = vec![
         "eval",
         "--composite",
         "--db",
-        trained().to_str().unwrap(),
+        db,
         recipe.to_str().unwrap(),
         dataset.to_str().unwrap(),
         "--json",
-    ]);
+    ];
+    args.extend(extra);
+    let o = visage(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     serde_json::from_slice(&o.stdout).unwrap()
 }
@@ -315,21 +323,11 @@ fn a_seam_fit_is_the_fifth_step_and_the_composite_measured() {
         ],
         &truth,
     );
-    let o = visage(&[
-        "eval",
-        "--composite",
-        "--db",
-        trained().to_str().unwrap(),
-        path.to_str().unwrap(),
-        truth.to_str().unwrap(),
-        "--seam-fit",
-        "60",
-        "--seam-fit-size",
-        "48",
-        "--json",
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let report = eval_with(
+        &path,
+        &truth,
+        &["--seam-fit", "60", "--seam-fit-size", "48"],
+    );
     let steps = report["decomposition"].as_array().unwrap();
     let names: Vec<&str> = steps.iter().map(|s| s["step"].as_str().unwrap()).collect();
     assert_eq!(

@@ -258,23 +258,20 @@ pub fn fit_seams(
     let model = &engine.database().model;
     let looks = looks(model, composite);
     let field = SeamField::new(model, &looks);
+    let mut trainable = drawable(&composite.gaussians);
+    // Beside another source, and drawable: a hidden Gaussian stays as it came.
     let on_seam: Vec<bool> = composite
         .gaussians
         .binding
         .iter()
-        .map(|&t| {
-            let tri = model.triangles[t as usize];
-            field
-                .blend_at(tri, [1.0 / 3.0; 3], looks[t as usize])
-                .is_some()
-        })
-        .collect();
-    let mut trainable = drawable(&composite.gaussians);
-    // A hidden Gaussian stays as it came.
-    let on_seam: Vec<bool> = on_seam
-        .iter()
         .zip(&trainable.opacity_logit)
-        .map(|(&seam, &o)| seam && o.is_finite())
+        .map(|(&t, &opacity)| {
+            let tri = model.triangles[t as usize];
+            opacity.is_finite()
+                && field
+                    .blend_at(tri, [1.0 / 3.0; 3], looks[t as usize])
+                    .is_some()
+        })
         .collect();
     let fitted = on_seam.iter().filter(|&&s| s).count();
     if fitted == 0 || options.iterations == 0 || options.cameras == 0 {
