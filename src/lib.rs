@@ -5,7 +5,6 @@
 //! name every layer from one place.
 
 pub use visage_editor::*;
-pub use visage_train::*;
 
 pub mod cli;
 pub mod tui;

@@ -7,24 +7,27 @@ use std::sync::OnceLock;
 use visage::avatar::gaussians::GaussianSet;
 use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
 use visage::compose::engine::{Composite, Engine};
-use visage::compose::recipe::{PostProcess, Recipe};
+use visage::compose::recipe::{Fit, PostProcess, Recipe};
 use visage::model::builtin::build_head;
+use visage::pipeline::composer::Composer;
 use visage::train::seam_fit::{fit_seams, SeamFit};
+
+fn new_engine() -> Engine {
+    let db = builtin_database(
+        build_head(),
+        SyntheticOptions {
+            seed: 11,
+            sources: 3,
+            gaussians_per_avatar: 4_000,
+        },
+    )
+    .unwrap();
+    Engine::new(db).unwrap()
+}
 
 fn engine() -> &'static Engine {
     static ENGINE: OnceLock<Engine> = OnceLock::new();
-    ENGINE.get_or_init(|| {
-        let db = builtin_database(
-            build_head(),
-            SyntheticOptions {
-                seed: 11,
-                sources: 3,
-                gaussians_per_avatar: 4_000,
-            },
-        )
-        .unwrap();
-        Engine::new(db).unwrap()
-    })
+    ENGINE.get_or_init(new_engine)
 }
 
 /// A small, quick rig: enough views to see both sides of the face.
@@ -34,7 +37,7 @@ const QUICK: SeamFit = SeamFit {
     cameras: 4,
 };
 
-fn composite(groups: &[(&str, usize)]) -> Composite {
+fn recipe(groups: &[(&str, usize)]) -> Recipe {
     let e = engine();
     let name = |s: usize| e.database().sources[s].name.clone();
     let mut text = format!("base = \"{}\"\n", name(0));
@@ -45,11 +48,17 @@ fn composite(groups: &[(&str, usize)]) -> Composite {
     }
     let mut recipe = Recipe::from_toml(&text).unwrap();
     recipe.post = PostProcess::BEST;
-    e.compose(&recipe.resolve(e.database()).unwrap())
+    recipe
+}
+
+fn composite(groups: &[(&str, usize)]) -> Composite {
+    let e = engine();
+    e.compose(&recipe(groups).resolve(e.database()).unwrap())
 }
 
 /// Indices whose parameters differ between two sets of the same Gaussians.
 fn changed(a: &GaussianSet, b: &GaussianSet) -> Vec<usize> {
+    assert_eq!(a.len(), b.len(), "not the same Gaussians");
     let stride = a.sh_stride();
     (0..a.len())
         .filter(|&i| {
@@ -72,7 +81,7 @@ fn same_places(a: &GaussianSet, b: &GaussianSet) -> bool {
 #[test]
 fn a_fit_draws_the_seams_closer_to_the_sources_and_moves_nothing_else() {
     let c = composite(&[("face", 1), ("hair", 2)]);
-    let (fitted, report) = fit_seams(engine(), &c, &QUICK, &mut |_| {}).unwrap();
+    let (fitted, report) = fit_seams(engine(), &c, &QUICK, &mut |_, _| {}).unwrap();
     assert!(
         report.fitted > 0 && report.fitted < c.gaussians.len() / 2,
         "{report:?}"
@@ -97,7 +106,7 @@ fn a_fit_draws_the_seams_closer_to_the_sources_and_moves_nothing_else() {
 #[test]
 fn one_source_and_zero_steps_leave_the_composite_as_it_is() {
     let unedited = composite(&[]);
-    let (same, report) = fit_seams(engine(), &unedited, &QUICK, &mut |_| {}).unwrap();
+    let (same, report) = fit_seams(engine(), &unedited, &QUICK, &mut |_, _| {}).unwrap();
     assert_eq!(report.fitted, 0);
     assert!(changed(&unedited.gaussians, &same).is_empty());
     let edited = composite(&[("nose", 1)]);
@@ -105,7 +114,7 @@ fn one_source_and_zero_steps_leave_the_composite_as_it_is() {
         iterations: 0,
         ..QUICK
     };
-    let (same, _) = fit_seams(engine(), &edited, &none, &mut |_| {}).unwrap();
+    let (same, _) = fit_seams(engine(), &edited, &none, &mut |_, _| {}).unwrap();
     assert!(changed(&edited.gaussians, &same).is_empty());
 }
 
@@ -115,14 +124,14 @@ fn one_source_and_zero_steps_leave_the_composite_as_it_is() {
 #[test]
 fn non_finite_gaussians_are_kept_as_they_came_and_spread_nothing() {
     let mut c = composite(&[("face", 1)]);
-    let (clean, _) = fit_seams(engine(), &c, &QUICK, &mut |_| {}).unwrap();
+    let (clean, _) = fit_seams(engine(), &c, &QUICK, &mut |_, _| {}).unwrap();
     let moved = changed(&c.gaussians, &clean);
     let stride = c.gaussians.sh_stride();
     let bad = [moved[0], moved[moved.len() / 2], moved[moved.len() - 1]];
     c.gaussians.position[bad[0]].x = f32::NAN;
     c.gaussians.log_scale[bad[1]] = glam::Vec3::splat(f32::INFINITY);
     c.gaussians.sh[bad[2] * stride] = f32::NAN;
-    let (fitted, report) = fit_seams(engine(), &c, &QUICK, &mut |_| {}).unwrap();
+    let (fitted, report) = fit_seams(engine(), &c, &QUICK, &mut |_, _| {}).unwrap();
     assert!(report.mse_after.is_finite(), "{report:?}");
     assert!(report.mse_after < report.mse_before, "{report:?}");
     let finite = |i: usize| {
@@ -138,4 +147,79 @@ fn non_finite_gaussians_are_kept_as_they_came_and_spread_nothing() {
             "kept as it came"
         );
     }
+}
+
+/// What the editor, `export` and a study see of a recipe's `[post] fit`:
+/// the composer shows the composite as composed until the fit is run, then
+/// the same fitted Gaussians as `fit_seams` makes; a new frame keeps the
+/// fit, a new selection redoes it, and `fit = "off"` gives back the
+/// composed Gaussians bit for bit.
+#[test]
+fn a_composer_runs_the_recipes_fit_keeps_it_and_gives_it_back() {
+    let mut composer = Composer::new(new_engine());
+    composer.set_fit_options(QUICK);
+    let mut r = recipe(&[("face", 1), ("hair", 2)]);
+    assert_eq!(r.post.fit, Fit::Seams, "the best post-processing fits");
+    composer.update(&r).unwrap();
+    let composed = composer.composite().gaussians.clone();
+    let pending = composer.fit_progress().expect("a fit is pending");
+    assert_eq!(pending.done, 0);
+    let generation = composer.generation();
+    let mut heard = Vec::new();
+    let report = composer
+        .finish_fit(&mut |p| heard.push((p.done, p.total)))
+        .unwrap()
+        .expect("the fit ran");
+    assert!(report.fitted > 0 && report.mse_after < report.mse_before);
+    let total = heard[heard.len() - 1].1;
+    assert!(heard
+        .iter()
+        .enumerate()
+        .all(|(k, &(d, t))| d == k + 1 && t == total));
+    assert_eq!(composer.fit_progress(), None);
+    assert_ne!(composer.generation(), generation, "drawers re-upload");
+    let fitted = composer.composite().gaussians.clone();
+    let (expected, _) = fit_seams(
+        engine(),
+        &composite(&[("face", 1), ("hair", 2)]),
+        &QUICK,
+        &mut |_, _| {},
+    )
+    .unwrap();
+    assert!(
+        changed(&expected, &fitted).is_empty(),
+        "the same fit as fit_seams"
+    );
+    assert!(!changed(&composed, &fitted).is_empty());
+
+    // Another frame: the fit stays, nothing to redo.
+    r.animation.motion = "talk".into();
+    r.animation.frame = 3;
+    let generation = composer.generation();
+    composer.update(&r).unwrap();
+    assert_eq!(composer.fit_progress(), None);
+    assert_eq!(composer.generation(), generation);
+    assert!(changed(&fitted, &composer.composite().gaussians).is_empty());
+
+    // Fit off: the composed Gaussians, bit for bit; on again: fitted again.
+    r.post.fit = Fit::Off;
+    composer.update(&r).unwrap();
+    assert!(changed(&composed, &composer.composite().gaussians).is_empty());
+    assert_eq!(composer.fit_progress(), None);
+    r.post.fit = Fit::Seams;
+    composer.update(&r).unwrap();
+    assert!(composer.fit_progress().is_some());
+    composer.finish_fit(&mut |_| {}).unwrap();
+    assert!(changed(&fitted, &composer.composite().gaussians).is_empty());
+
+    // Another source for a group: the engine updates the composed
+    // Gaussians (not the fitted ones), and the fit is pending again.
+    let name = engine().database().sources[2].name.clone();
+    r.groups.get_mut("face").unwrap().gaussians = name;
+    composer.update(&r).unwrap();
+    assert!(composer.fit_progress().is_some());
+    let recomposed = composer.composite().gaussians.clone();
+    let e = engine();
+    let direct = e.compose(&r.resolve(e.database()).unwrap());
+    assert!(changed(&direct.gaussians, &recomposed).is_empty());
 }

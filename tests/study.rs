@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use visage::compose::composition::Attributes;
+use visage::compose::recipe::{Fit, PostProcess, Recipe, Smoothing};
 use visage::compose::rules::Rules;
 use visage::study::analysis::{analyse, Analysis, AnalysisOptions};
 use visage::study::results::Results;
@@ -94,7 +95,6 @@ use common::visage;
 use std::time::Duration;
 use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
 use visage::compose::composition::Composition;
-use visage::compose::recipe::Recipe;
 use visage::compose::rules::Context;
 
 fn temp(name: &str) -> std::path::PathBuf {
@@ -229,6 +229,58 @@ fn bad_study_input_fails_with_one_line_and_exit_2() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("attribute"));
 }
 
+/// A category's `post` names a preset: "ours" gives every avatar the best
+/// measured post-processing, seam fit included (what the editor starts
+/// from); a preset nobody knows is one line and exit 2.
+#[test]
+fn a_category_post_names_a_preset() {
+    let dir = temp("preset");
+    std::fs::create_dir_all(&dir).unwrap();
+    let spec = dir.join("spec.toml");
+    let write = |post: &str| {
+        std::fs::write(
+            &spec,
+            format!(
+                "[[category]]\nname = \"edited\"\ndatabase = {{ db = \"builtin\", gaussians_per_avatar = 500 }}\npost = {post}\nunedited = [\"ada\", \"bram\"]\n"
+            ),
+        )
+        .unwrap();
+    };
+    let out = dir.join("built");
+    let build = || {
+        visage(&[
+            "study",
+            "build",
+            spec.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    write("\"ours\"");
+    stdout(&build());
+    let recipe = Recipe::load(&out.join("recipes/001.toml")).unwrap();
+    assert_eq!(recipe.post, PostProcess::BEST);
+    assert_eq!(recipe.post.fit, Fit::Seams);
+    let text = std::fs::read_to_string(out.join("recipes/001.toml")).unwrap();
+    assert!(text.contains("fit = \"seams\""), "{text}");
+
+    write("\"best\"");
+    std::fs::remove_dir_all(&out).ok();
+    let failed = build();
+    let err = String::from_utf8_lossy(&failed.stderr);
+    assert_eq!(failed.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("unknown preset 'best'"), "{err}");
+
+    // A table still works, as before.
+    write("{ smoothing = \"thesis\" }");
+    std::fs::remove_dir_all(&out).ok();
+    stdout(&build());
+    let recipe = Recipe::load(&out.join("recipes/001.toml")).unwrap();
+    assert_eq!(recipe.post.smoothing, Smoothing::Thesis);
+    assert_eq!(recipe.post.fit, Fit::Off);
+}
+
 /// `study analyse` from the command line: JSON with the thesis's numbers
 /// and the two plots.
 #[test]
@@ -280,7 +332,7 @@ fn two_participants_run_the_study_in_tmux_and_survive_a_kill() {
     let run = |tmux: &Tmux, who: &str, status: &Path| {
         std::fs::remove_file(status).ok();
         tmux.start(&format!(
-            "{} study run {d} --participant {who} --graphics halfblocks --renderer cpu 2>/dev/null; echo EXIT=$? > {}; sleep 60",
+            "{} study run {d} --participant {who} --graphics halfblocks --renderer cpu --seam-fit 0 2>/dev/null; echo EXIT=$? > {}; sleep 60",
             env!("CARGO_BIN_EXE_visage"),
             status.display()
         ));
@@ -356,7 +408,7 @@ fn two_participants_run_the_study_in_tmux_and_survive_a_kill() {
     std::fs::remove_file(&carol_status).ok();
     carol.start_sized(
         &format!(
-            "{} study run {d} --participant carol --graphics halfblocks --renderer cpu 2>/dev/null; echo EXIT=$? > {}; sleep 60",
+            "{} study run {d} --participant carol --graphics halfblocks --renderer cpu --seam-fit 0 2>/dev/null; echo EXIT=$? > {}; sleep 60",
             env!("CARGO_BIN_EXE_visage"),
             carol_status.display()
         ),

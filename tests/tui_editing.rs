@@ -137,8 +137,9 @@ fn recording_into_an_existing_journal_continues_it() {
     let tmux = Tmux::new("record");
     tmux.start_sized(&visage_line(&home, &args, &status), 80, 24);
     let s = tmux.wait_for("the editor", LONG, editor_ready);
-    // A new session starts from the post-processing that measured best.
-    assert!(s.contains("semantic") && s.contains("relit"), "{s}");
+    // A new session starts from the post-processing that measured best,
+    // shown by its preset's name.
+    assert!(s.contains("base ada post ours"), "{s}");
     tmux.keys(&[":"]);
     tmux.type_text("set-base bram");
     tmux.keys(&["Enter"]);

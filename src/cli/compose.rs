@@ -6,7 +6,7 @@ use clap::{Args, ValueEnum};
 use serde_json::json;
 
 use super::DbArgs;
-use crate::compose::recipe::Recipe;
+use crate::compose::recipe::{Fit, Recipe};
 use crate::compose::{canonical_order, composite_hash, reordered, state_hash};
 use crate::error::Result;
 use crate::io::avatar::{neutral_offset, write_avatar, AvatarParams, FrameParams};
@@ -14,7 +14,7 @@ use crate::io::ply::write_splat_ply;
 use crate::model::regions::{Group, Region};
 use crate::pipeline::composer::{BuildTimings, Composer};
 use crate::text::printable;
-use crate::train::seam_fit::{fit_seams, SeamFit};
+use crate::train::seam_fit::SeamFit;
 
 /// Arguments of `visage compose`.
 #[derive(Args, Debug, Clone)]
@@ -27,9 +27,51 @@ pub struct ComposeArgs {
     /// Frame of the recipe's motion to pose (default: the recipe's frame).
     #[arg(long, value_name = "N")]
     frame: Option<usize>,
+    #[command(flatten)]
+    fit: FitArgs,
     /// Print one JSON document instead of text.
     #[arg(long)]
     json: bool,
+}
+
+/// The seam fit (method §7.12) of a command that composes a recipe.
+#[derive(Args, Debug, Clone)]
+pub struct FitArgs {
+    /// Fit the composite's seams with this many steps before using it
+    /// (colour and opacity of the Gaussians beside a change of source,
+    /// fitted to what the sources draw there); 0: no fit. Default: as the
+    /// recipe's `[post] fit` says (200 steps for "seams").
+    #[arg(long, value_name = "STEPS")]
+    seam_fit: Option<usize>,
+    /// The width and height of the seam fit's views, in pixels (the fit
+    /// needs the resolution the composite will be looked at).
+    #[arg(long, value_name = "PX", default_value_t = SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096))]
+    seam_fit_size: u32,
+}
+
+impl FitArgs {
+    /// No fit, whatever the recipe says (benchmarks of drawing speed).
+    pub const OFF: FitArgs = FitArgs {
+        seam_fit: Some(0),
+        seam_fit_size: 256,
+    };
+
+    /// The recipe with `--seam-fit` applied to its `[post] fit`.
+    fn apply(&self, recipe: &mut Recipe) {
+        match self.seam_fit {
+            Some(0) => recipe.post.fit = Fit::Off,
+            Some(_) => recipe.post.fit = Fit::Seams,
+            None => {}
+        }
+    }
+
+    fn options(&self) -> SeamFit {
+        SeamFit {
+            iterations: self.seam_fit.unwrap_or(SeamFit::default().iterations),
+            size: self.seam_fit_size,
+            ..SeamFit::default()
+        }
+    }
 }
 
 /// Export formats.
@@ -59,26 +101,47 @@ pub struct ExportArgs {
     /// Output path.
     #[arg(short = 'o', long = "output", value_name = "PATH")]
     output: PathBuf,
-    /// Fit the composite's seams with this many steps before writing it
-    /// (method §7.12: colour and opacity of the Gaussians beside a change of
-    /// source, fitted to what the sources draw there; 200 is what
-    /// `bench composites --pipeline ours` measures); 0: no fit.
-    #[arg(long, value_name = "STEPS", default_value_t = 0)]
-    seam_fit: usize,
-    /// With --seam-fit: the width and height of the fit's views, in pixels
-    /// (the fit needs the resolution the composite will be looked at).
-    #[arg(long, value_name = "PX", default_value_t = crate::train::seam_fit::SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096), requires = "seam_fit")]
-    seam_fit_size: u32,
+    #[command(flatten)]
+    fit: FitArgs,
 }
 
-/// Loads the database and a recipe file, builds the composite and poses `frame`.
+/// Loads the database and a recipe file, builds the composite, poses
+/// `frame` and runs the seam fit the recipe (or `fit`) asks for, with a
+/// progress bar.
 pub fn build(
     db_args: &DbArgs,
     recipe_path: &std::path::Path,
     frame: Option<usize>,
+    fit: &FitArgs,
 ) -> Result<(Composer, BuildTimings)> {
-    let recipe = Recipe::load(recipe_path)?;
-    Composer::build(&db_args.spec(), |_| recipe, frame, Some(recipe_path))
+    let mut recipe = Recipe::load(recipe_path)?;
+    fit.apply(&mut recipe);
+    let (mut composer, timings) =
+        Composer::build(&db_args.spec(), |_| recipe, frame, Some(recipe_path))?;
+    composer.set_fit_options(fit.options());
+    finish_fit(&mut composer)?;
+    Ok((composer, timings))
+}
+
+/// Runs the composer's pending seam fit with a progress bar on stderr and
+/// says what it did.
+fn finish_fit(composer: &mut Composer) -> Result<()> {
+    if composer.fit_progress().is_none() {
+        return Ok(());
+    }
+    let bar = super::train::training_bar(0, "seam fit ");
+    let report = composer.finish_fit(&mut |p| {
+        bar.set_length(p.total as u64);
+        bar.set_position(p.done as u64);
+    })?;
+    bar.finish_and_clear();
+    if let Some(report) = report.filter(|r| r.fitted > 0) {
+        eprintln!(
+            "visage: fitted {} seam Gaussians over {} views: error against the sources' own seams {:.2e} → {:.2e}",
+            report.fitted, report.views, report.mse_before, report.mse_after
+        );
+    }
+    Ok(())
 }
 
 /// Loads the database, builds the composite of the recipe `choose` picks for
@@ -93,7 +156,7 @@ pub fn build_from(
 
 /// Runs `visage compose`.
 pub fn run_compose(args: &ComposeArgs) -> Result<()> {
-    let (composer, timings) = build(&args.db, &args.recipe, args.frame)?;
+    let (composer, timings) = build(&args.db, &args.recipe, args.frame, &args.fit)?;
     let report = report(&composer, &timings, args.frame);
     if args.json {
         println!("{report}");
@@ -105,29 +168,7 @@ pub fn run_compose(args: &ComposeArgs) -> Result<()> {
 
 /// Runs `visage export`.
 pub fn run_export(args: &ExportArgs) -> Result<()> {
-    let (mut composer, _) = build(&args.db, &args.recipe, args.frame)?;
-    if args.seam_fit > 0 {
-        let fit = SeamFit {
-            iterations: args.seam_fit,
-            size: args.seam_fit_size,
-            ..SeamFit::default()
-        };
-        let bar = super::train::training_bar(fit.iterations, "seam fit ");
-        bar.set_message("drawing the sources' own seams");
-        let (fitted, report) =
-            fit_seams(composer.engine(), composer.composite(), &fit, &mut |step| {
-                bar.set_position(step as u64);
-                if step == 0 {
-                    bar.set_message("");
-                }
-            })?;
-        bar.finish_and_clear();
-        composer.refit(fitted)?;
-        eprintln!(
-            "visage: fitted {} seam Gaussians over {} views: error against the sources' own seams {:.2e} → {:.2e}",
-            report.fitted, report.views, report.mse_before, report.mse_after
-        );
-    }
+    let (composer, _) = build(&args.db, &args.recipe, args.frame, &args.fit)?;
     match args.format {
         ExportFormat::Ply => {
             let scene = composer.scene();
@@ -243,6 +284,13 @@ fn report(composer: &Composer, timings: &BuildTimings, frame: Option<usize>) -> 
         "anchor": format!("{:?}", r.post.anchor).to_lowercase(),
         "shading": format!("{:?}", r.post.shading).to_lowercase(),
         "skin": format!("{:?}", r.post.skin).to_lowercase(),
+        "fit": format!("{:?}", r.post.fit).to_lowercase(),
+        "seam_fit": composer.fit_report().map(|f| json!({
+            "fitted": f.fitted,
+            "views": f.views,
+            "mse_before": f.mse_before,
+            "mse_after": f.mse_after,
+        })),
         "gaussians": c.gaussians.len(),
         "extra_gaussians": extra_total,
         "extras": extras,
@@ -299,7 +347,7 @@ fn print_text(r: &serde_json::Value) {
         );
     }
     println!(
-        "smoothing {} adds {} Gaussians; colour {}; regions by {}; deform {}; anchor {}; shading {}; blend residual {:.2e}",
+        "smoothing {} adds {} Gaussians; colour {}; regions by {}; deform {}; anchor {}; shading {}; skin {}; fit {}; blend residual {:.2e}",
         r["smoothing"].as_str().unwrap_or(""),
         r["extra_gaussians"],
         r["colour"].as_str().unwrap_or(""),
@@ -307,6 +355,8 @@ fn print_text(r: &serde_json::Value) {
         r["deform"].as_str().unwrap_or(""),
         r["anchor"].as_str().unwrap_or(""),
         r["shading"].as_str().unwrap_or(""),
+        r["skin"].as_str().unwrap_or(""),
+        r["fit"].as_str().unwrap_or(""),
         r["solve_residual"].as_f64().unwrap_or(0.0)
     );
     let t = &r["timings_ms"];

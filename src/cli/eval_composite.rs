@@ -3,6 +3,7 @@
 //! as tables or one JSON document, with an optional picture.
 
 use super::train::EvalArgs;
+use crate::compose::recipe::Fit;
 use crate::error::{Error, Result};
 use crate::pipeline::DatabaseSpec;
 use crate::train::composite_eval::{evaluate_composite, CompositeReport, EvalOptions, Quality};
@@ -34,8 +35,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let options = EvalOptions {
         border_px: args.border_px,
         picture_views: if args.picture.is_some() { 3 } else { 0 },
-        fit: (args.seam_fit > 0).then(|| SeamFit {
-            iterations: args.seam_fit,
+        fit: match args.seam_fit {
+            Some(0) => None,
+            Some(steps) => Some(steps),
+            None => (recipe.post.fit == Fit::Seams).then_some(SeamFit::default().iterations),
+        }
+        .map(|iterations| SeamFit {
+            iterations,
             size: args.seam_fit_size,
             ..SeamFit::default()
         }),

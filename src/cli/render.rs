@@ -6,7 +6,7 @@ use std::time::Instant;
 use clap::Args;
 
 use super::camera::CameraArgs;
-use super::compose::{build, build_from};
+use super::compose::{build, build_from, FitArgs};
 use super::values::{parse_range, parse_size};
 use super::DbArgs;
 use crate::compose::recipe::Recipe;
@@ -27,6 +27,8 @@ pub struct RenderArgs {
     /// Recipe file (TOML); without one (and without --ply) the first source is shown.
     #[arg(long, value_name = "FILE", conflicts_with = "ply")]
     recipe: Option<PathBuf>,
+    #[command(flatten)]
+    fit: FitArgs,
     /// A 3DGS scene to render instead of a composite: an INRIA PLY (SH degree
     /// 0-3) or an antimatter15 .splat.
     #[arg(long, value_name = "FILE")]
@@ -138,7 +140,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     } else {
         // Without a recipe: the database's first source as it is, in the rest pose.
         let (composer, _) = match &args.recipe {
-            Some(path) => build(&args.db, path, args.frame)?,
+            Some(path) => build(&args.db, path, args.frame, &args.fit)?,
             None => build_from(&args.db, args.frame, |database| {
                 Recipe::unedited(&database.sources[0].name)
             })?,

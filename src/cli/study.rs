@@ -14,6 +14,7 @@ use crate::study::design::{build, category_counts, Databases, StudyFolder};
 use crate::study::journal::{read_all, tally};
 use crate::study::plot::write_plots;
 use crate::study::results::Results;
+use crate::train::seam_fit::SeamFit;
 use crate::tui::graphics::GraphicsChoice;
 use crate::tui::study::{run_participant, RunOptions};
 
@@ -71,6 +72,13 @@ struct RunArgs {
     /// Renderer: auto (hardware GPU, else CPU), gpu or cpu.
     #[arg(long, value_parser = Backend::parse, default_value = "auto")]
     renderer: Backend,
+    /// Steps of the seam fit run before showing each avatar whose
+    /// post-processing asks for one (`post = "ours"`); 0: none.
+    #[arg(long, value_name = "STEPS", default_value_t = SeamFit::default().iterations)]
+    seam_fit: usize,
+    /// The width and height of the seam fit's views, in pixels.
+    #[arg(long, value_name = "PX", default_value_t = SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096))]
+    seam_fit_size: u32,
 }
 
 /// Arguments of `visage study analyse`.
@@ -184,6 +192,11 @@ fn run_session(args: &RunArgs) -> Result<()> {
         participant: args.participant.clone(),
         graphics: args.graphics,
         renderer: args.renderer,
+        seam_fit: SeamFit {
+            iterations: args.seam_fit,
+            size: args.seam_fit_size,
+            ..SeamFit::default()
+        },
     })?;
     println!("{summary}");
     Ok(())

@@ -258,18 +258,15 @@ pub struct EvalArgs {
     #[arg(long, value_name = "PNG", requires = "composite")]
     pub(super) picture: Option<PathBuf>,
     /// With --composite: fit the composite's seams with this many steps
-    /// (method §7.12; 200 is what `bench composites --pipeline ours` runs)
-    /// and measure the fitted composite; 0: no fit.
-    #[arg(
-        long,
-        value_name = "STEPS",
-        default_value_t = 0,
-        requires = "composite"
-    )]
-    pub(super) seam_fit: usize,
-    /// With --seam-fit: the width and height of the fit's views, in pixels
-    /// (the fit needs the resolution the composite is looked at).
-    #[arg(long, value_name = "PX", default_value_t = crate::train::seam_fit::SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096), requires = "seam_fit")]
+    /// (method §7.12) and measure the fitted composite as a fifth step of
+    /// the decomposition; 0: no fit. Default: as the recipe's `[post] fit`
+    /// says (200 steps for "seams", what `bench composites --pipeline ours`
+    /// runs).
+    #[arg(long, value_name = "STEPS", requires = "composite")]
+    pub(super) seam_fit: Option<usize>,
+    /// With --composite: the width and height of the seam fit's views, in
+    /// pixels (the fit needs the resolution the composite is looked at).
+    #[arg(long, value_name = "PX", default_value_t = crate::train::seam_fit::SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096), requires = "composite")]
     pub(super) seam_fit_size: u32,
     #[command(flatten)]
     head: HeadArgs,

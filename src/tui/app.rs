@@ -583,6 +583,14 @@ impl App {
                     self.status = message;
                 }
                 Reply::Failed(message) => self.status = message,
+                Reply::Fit(progress) => {
+                    if progress.is_none() && self.picture.info.fit.is_some() {
+                        // Done: draw the fitted composite.
+                        self.picture.version += 1;
+                        self.status = "seam fit done".into();
+                    }
+                    self.picture.info.fit = progress;
+                }
                 Reply::Pivot(at, depth) => {
                     self.pivot.asked = false;
                     if at == self.editor().state.recipe.camera {
@@ -663,6 +671,7 @@ impl App {
             fps: p.info.fps,
             image_size: (result.image.width, result.image.height),
             renderer: self.renderer_name.clone(),
+            fit: p.info.fit,
         };
         p.image = Some(result.image);
         p.encoded = encoded;

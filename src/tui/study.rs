@@ -37,6 +37,7 @@ use crate::render::image::RgbImage;
 use crate::render::Backend;
 use crate::study::design::{Display, StudyFolder};
 use crate::study::journal::{journal_path, Answer, Journal};
+use crate::train::seam_fit::SeamFit;
 
 /// Options of `visage study run`.
 pub struct RunOptions {
@@ -48,6 +49,9 @@ pub struct RunOptions {
     pub graphics: GraphicsChoice,
     /// Renderer.
     pub renderer: Backend,
+    /// How the seam fit of the avatars whose post-processing asks for one
+    /// runs (before each is shown); 0 iterations: none.
+    pub seam_fit: SeamFit,
 }
 
 /// Degrees one arrow key turns the head.
@@ -95,6 +99,7 @@ pub fn run_participant(options: RunOptions) -> Result<String> {
         participant,
         graphics,
         renderer,
+        seam_fit,
     } = options;
     let mut journal = Journal::open(&study, &participant)?;
     let order = study.order(&participant);
@@ -117,7 +122,9 @@ pub fn run_participant(options: RunOptions) -> Result<String> {
         if workbenches.iter().all(|(s, _)| *s != spec) {
             eprintln!("visage: opening the {} database…", spec.db);
             let (db, _) = spec.load()?;
-            workbenches.push((spec.clone(), Workbench::new(Engine::new(db)?, renderer)?));
+            let mut workbench = Workbench::new(Engine::new(db)?, renderer)?;
+            workbench.set_fit_options(seam_fit);
+            workbenches.push((spec.clone(), workbench));
         }
     }
     let graphics = detect(graphics);
@@ -293,6 +300,9 @@ impl Session<'_> {
             .iter()
             .position(|(s, _)| *s == spec)
             .expect("every category's database was opened");
+        // Every participant sees the finished avatar from its first frame:
+        // a seam fit its post-processing asks for runs before it is shown.
+        self.workbenches[workbench].1.settle(&recipe)?;
         Ok(Showing {
             id,
             position: self.done + 1,

@@ -15,8 +15,10 @@ use ratatui::Frame;
 use super::graphics::{draw_halfblocks, reserve_cells, Protocol};
 use super::keymap::Keymap;
 use super::prompt::Prompt;
+use crate::compose::recipe::{PostPreset, Recipe};
 use crate::editor::state::{Catalog, EditorState, SceneSummary};
 use crate::model::regions::Group;
+use crate::pipeline::composer::FitProgress;
 use crate::pipeline::workbench::FrameTimings;
 use crate::render::image::RgbImage;
 
@@ -49,6 +51,9 @@ pub struct InfoPanel {
     pub renderer: String,
     /// What a scene's level of detail drew, when it drew a cut.
     pub lod: Option<crate::pipeline::lod::CutSummary>,
+    /// How far the seam fit running in the background is (`None`: not
+    /// running).
+    pub fit: Option<FitProgress>,
 }
 
 /// What the layout depends on besides the terminal's size.
@@ -444,20 +449,7 @@ fn composite_sections(vm: &ViewModel) -> Vec<Section> {
     let (undo, redo) = s.history();
     vec![
         groups,
-        section(
-            "post",
-            vec![format!(
-                " base {} smoothing {} colour {} regions by {} deform {} anchor {} shading {} skin {}",
-                r.base,
-                lower(&r.post.smoothing),
-                lower(&r.post.colour),
-                lower(&r.post.membership),
-                lower(&r.post.deform),
-                lower(&r.post.anchor),
-                lower(&r.post.shading),
-                lower(&r.post.skin),
-            )],
-        ),
+        section("post", vec![post_text(r, i.fit)]),
         section(
             "animation",
             vec![
@@ -715,6 +707,34 @@ fn draw_menu(frame: &mut Frame, row: Rect, candidates: &[String], selected: Opti
         Paragraph::new(Line::from(spans)).style(Style::default().bg(Color::Rgb(40, 40, 48))),
         row,
     );
+}
+
+/// The post panel's line: the base, and the post-processing by its
+/// preset's name where it is one (the full list otherwise), with the seam
+/// fit's progress while it runs.
+fn post_text(r: &Recipe, fit: Option<FitProgress>) -> String {
+    let lower = |d: &dyn std::fmt::Debug| format!("{d:?}").to_lowercase();
+    let running = match (r.post.fit, fit) {
+        (crate::compose::recipe::Fit::Seams, Some(p)) => {
+            format!(" (fitting seams {}%)", 100 * p.done / p.total.max(1))
+        }
+        _ => String::new(),
+    };
+    if let Some(preset) = PostPreset::ALL.into_iter().find(|p| p.post() == r.post) {
+        return format!(" base {} post {}{running}", r.base, preset.name());
+    }
+    format!(
+        " base {} smoothing {} colour {} regions by {} deform {} anchor {} shading {} skin {} fit {}{running}",
+        r.base,
+        lower(&r.post.smoothing),
+        lower(&r.post.colour),
+        lower(&r.post.membership),
+        lower(&r.post.deform),
+        lower(&r.post.anchor),
+        lower(&r.post.shading),
+        lower(&r.post.skin),
+        lower(&r.post.fit),
+    )
 }
 
 #[cfg(test)]

@@ -14,6 +14,7 @@ use super::graphics::ImageTarget;
 use crate::compose::recipe::Recipe;
 use crate::editor::perform;
 use crate::editor::state::Effect;
+use crate::pipeline::composer::FitProgress;
 use crate::pipeline::workbench::{FrameRequest, FrameResult, Workbench};
 use crate::render::image::RgbImage;
 use crate::scene::camera::Orbit;
@@ -70,6 +71,9 @@ pub enum Reply {
     Thumbnails(Vec<(RgbImage, Vec<u8>)>),
     /// A frame or question failed.
     Failed(String),
+    /// The seam fit went on in the background: how far it is, or `None`
+    /// once it is done (the composite shows it from the next frame).
+    Fit(Option<FitProgress>),
 }
 
 #[derive(Default)]
@@ -136,6 +140,8 @@ impl Drop for RenderWorker {
 enum Job {
     Frame(FrameJob),
     Task(Task),
+    /// A unit of the composite's seam fit, done while nothing else waits.
+    FitStep,
 }
 
 fn work(mut workbench: Workbench, mailbox: &(Mutex<Mailbox>, Condvar), replies: &Sender<Reply>) {
@@ -153,12 +159,16 @@ fn work(mut workbench: Workbench, mailbox: &(Mutex<Mailbox>, Condvar), replies: 
                 if let Some(f) = m.frame.take() {
                     break Job::Frame(f);
                 }
+                if workbench.fit_progress().is_some() {
+                    break Job::FitStep;
+                }
                 m = cv.wait(m).unwrap_or_else(|e| e.into_inner());
             }
         };
         let reply = match job {
             Job::Frame(f) => draw(&mut workbench, f),
             Job::Task(task) => run_task(&mut workbench, task),
+            Job::FitStep => fit_step(&mut workbench),
         };
         if replies.send(reply).is_err() {
             return;
@@ -181,6 +191,17 @@ fn draw(workbench: &mut Workbench, job: FrameJob) -> Reply {
             }
         }
         Err(e) => Reply::Failed(format!("render failed: {e}")),
+    }
+}
+
+/// One unit of the seam fit; a unit takes a fraction of a second, so a
+/// frame asked for meanwhile waits at most that long.
+fn fit_step(workbench: &mut Workbench) -> Reply {
+    match workbench.fit_step() {
+        Ok(_) => Reply::Fit(workbench.fit_progress()),
+        Err(e) => Reply::Failed(format!(
+            "seam fit failed (the composite shows unfitted): {e}"
+        )),
     }
 }
 

@@ -14,7 +14,7 @@ use serde::Serialize;
 use super::stats::emit;
 use crate::avatar::database::Database;
 use crate::cli::values::parse_size;
-use crate::compose::recipe::{ColourCorrection, PostProcess, Recipe, Smoothing};
+use crate::compose::recipe::{ColourCorrection, Fit, PostProcess, Recipe, Smoothing};
 use crate::error::{Error, Result};
 use crate::pipeline::DatabaseSpec;
 use crate::render::Backend;
@@ -58,8 +58,9 @@ pub struct CompositesBenchArgs {
     /// or ours (the best measured: by place, colour seams, semantic colour).
     #[arg(long, value_enum, default_value = "recipe")]
     pipeline: Pipeline,
-    /// Steps of the seam fit (method §7.12) that `--pipeline ours` runs
-    /// after the recipe; 0: none (the other pipelines never fit).
+    /// Steps of the seam fit (method §7.12) run for the composites whose
+    /// post-processing asks for it (`[post] fit = "seams"`, as `--pipeline
+    /// ours` does; `thesis` never fits); 0: none.
     #[arg(long, value_name = "STEPS", default_value_t = SeamFit::default().iterations)]
     seam_fit: usize,
     /// Print one JSON document.
@@ -265,16 +266,19 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
         ..DatabaseSpec::default()
     }
     .load()?;
-    let options = EvalOptions {
-        border_px: args.border_px,
-        picture_views: 0,
-        fit: (args.pipeline == Pipeline::Ours && args.seam_fit > 0).then(|| SeamFit {
-            iterations: args.seam_fit,
-            ..SeamFit::default()
-        }),
+    let fit = SeamFit {
+        iterations: args.seam_fit,
+        ..SeamFit::default()
     };
+    let mut fitted_any = false;
     let mut rows = Vec::new();
     for (name, recipe) in &recipes {
+        let options = EvalOptions {
+            border_px: args.border_px,
+            picture_views: 0,
+            fit: (recipe.post.fit == Fit::Seams && args.seam_fit > 0).then_some(fit),
+        };
+        fitted_any |= options.fit.is_some();
         let (tone, seams) = target_of(recipe);
         let start = Instant::now();
         let truth = scratch(&format!("truth-{name}"));
@@ -319,7 +323,7 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
         frames: args.frames,
         iterations: args.iterations,
         pipeline: args.pipeline,
-        seam_fit: options.fit.map_or(0, |f| f.iterations),
+        seam_fit: if fitted_any { args.seam_fit } else { 0 },
         mean: Means {
             psnr_db: mean_of(&|r| r.quality.psnr_db),
             ceiling_psnr_db: mean_of(&|r| r.ceiling.psnr_db),

@@ -11,7 +11,7 @@ use crate::cli::DbArgs;
 use crate::compose::blend::Blender;
 use crate::compose::engine::{Engine, PosedMesh};
 use crate::compose::recipe::{
-    Anchor, AnimationMode, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe,
+    Anchor, AnimationMode, ColourCorrection, Deform, Fit, Membership, PostProcess, ResolvedRecipe,
     Shading, SkinSource, Smoothing,
 };
 use crate::error::{Error, Result};
@@ -120,6 +120,7 @@ pub fn run(args: &EngineBenchArgs) -> Result<()> {
         anchor: Anchor::Parent,
         shading: Shading::Kept,
         skin: SkinSource::Source,
+        fit: Fit::Off,
     };
     for &n in &args.sources {
         // A composite drawing on all n sources: random shape weights and assignment.

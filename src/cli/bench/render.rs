@@ -13,7 +13,7 @@ use super::render_report::{
 };
 use super::scene::{bench_scene, SceneSource, SCENE_SIZES};
 use super::stats::{emit, ms_since, open_and_upload, peak_rss_mb, summarize, time_frames, Rounds};
-use crate::cli::compose::{build, build_from};
+use crate::cli::compose::{build, build_from, FitArgs};
 use crate::cli::values::parse_size;
 use crate::cli::DbArgs;
 use crate::compose::recipe::{ColourCorrection, GroupEdit, Recipe, Smoothing};
@@ -222,7 +222,8 @@ fn bench_composite(args: &RenderBenchArgs, rounds: Rounds) -> Result<RenderRepor
     };
     let t = Instant::now();
     let (mut composer, _) = match &args.recipe {
-        Some(path) => build(&args.db, path, Some(0))?,
+        // Drawing speed does not depend on fitted colours: no seam fit.
+        Some(path) => build(&args.db, path, Some(0), &FitArgs::OFF)?,
         None => build_from(&args.db, Some(0), bench_recipe_for)?,
     };
     let orbit = composer.composite().recipe.camera;

@@ -141,6 +141,20 @@ pub enum SkinSource {
     Base,
 }
 
+/// A finishing step over the composed Gaussians (docs/method.md §7.12).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Fit {
+    /// The Gaussians as composed.
+    #[default]
+    Off,
+    /// The colours and opacities of the Gaussians beside a change of source
+    /// fitted to what the sources themselves draw there (the seam fit). The
+    /// engine composes without it; whoever shows or writes the composite
+    /// runs it (seconds, not milliseconds: the editor in the background).
+    Seams,
+}
+
 /// How the composite is animated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -187,6 +201,9 @@ pub struct PostProcess {
     /// Where a swapped region's skin comes from.
     #[serde(skip_serializing_if = "is_default_skin")]
     pub skin: SkinSource,
+    /// The finishing fit over the composed Gaussians.
+    #[serde(skip_serializing_if = "is_default_fit")]
+    pub fit: Fit,
 }
 
 impl PostProcess {
@@ -200,6 +217,7 @@ impl PostProcess {
         anchor: Anchor::Parent,
         shading: Shading::Kept,
         skin: SkinSource::Source,
+        fit: Fit::Off,
     };
     /// The post-processing that measured best against ground truth
     /// (docs/method.md §13, README): `--pipeline ours` and the study's edited
@@ -212,6 +230,7 @@ impl PostProcess {
         anchor: Anchor::Nearest,
         shading: Shading::Relit,
         skin: SkinSource::Base,
+        fit: Fit::Seams,
     };
 }
 
@@ -277,9 +296,14 @@ fn is_default_skin(s: &SkinSource) -> bool {
     *s == SkinSource::default()
 }
 
+fn is_default_fit(f: &Fit) -> bool {
+    *f == Fit::default()
+}
+
 /// Prints like a derived `Debug`, leaving `membership`, `deform`, `anchor`,
-/// `shading` and `skin` out while they are the defaults: state hashes (which hash the recipe's `Debug` text) of recorded
-/// sessions stay what they were before the field existed.
+/// `shading`, `skin` and `fit` out while they are the defaults: state hashes
+/// (which hash the recipe's `Debug` text) of recorded sessions stay what they
+/// were before the field existed.
 impl std::fmt::Debug for PostProcess {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let mut d = f.debug_struct("PostProcess");
@@ -299,6 +323,9 @@ impl std::fmt::Debug for PostProcess {
         }
         if self.skin != SkinSource::default() {
             d.field("skin", &self.skin);
+        }
+        if self.fit != Fit::default() {
+            d.field("fit", &self.fit);
         }
         d.finish()
     }

@@ -13,7 +13,8 @@ use std::iter::Peekable;
 use std::str::SplitWhitespace;
 
 use crate::compose::recipe::{
-    Anchor, AnimationMode, ColourCorrection, Deform, Membership, Shading, SkinSource, Smoothing,
+    Anchor, AnimationMode, ColourCorrection, Deform, Fit, Membership, Shading, SkinSource,
+    Smoothing,
 };
 use crate::model::regions::Group;
 use crate::render::lod::LodPolicy;
@@ -522,6 +523,12 @@ impl Named for SkinSource {
     const WORDS: &'static [&'static str] = &["source", "base"];
 }
 
+impl Named for Fit {
+    const NAMES: &'static [(Self, &'static str)] = &[(Fit::Off, "off"), (Fit::Seams, "seams")];
+    const LABEL: &'static str = "fit";
+    const WORDS: &'static [&'static str] = &["off", "seams"];
+}
+
 impl Named for AnimationMode {
     const NAMES: &'static [(Self, &'static str)] = &[
         (AnimationMode::Fast, "fast"),
@@ -758,6 +765,10 @@ commands! {
     /// from: its source, or the base (under the source's features).
     Skin(choice: Option<SkinSource> as Choice<SkinSource>)
         => "skin", "[source|base]", "take a swapped region's skin from its source or from the base", PostProcessing, edit;
+    /// Set (or with `None`, toggle) the seam fit: colours and opacities
+    /// beside a change of source fitted to what the sources draw there.
+    Fit(choice: Option<Fit> as Choice<Fit>)
+        => "fit", "[off|seams]", "fit the colours beside each change of source (runs in the background)", PostProcessing, edit;
     /// Drive the composite with a motion ("rest" for none).
     Motion(motion: String as MotionName) => "motion", "NAME|rest", "drive the composite with a motion", Animation, edit;
     /// Switch to the next motion.
@@ -926,6 +937,8 @@ mod tests {
             "shading",
             "skin base",
             "skin",
+            "fit seams",
+            "fit",
             "motion talk",
             "next-motion",
             "play",

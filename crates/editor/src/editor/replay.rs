@@ -138,6 +138,8 @@ pub fn replay(path: &Path, out: Option<&Path>) -> Result<ReplayReport> {
                 min_psnr,
             }) => {
                 let stored = RgbImage::load_png(&base_dir.join(image)).map_err(Error::input)?;
+                // The finished composite, seam fit included: what a still shows.
+                workbench.settle(&editor.state.recipe)?;
                 let frame =
                     workbench.render(&editor.frame_request(stored.width, stored.height, true))?;
                 let p = psnr_report(&frame.image, &stored).unwrap_or(0.0);

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use crate::compose::recipe::{
-    Anchor, AnimationMode, ColourCorrection, Deform, GroupEdit, Membership, Recipe, Shading,
+    Anchor, AnimationMode, ColourCorrection, Deform, Fit, GroupEdit, Membership, Recipe, Shading,
     SkinSource, Smoothing,
 };
 use crate::model::regions::Group;
@@ -430,6 +430,12 @@ impl EditorState {
                 post.skin = s.unwrap_or(match post.skin {
                     SkinSource::Source => SkinSource::Base,
                     SkinSource::Base => SkinSource::Source,
+                })
+            }
+            Command::Fit(f) => {
+                post.fit = f.unwrap_or(match post.fit {
+                    Fit::Off => Fit::Seams,
+                    Fit::Seams => Fit::Off,
                 })
             }
             other => return Err(misrouted(other)),

@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use crate::avatar::gaussians::{dc_to_rgb, rgb_to_dc, GaussianSet};
 use crate::compose::engine::{Composite, Engine, PosedMesh};
-use crate::compose::recipe::{Recipe, ResolvedRecipe};
+use crate::compose::recipe::{Fit, Recipe, ResolvedRecipe};
 use crate::error::{Error, Result};
 use crate::model::regions::Group;
 use crate::render::image::RgbImage;
@@ -19,6 +19,7 @@ use crate::render::settings::RenderSettings;
 use crate::render::{Backend, SplatRenderer};
 use crate::scene::camera::Camera;
 use crate::scene::splats::SplatScene;
+use crate::train::seam_fit::{FitReport, SeamFit, SeamFitter};
 
 use super::lod::LodScene;
 use super::DatabaseSpec;
@@ -36,6 +37,30 @@ pub struct BuildTimings {
     pub pose: f64,
 }
 
+/// Where the recipe's finishing fit (`[post] fit`) stands.
+enum FitState {
+    /// The recipe asks for none: the composite shows as composed.
+    None,
+    /// Asked for and not done: the composite shows as composed meanwhile.
+    /// The fitter starts with the first [`Composer::fit_step`].
+    Pending(Option<Box<SeamFitter>>),
+    /// Done: the composite holds the fitted Gaussians, and this the
+    /// engine's own, put back before the engine updates the composite.
+    Fitted {
+        composed: GaussianSet,
+        report: FitReport,
+    },
+}
+
+/// How far a pending fit is, in units of work (see [`SeamFitter`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FitProgress {
+    /// Units done.
+    pub done: usize,
+    /// Units in all (0 until the fit starts).
+    pub total: usize,
+}
+
 /// A composite on its engine, kept up to date with a recipe and posed.
 pub struct Composer {
     engine: Engine,
@@ -43,6 +68,8 @@ pub struct Composer {
     posed: PosedMesh,
     /// Bumped whenever the composite's Gaussians change (renderers re-upload).
     generation: u64,
+    fit: FitState,
+    fit_options: SeamFit,
 }
 
 /// How long the last [`Composer::update`] spent, in milliseconds.
@@ -64,6 +91,20 @@ impl Composer {
             composite: None,
             posed: PosedMesh::default(),
             generation: 0,
+            fit: FitState::None,
+            fit_options: SeamFit::default(),
+        }
+    }
+
+    /// How a recipe's seam fit runs from now on (default:
+    /// [`SeamFit::default`]); a fit under other options is redone.
+    pub fn set_fit_options(&mut self, options: SeamFit) {
+        if options != self.fit_options {
+            self.fit_options = options;
+            if !matches!(self.fit, FitState::None) {
+                self.unfit();
+                self.fit = FitState::Pending(None);
+            }
         }
     }
 
@@ -103,9 +144,14 @@ impl Composer {
     }
 
     /// Brings the composite up to date with `recipe` and poses its frame.
+    /// A seam fit the recipe asks for (`[post] fit = "seams"`) is not run
+    /// here: the composite shows as composed until [`Composer::fit_step`]
+    /// or [`Composer::finish_fit`] completes it, and keeps a completed fit
+    /// for as long as its Gaussians and shape stay.
     pub fn update(&mut self, recipe: &Recipe) -> Result<(ResolvedRecipe, UpdateTimings)> {
         let resolved = recipe.resolve(self.engine.database())?;
         let t = Instant::now();
+        let fitted = self.unfit();
         let recomposed = match &mut self.composite {
             Some(c) => {
                 let changes = self.engine.update(c, &resolved);
@@ -120,6 +166,7 @@ impl Composer {
                 true
             }
         };
+        self.follow_fit(resolved.post.fit, fitted, recomposed);
         let compose = t.elapsed().as_secs_f64() * 1e3;
         let pose = self.pose(resolved.frame);
         Ok((
@@ -132,28 +179,121 @@ impl Composer {
         ))
     }
 
-    /// Gives the composite's Gaussians the colours and opacities of
-    /// `refitted`, the same Gaussians changed by a finishing step (the seam
-    /// fit, method §7.12). Refuses a set that is not the same Gaussians in
-    /// the same places.
-    pub fn refit(&mut self, refitted: GaussianSet) -> Result<()> {
-        let c = self
-            .composite
-            .as_mut()
-            .expect("a composer is updated before it is refitted");
-        let g = &c.gaussians;
-        if refitted.len() != g.len()
-            || refitted.sh_degree != g.sh_degree
-            || refitted.binding != g.binding
-            || refitted.position != g.position
-        {
-            return Err(Error::input(
-                "a refitted composite must keep its Gaussians and their places",
-            ));
+    /// Puts the engine's own Gaussians back where a fit was shown, and
+    /// returns the fitted ones with their report.
+    fn unfit(&mut self) -> Option<(GaussianSet, FitReport)> {
+        let FitState::Fitted { composed, report } =
+            std::mem::replace(&mut self.fit, FitState::None)
+        else {
+            return None;
+        };
+        let c = self.composite.as_mut().expect("a fit is of a composite");
+        Some((std::mem::replace(&mut c.gaussians, composed), report))
+    }
+
+    /// The fit state after an update: a completed fit stays while the
+    /// composite is the same; a pending one keeps its progress likewise.
+    fn follow_fit(
+        &mut self,
+        wanted: Fit,
+        fitted: Option<(GaussianSet, FitReport)>,
+        recomposed: bool,
+    ) {
+        let pending = std::mem::replace(&mut self.fit, FitState::None);
+        if wanted == Fit::Off {
+            if fitted.is_some() {
+                // The composed Gaussians are back on show.
+                self.generation += 1;
+            }
+            return;
         }
-        c.gaussians = refitted;
-        self.generation += 1;
-        Ok(())
+        if recomposed {
+            if fitted.is_some() {
+                self.generation += 1;
+            }
+            self.fit = FitState::Pending(None);
+            return;
+        }
+        self.fit = match fitted {
+            Some((set, report)) => {
+                let c = self.composite.as_mut().expect("updated");
+                FitState::Fitted {
+                    composed: std::mem::replace(&mut c.gaussians, set),
+                    report,
+                }
+            }
+            None => match pending {
+                FitState::Pending(fitter) => FitState::Pending(fitter),
+                _ => FitState::Pending(None),
+            },
+        };
+    }
+
+    /// How far the recipe's seam fit is, while it is pending (`None`: no
+    /// fit asked for, or it is done).
+    pub fn fit_progress(&self) -> Option<FitProgress> {
+        match &self.fit {
+            FitState::Pending(fitter) => Some(fitter.as_ref().map_or_else(
+                FitProgress::default,
+                |f| FitProgress {
+                    done: f.done(),
+                    total: f.total(),
+                },
+            )),
+            _ => None,
+        }
+    }
+
+    /// What the completed seam fit did (`None` until one completes).
+    pub fn fit_report(&self) -> Option<FitReport> {
+        match &self.fit {
+            FitState::Fitted { report, .. } => Some(*report),
+            _ => None,
+        }
+    }
+
+    /// Does one unit of a pending seam fit; when that completes it, the
+    /// composite shows the fitted Gaussians (the generation changes).
+    /// Returns the progress, or `None` when no fit is pending.
+    pub fn fit_step(&mut self) -> Result<Option<FitProgress>> {
+        let FitState::Pending(fitter) = &mut self.fit else {
+            return Ok(None);
+        };
+        let c = self.composite.as_mut().expect("a fit is of a composite");
+        let f = fitter
+            .get_or_insert_with(|| Box::new(SeamFitter::new(&self.engine, c, &self.fit_options)));
+        if let Err(e) = f.step(&self.engine, c) {
+            // Given up: the composite stays as composed until it changes.
+            self.fit = FitState::None;
+            return Err(e);
+        }
+        let progress = FitProgress {
+            done: f.done(),
+            total: f.total(),
+        };
+        if f.finished() {
+            let (set, report) = f.result(c);
+            self.fit = FitState::Fitted {
+                composed: std::mem::replace(&mut c.gaussians, set),
+                report,
+            };
+            self.generation += 1;
+        }
+        Ok(Some(progress))
+    }
+
+    /// Runs a pending seam fit to the end; `progress` hears each unit.
+    /// Returns the fit's report when one was pending.
+    pub fn finish_fit(
+        &mut self,
+        progress: &mut dyn FnMut(FitProgress),
+    ) -> Result<Option<FitReport>> {
+        let mut ran = false;
+        while let Some(p) = self.fit_step()? {
+            ran = true;
+            progress(p);
+        }
+        Ok(ran.then(|| self.fit_report()).flatten())
     }
 
     /// Fails unless the composite's motion has every frame of `frames` (the

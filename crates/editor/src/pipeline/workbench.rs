@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use super::composer::{Composer, Painter};
+use super::composer::{Composer, FitProgress, Painter};
 use super::lod::{CutSummary, LodScene};
 use super::subject::ViewedScene;
 use crate::compose::engine::Engine;
@@ -27,6 +27,7 @@ use crate::render::settings::RenderSettings;
 use crate::render::Backend;
 use crate::scene::clean::{judge, keep, CleanOptions};
 use crate::scene::splats::SplatScene;
+use crate::train::seam_fit::SeamFit;
 
 /// Debug view toggles.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -183,6 +184,44 @@ impl Workbench {
         }
     }
 
+    /// Brings the composite up to date with `recipe` and runs the seam fit
+    /// it asks for to the end, so what is drawn next is the finished
+    /// composite (stills, exports, a study's avatars). Nothing for a scene.
+    pub fn settle(&mut self, recipe: &Recipe) -> Result<()> {
+        if let Content::Composite(composer) = &mut self.content {
+            composer.update(recipe)?;
+            composer.finish_fit(&mut |_| {})?;
+        }
+        Ok(())
+    }
+
+    /// How a recipe's seam fit runs from now on (see
+    /// [`Composer::set_fit_options`]).
+    pub fn set_fit_options(&mut self, options: SeamFit) {
+        if let Content::Composite(composer) = &mut self.content {
+            composer.set_fit_options(options);
+        }
+    }
+
+    /// How far the composite's seam fit is while one is pending (`None`:
+    /// none asked for, or it is done).
+    pub fn fit_progress(&self) -> Option<FitProgress> {
+        match &self.content {
+            Content::Composite(composer) => composer.fit_progress(),
+            Content::Scene(_) => None,
+        }
+    }
+
+    /// Does one unit of the composite's pending seam fit (see
+    /// [`Composer::fit_step`]); `None` when none is pending. The editor's
+    /// render worker calls it while no frame is waiting.
+    pub fn fit_step(&mut self) -> Result<Option<FitProgress>> {
+        match &mut self.content {
+            Content::Composite(composer) => composer.fit_step(),
+            Content::Scene(_) => Ok(None),
+        }
+    }
+
     /// Renders a request.
     pub fn render(&mut self, request: &FrameRequest) -> Result<FrameResult> {
         let settings = settings_for(request);
@@ -297,6 +336,8 @@ impl Workbench {
         match &mut self.content {
             Content::Composite(composer) => {
                 composer.update(recipe)?;
+                // A file holds the composite the recipe makes, fit included.
+                composer.finish_fit(&mut |_| {})?;
                 let scene = composer.scene();
                 crate::io::splat::write_scene(path, &scene)?;
                 Ok(scene.len())
@@ -342,6 +383,7 @@ impl Workbench {
             exact: true,
             ..request.clone()
         };
+        self.settle(&still.recipe)?;
         let frame = self.render(&still)?;
         frame.image.save_png(path)?;
         Ok(frame.image)

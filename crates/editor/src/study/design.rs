@@ -19,7 +19,7 @@
 //! [[category]]
 //! name = "edit_smooth"
 //! database = { db = "builtin", gaussians_per_avatar = 20000 }
-//! post = { smoothing = "thesis" }
+//! post = { smoothing = "thesis" } # or a preset: "off", "thesis", "ours"
 //! recipes = ["random"]           # recipe files, or folders of them
 //!
 //! [[category]]
@@ -36,7 +36,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::compose::composition::Attributes;
-use crate::compose::recipe::{PostProcess, Recipe};
+use crate::compose::recipe::{PostPreset, PostProcess, Recipe};
 use crate::error::{Error, Result};
 use crate::pipeline::DatabaseSpec;
 
@@ -125,7 +125,7 @@ struct CategorySpec {
     name: String,
     #[serde(default)]
     database: DatabaseSpec,
-    #[serde(default)]
+    #[serde(default, deserialize_with = "post_spec")]
     post: PostProcess,
     #[serde(default)]
     recipes: Vec<PathBuf>,
@@ -144,6 +144,38 @@ struct StudySpec {
     display: Display,
     #[serde(rename = "category", default)]
     categories: Vec<CategorySpec>,
+}
+
+/// A category's `post`: a preset's name ("off", "thesis", "ours": what the
+/// editor starts from and `bench composites --pipeline` names) or a table
+/// of options as a recipe's `[post]`.
+fn post_spec<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<PostProcess, D::Error> {
+    struct PostVisitor;
+    impl<'de> serde::de::Visitor<'de> for PostVisitor {
+        type Value = PostProcess;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str(
+                "a preset (\"off\", \"thesis\" or \"ours\") or a table of post-processing options",
+            )
+        }
+        fn visit_str<E: serde::de::Error>(self, name: &str) -> std::result::Result<PostProcess, E> {
+            PostPreset::from_name(name)
+                .map(PostPreset::post)
+                .ok_or_else(|| {
+                    E::custom(format!(
+                        "unknown preset '{}' (give \"off\", \"thesis\" or \"ours\")",
+                        crate::text::printable(name)
+                    ))
+                })
+        }
+        fn visit_map<M: serde::de::MapAccess<'de>>(
+            self,
+            map: M,
+        ) -> std::result::Result<PostProcess, M::Error> {
+            PostProcess::deserialize(serde::de::value::MapAccessDeserializer::new(map))
+        }
+    }
+    d.deserialize_any(PostVisitor)
 }
 
 fn default_seed() -> u64 {

@@ -29,7 +29,8 @@ use crate::avatar::database::Database;
 use crate::avatar::synthetic::look_index;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
 use crate::compose::recipe::{
-    AnimationMode, ColourCorrection, PostProcess, Recipe, ResolvedRecipe, SkinSource, Smoothing,
+    AnimationMode, ColourCorrection, Fit, PostProcess, Recipe, ResolvedRecipe, SkinSource,
+    Smoothing,
 };
 use crate::error::{Error, Result};
 use crate::model::head::{HeadModel, Joint, Pose};
@@ -363,6 +364,8 @@ fn steps(recipe: &Recipe) -> Vec<(&'static str, Recipe)> {
         shading: recipe.post.shading,
         // The base's skin is part of matching skin, the +colour step.
         skin: SkinSource::Source,
+        // The seam fit is the decomposition's fifth step, not part of these.
+        fit: Fit::Off,
     };
     let mut shape = recipe.clone();
     shape.post = swap.post;
@@ -606,7 +609,7 @@ pub fn decomposition(engine: &Engine, recipe: &Recipe) -> Result<Vec<(&'static s
 
 /// `composite` with its seams fitted (method §7.12).
 pub fn seam_fitted(engine: &Engine, composite: &Composite, fit: &SeamFit) -> Result<Composite> {
-    let (gaussians, _) = fit_seams(engine, composite, fit, &mut |_| {})?;
+    let (gaussians, _) = fit_seams(engine, composite, fit, &mut |_, _| {})?;
     let mut fitted = composite.clone();
     fitted.gaussians = gaussians;
     Ok(fitted)

@@ -15,6 +15,8 @@
 //! fit changes what a Gaussian shows, not where it sits, so animation and
 //! the region membership are untouched.
 
+use std::sync::Arc;
+
 use crate::avatar::gaussians::GaussianSet;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
 use crate::compose::recipe::AnimationMode;
@@ -80,7 +82,7 @@ pub struct FitReport {
 struct View {
     camera: TrainCamera,
     /// The composite posed for this view.
-    posed: std::rc::Rc<PosedMesh>,
+    posed: Arc<PosedMesh>,
     /// Per pixel: the blended target (RGB), meaningful where `head` is set.
     goal: Vec<f64>,
     /// Pixels that show the composite's surface.
@@ -153,71 +155,6 @@ fn draw(model: &Trainable, posed: &PosedMesh, camera: &TrainCamera) -> Result<Ve
     Ok(render.image().to_vec())
 }
 
-/// The rig's views with their blended targets: per pixel, the render of the
-/// head wholly from the source the surface point wears, cross-faded towards
-/// the nearest other source's by the seam weight there.
-fn views(
-    engine: &Engine,
-    composite: &Composite,
-    field: &SeamField,
-    looks: &[u32],
-    options: &SeamFit,
-) -> Result<Vec<View>> {
-    let model = &engine.database().model;
-    // Per source shown: the head wholly from it, as the recipe would make it.
-    let wholes: Vec<(Trainable, Composite)> = field
-        .sources()
-        .iter()
-        .map(|&s| {
-            let mut recipe = composite.recipe.clone();
-            recipe.gaussians = [s as usize; Group::COUNT];
-            let whole = engine.compose(&recipe);
-            (drawable(&whole.gaussians), whole)
-        })
-        .collect();
-    let (cameras, _) = rig(options.cameras, false, [options.size; 2]);
-    let mut out = Vec::new();
-    for pose in rig_poses() {
-        let posed_composite = std::rc::Rc::new(posed(engine, composite, &pose));
-        let posed_wholes: Vec<PosedMesh> = wholes
-            .iter()
-            .map(|(_, whole)| posed(engine, whole, &pose))
-            .collect();
-        for camera in &cameras {
-            let images: Vec<Vec<f64>> = wholes
-                .iter()
-                .zip(&posed_wholes)
-                .map(|((m, _), p)| draw(m, p, camera))
-                .collect::<Result<_>>()?;
-            let of = |s: u32| {
-                let k = field.sources().binary_search(&s).unwrap_or(0);
-                &images[k]
-            };
-            let hits = rasterize(&posed_composite.vertices, &model.triangles, camera);
-            let mut goal = vec![0.0; 3 * hits.len()];
-            let mut head = vec![false; hits.len()];
-            for (p, hit) in hits.iter().enumerate() {
-                let Some((tri, bary, _)) = hit else { continue };
-                let own = looks[*tri as usize];
-                let (other, w) = field
-                    .blend_at(model.triangles[*tri as usize], *bary, own)
-                    .map_or((own, 0.0), |b| (b.other, f64::from(b.weight)));
-                head[p] = true;
-                for c in 0..3 {
-                    goal[3 * p + c] = (1.0 - w) * of(own)[3 * p + c] + w * of(other)[3 * p + c];
-                }
-            }
-            out.push(View {
-                camera: *camera,
-                posed: posed_composite.clone(),
-                goal,
-                head,
-            });
-        }
-    }
-    Ok(out)
-}
-
 /// Squared error per channel against a view's target, summed over its head
 /// pixels, with ∂(mean)/∂image for `count` pixels over all views.
 fn error(image: &[f64], view: &View, count: f64) -> (f64, Vec<f64>) {
@@ -236,72 +173,229 @@ fn error(image: &[f64], view: &View, count: f64) -> (f64, Vec<f64>) {
     (sum, d)
 }
 
-fn mean_error(model: &Trainable, views: &[View]) -> Result<f64> {
-    let (mut sum, mut count) = (0.0, 0usize);
-    for view in views {
-        sum += error(&draw(model, &view.posed, &view.camera)?, view, 1.0).0;
-        count += view.head.iter().filter(|&&h| h).count();
-    }
-    Ok(sum / (3 * count.max(1)) as f64)
+/// A whole head from one source, as the recipe would make it, ready to draw.
+struct Whole {
+    drawable: Trainable,
+    composite: Composite,
 }
 
-/// The composite's Gaussians with those on a seam fitted (see the module
-/// documentation); unchanged where the composite shows one source.
-/// `progress` hears the steps done: 0 once the targets are drawn, then
-/// after each step.
-pub fn fit_seams(
-    engine: &Engine,
-    composite: &Composite,
-    options: &SeamFit,
-    progress: &mut dyn FnMut(usize),
-) -> Result<(GaussianSet, FitReport)> {
-    let model = &engine.database().model;
-    let looks = looks(model, composite);
-    let field = SeamField::new(model, &looks);
-    let mut trainable = drawable(&composite.gaussians);
-    // Beside another source, and drawable: a hidden Gaussian stays as it came.
-    let on_seam: Vec<bool> = composite
-        .gaussians
-        .binding
-        .iter()
-        .zip(&trainable.opacity_logit)
-        .map(|(&t, &opacity)| {
-            let tri = model.triangles[t as usize];
-            opacity.is_finite()
-                && field
-                    .blend_at(tri, [1.0 / 3.0; 3], looks[t as usize])
-                    .is_some()
-        })
-        .collect();
-    let fitted = on_seam.iter().filter(|&&s| s).count();
-    if fitted == 0 || options.iterations == 0 || options.cameras == 0 {
-        return Ok((composite.gaussians.clone(), FitReport::default()));
+/// The composite and the wholes posed at one of the rig's poses.
+struct PosedRig {
+    composite: Arc<PosedMesh>,
+    wholes: Vec<PosedMesh>,
+}
+
+/// A seam fit in progress, one unit of work at a time, so that a caller
+/// that must stay responsive (the editor's render worker) can interleave it
+/// with other work, see how far it is, and drop it when the composite
+/// changes. The units: compose each source's whole head, pose the rig's two
+/// poses, draw each view's target (and measure the composite there), take
+/// each Adam step, and measure each view again. [`fit_seams`] runs them all.
+///
+/// Each call takes the engine and the composite the fitter was made for;
+/// the fitter keeps only what it computed from them.
+pub struct SeamFitter {
+    options: SeamFit,
+    looks: Vec<u32>,
+    field: SeamField,
+    on_seam: Vec<bool>,
+    fitted: usize,
+    trainable: Trainable,
+    wholes: Vec<Whole>,
+    posed: Vec<PosedRig>,
+    cameras: Vec<TrainCamera>,
+    views: Vec<View>,
+    sh_steps: AdamGroup,
+    opacity_steps: AdamGroup,
+    rasterizer: Rasterizer,
+    /// Squared error and pixels over the views, before and after.
+    before: (f64, usize),
+    after: (f64, usize),
+    done: usize,
+}
+
+impl SeamFitter {
+    /// A fit of `composite`'s seams; nothing is drawn yet.
+    pub fn new(engine: &Engine, composite: &Composite, options: &SeamFit) -> SeamFitter {
+        let model = &engine.database().model;
+        let looks = looks(model, composite);
+        let field = SeamField::new(model, &looks);
+        let trainable = drawable(&composite.gaussians);
+        // Beside another source, and drawable: a hidden Gaussian stays as it came.
+        let on_seam: Vec<bool> = composite
+            .gaussians
+            .binding
+            .iter()
+            .zip(&trainable.opacity_logit)
+            .map(|(&t, &opacity)| {
+                let tri = model.triangles[t as usize];
+                opacity.is_finite()
+                    && field
+                        .blend_at(tri, [1.0 / 3.0; 3], looks[t as usize])
+                        .is_some()
+            })
+            .collect();
+        let fitted = on_seam.iter().filter(|&&s| s).count();
+        let (cameras, _) = rig(options.cameras, false, [options.size; 2]);
+        let n = trainable.len();
+        SeamFitter {
+            options: *options,
+            looks,
+            field,
+            on_seam,
+            fitted,
+            trainable,
+            wholes: Vec::new(),
+            posed: Vec::new(),
+            cameras,
+            views: Vec::new(),
+            sh_steps: AdamGroup::new(LR_DC, SH_STRIDE, n),
+            opacity_steps: AdamGroup::new(LR_OPACITY, 1, n),
+            rasterizer: Rasterizer::Cpu,
+            before: (0.0, 0),
+            after: (0.0, 0),
+            done: 0,
+        }
     }
-    let views = views(engine, composite, &field, &looks, options)?;
-    let mse_before = mean_error(&trainable, &views)?;
-    progress(0);
-    let per_view = views
-        .iter()
-        .map(|v| v.head.iter().filter(|&&h| h).count())
-        .sum::<usize>() as f64
-        / views.len() as f64;
-    let n = trainable.len();
-    let mut sh_steps = AdamGroup::new(LR_DC, SH_STRIDE, n);
-    let mut opacity_steps = AdamGroup::new(LR_OPACITY, 1, n);
-    let mut rasterizer = Rasterizer::Cpu;
-    for step in 0..options.iterations {
-        let view = &views[step % views.len()];
+
+    /// Nothing to fit: no Gaussian on a seam, no steps or no cameras.
+    fn idle(&self) -> bool {
+        self.fitted == 0 || self.options.iterations == 0 || self.options.cameras == 0
+    }
+
+    fn view_count(&self) -> usize {
+        rig_poses().len() * self.cameras.len()
+    }
+
+    /// Units of work in all.
+    pub fn total(&self) -> usize {
+        if self.idle() {
+            return 0;
+        }
+        self.field.sources().len()
+            + rig_poses().len()
+            + 2 * self.view_count()
+            + self.options.iterations
+    }
+
+    /// Units of work done.
+    pub fn done(&self) -> usize {
+        self.done
+    }
+
+    /// Every unit done.
+    pub fn finished(&self) -> bool {
+        self.done >= self.total()
+    }
+
+    /// Does the next unit of work (nothing once finished).
+    pub fn step(&mut self, engine: &Engine, composite: &Composite) -> Result<()> {
+        if self.finished() {
+            return Ok(());
+        }
+        let sources = self.field.sources().len();
+        let poses = rig_poses().len();
+        let views = self.view_count();
+        let unit = self.done;
+        if unit < sources {
+            let mut recipe = composite.recipe.clone();
+            recipe.gaussians = [self.field.sources()[unit] as usize; Group::COUNT];
+            let whole = engine.compose(&recipe);
+            self.wholes.push(Whole {
+                drawable: drawable(&whole.gaussians),
+                composite: whole,
+            });
+        } else if unit < sources + poses {
+            let pose = rig_poses()[unit - sources];
+            self.posed.push(PosedRig {
+                composite: Arc::new(posed(engine, composite, &pose)),
+                wholes: self
+                    .wholes
+                    .iter()
+                    .map(|w| posed(engine, &w.composite, &pose))
+                    .collect(),
+            });
+        } else if unit < sources + poses + views {
+            let view = self.target(&engine.database().model, unit - sources - poses)?;
+            self.before = add(self.before, self.measure(&view)?);
+            self.views.push(view);
+            if self.views.len() == views {
+                // The targets are drawn: the wholes are no longer needed.
+                self.wholes = Vec::new();
+                self.posed = Vec::new();
+            }
+        } else if unit < sources + poses + views + self.options.iterations {
+            self.adam_step(unit - sources - poses - views)?;
+        } else {
+            let view = &self.views[unit - sources - poses - views - self.options.iterations];
+            self.after = add(self.after, self.measure(view)?);
+        }
+        self.done += 1;
+        Ok(())
+    }
+
+    /// View `k` of the rig with its blended target: per pixel, the render of
+    /// the head wholly from the source the surface point wears, cross-faded
+    /// towards the nearest other source's by the seam weight there.
+    fn target(&self, model: &HeadModel, k: usize) -> Result<View> {
+        let rig = &self.posed[k / self.cameras.len()];
+        let camera = &self.cameras[k % self.cameras.len()];
+        let images: Vec<Vec<f64>> = self
+            .wholes
+            .iter()
+            .zip(&rig.wholes)
+            .map(|(w, p)| draw(&w.drawable, p, camera))
+            .collect::<Result<_>>()?;
+        let of = |s: u32| {
+            let k = self.field.sources().binary_search(&s).unwrap_or(0);
+            &images[k]
+        };
+        let hits = rasterize(&rig.composite.vertices, &model.triangles, camera);
+        let mut goal = vec![0.0; 3 * hits.len()];
+        let mut head = vec![false; hits.len()];
+        for (p, hit) in hits.iter().enumerate() {
+            let Some((tri, bary, _)) = hit else { continue };
+            let own = self.looks[*tri as usize];
+            let (other, w) = self
+                .field
+                .blend_at(model.triangles[*tri as usize], *bary, own)
+                .map_or((own, 0.0), |b| (b.other, f64::from(b.weight)));
+            head[p] = true;
+            for c in 0..3 {
+                goal[3 * p + c] = (1.0 - w) * of(own)[3 * p + c] + w * of(other)[3 * p + c];
+            }
+        }
+        Ok(View {
+            camera: *camera,
+            posed: rig.composite.clone(),
+            goal,
+            head,
+        })
+    }
+
+    /// Squared error of the Gaussians as they are against `view`, and its
+    /// head pixels.
+    fn measure(&self, view: &View) -> Result<(f64, usize)> {
+        let image = draw(&self.trainable, &view.posed, &view.camera)?;
+        let pixels = view.head.iter().filter(|&&h| h).count();
+        Ok((error(&image, view, 1.0).0, pixels))
+    }
+
+    /// Adam step `k`, on view `k` round the rig.
+    fn adam_step(&mut self, k: usize) -> Result<()> {
+        let view = &self.views[k % self.views.len()];
+        let per_view = self.before.1 as f64 / self.views.len() as f64;
         let render = Render::new(
-            &trainable,
+            &self.trainable,
             &view.posed.frames,
             &view.camera,
             [0.0; 3],
             &Obscurer::None,
-            &mut rasterizer,
+            &mut self.rasterizer,
         )?;
         let (_, d_image) = error(render.image(), view, 3.0 * per_view.max(1.0));
-        let mut grads = render.backward(&trainable, &d_image, &mut rasterizer)?;
-        for (i, &seam) in on_seam.iter().enumerate() {
+        let mut grads = render.backward(&self.trainable, &d_image, &mut self.rasterizer)?;
+        for (i, &seam) in self.on_seam.iter().enumerate() {
             let sh = &mut grads.sh[i * SH_STRIDE..(i + 1) * SH_STRIDE];
             if seam {
                 sh[3..].iter_mut().for_each(|g| *g *= REST_FACTOR);
@@ -311,26 +405,58 @@ pub fn fit_seams(
                 grads.opacity_logit[i] = 0.0;
             }
         }
-        sh_steps.step(&mut trainable.sh, &grads.sh);
-        opacity_steps.step(&mut trainable.opacity_logit, &grads.opacity_logit);
-        progress(step + 1);
+        self.sh_steps.step(&mut self.trainable.sh, &grads.sh);
+        self.opacity_steps
+            .step(&mut self.trainable.opacity_logit, &grads.opacity_logit);
+        Ok(())
     }
-    let mse_after = mean_error(&trainable, &views)?;
-    let mut out = composite.gaussians.clone();
-    let stride = out.sh_stride();
-    for i in (0..n).filter(|&i| on_seam[i]) {
-        out.opacity_logit[i] = trainable.opacity_logit[i] as f32;
-        for k in 0..stride {
-            out.sh[i * stride + k] = trainable.sh[i * SH_STRIDE + k] as f32;
+
+    /// `composite`'s Gaussians with the seam Gaussians as fitted so far, and
+    /// what the fit did (the error after is over the views measured again
+    /// so far: complete once [`SeamFitter::finished`]).
+    pub fn result(&self, composite: &Composite) -> (GaussianSet, FitReport) {
+        if self.idle() {
+            return (composite.gaussians.clone(), FitReport::default());
         }
+        let mut out = composite.gaussians.clone();
+        let stride = out.sh_stride();
+        for i in (0..out.len()).filter(|&i| self.on_seam[i]) {
+            out.opacity_logit[i] = self.trainable.opacity_logit[i] as f32;
+            for k in 0..stride {
+                out.sh[i * stride + k] = self.trainable.sh[i * SH_STRIDE + k] as f32;
+            }
+        }
+        let mean = |(sum, pixels): (f64, usize)| sum / (3 * pixels.max(1)) as f64;
+        (
+            out,
+            FitReport {
+                fitted: self.fitted,
+                views: self.views.len(),
+                mse_before: mean(self.before),
+                mse_after: mean(self.after),
+            },
+        )
     }
-    Ok((
-        out,
-        FitReport {
-            fitted,
-            views: views.len(),
-            mse_before,
-            mse_after,
-        },
-    ))
+}
+
+fn add(a: (f64, usize), b: (f64, usize)) -> (f64, usize) {
+    (a.0 + b.0, a.1 + b.1)
+}
+
+/// The composite's Gaussians with those on a seam fitted (see the module
+/// documentation); unchanged where the composite shows one source.
+/// `progress` hears the units of work done and their total after each
+/// (see [`SeamFitter`]).
+pub fn fit_seams(
+    engine: &Engine,
+    composite: &Composite,
+    options: &SeamFit,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(GaussianSet, FitReport)> {
+    let mut fitter = SeamFitter::new(engine, composite, options);
+    while !fitter.finished() {
+        fitter.step(engine, composite)?;
+        progress(fitter.done(), fitter.total());
+    }
+    Ok(fitter.result(composite))
 }
