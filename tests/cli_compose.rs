@@ -123,6 +123,49 @@ fn export_with_a_seam_fit_changes_only_colours_and_opacities() {
         .all(|x| x.is_finite()));
 }
 
+/// A recipe's `[post] fit = "seams"` runs in `compose` (and `export`,
+/// `render`) before the composite is described or written; `--seam-fit 0`
+/// turns it off and gives back the unfitted composite exactly.
+#[test]
+fn a_recipes_seam_fit_runs_unless_turned_off() {
+    let text = std::fs::read_to_string("recipes/three-sources.toml")
+        .unwrap()
+        .replace(
+            "colour = \"skin\"\n",
+            "colour = \"skin\"\nfit = \"seams\"\n",
+        );
+    let recipe = std::env::temp_dir().join(format!("visage-fit-{}.toml", std::process::id()));
+    std::fs::write(&recipe, text).unwrap();
+    let path = recipe.to_str().unwrap();
+    let compose = |extra: &[&str]| {
+        let mut args = vec!["compose", "--recipe", path, "--json"];
+        args.extend(extra);
+        args.extend(SMALL);
+        let out = visage(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    let plain = compose_json("recipes/three-sources.toml");
+    assert_eq!(plain["fit"], "off");
+    assert!(plain["seam_fit"].is_null());
+    let fitted = compose(&["--seam-fit", "5", "--seam-fit-size", "32"]);
+    assert_eq!(fitted["fit"], "seams");
+    assert!(
+        fitted["seam_fit"]["fitted"].as_u64().unwrap() > 0,
+        "{}",
+        fitted["seam_fit"]
+    );
+    assert_ne!(fitted["composite_hash"], plain["composite_hash"]);
+    let off = compose(&["--seam-fit", "0"]);
+    assert_eq!(off["fit"], "off");
+    assert_eq!(off["composite_hash"], plain["composite_hash"]);
+    std::fs::remove_file(&recipe).ok();
+}
+
 #[test]
 fn bad_recipes_fail_with_one_line_and_exit_2() {
     let dir = std::env::temp_dir().join(format!("visage-bad-recipes-{}", std::process::id()));

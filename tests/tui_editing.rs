@@ -480,3 +480,39 @@ fn the_viewer_opens_captures_upright_flips_and_orbits_what_it_looks_at() {
     tmux.keys(&["q"]);
     assert_eq!(exit_code(&status), "EXIT=0");
 }
+
+/// The seam fit of a new session's "ours" post-processing runs in the
+/// background after an edit: the post panel shows its progress while the
+/// editor keeps answering, the status line says when it is done, and
+/// `fit off` lists the options with the fit off.
+#[test]
+fn the_seam_fit_runs_in_the_background_and_can_be_turned_off() {
+    let home = home("fit");
+    let status = temp("fit-status");
+    std::fs::remove_file(&status).ok();
+    let tmux = Tmux::new("fit");
+    tmux.start_sized(&visage_line(&home, DB, &status), 80, 24);
+    tmux.wait_for("the editor", LONG, editor_ready);
+    tmux.keys(&[":"]);
+    tmux.type_text("set-gaussians nose bram");
+    tmux.keys(&["Enter"]);
+    tmux.wait_for("the fit under way", LONG, |s| {
+        s.contains("post ours (fitting seams")
+    });
+    // The editor answers while the fit runs.
+    tmux.keys(&["Down"]);
+    tmux.wait_for("the next group", LONG, |s| s.contains("▶eyes"));
+    tmux.wait_for("the fit done", LONG, |s| {
+        s.contains("seam fit done") && s.contains("post ours") && !s.contains("fitting")
+    });
+    tmux.keys(&[":"]);
+    tmux.type_text("fit off");
+    tmux.keys(&["Enter"]);
+    tmux.wait_for("the options listed", LONG, |s| {
+        s.contains("shading relit") && s.contains("fit off")
+    });
+    tmux.keys(&["q"]);
+    tmux.wait_for("the question", LONG, |s| s.contains("quit?"));
+    tmux.keys(&["q"]);
+    assert_eq!(exit_code(&status), "EXIT=0");
+}
