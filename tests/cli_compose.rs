@@ -92,9 +92,10 @@ fn export_ply_writes_every_gaussian_of_the_frame() {
 }
 
 /// `export --seam-fit` writes the same Gaussians in the same places with
-/// the seams' colours and opacities fitted (method §7.12).
+/// the seams' colours, opacities and (a little) scales fitted (method
+/// §7.12).
 #[test]
-fn export_with_a_seam_fit_changes_only_colours_and_opacities() {
+fn export_with_a_seam_fit_changes_only_colours_opacities_and_scales() {
     let (plain, _) = export_ply(&[]);
     let (fitted, said) = export_ply(&["--seam-fit", "20", "--seam-fit-size", "64"]);
     assert!(
@@ -103,7 +104,12 @@ fn export_with_a_seam_fit_changes_only_colours_and_opacities() {
     );
     assert_eq!(plain.len(), fitted.len());
     assert_eq!(plain.position, fitted.position);
-    assert_eq!(plain.scale, fitted.scale);
+    // Scales may move a little (the fit's reach), never far.
+    assert!(plain.scale.iter().zip(&fitted.scale).all(|(a, b)| a
+        .to_array()
+        .iter()
+        .zip(b.to_array())
+        .all(|(x, y)| (x.ln() - y.ln()).abs() < 1.0)));
     assert_eq!(plain.rotation, fitted.rotation);
     let stride = plain.sh.len() / plain.len();
     let recoloured = (0..plain.len())

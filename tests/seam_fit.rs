@@ -1,6 +1,7 @@
-//! The seam fit (method §7.12): a composite's Gaussians beside a change of
-//! source fitted, colour and opacity only, to what the sources themselves
-//! draw there; every other Gaussian and every Gaussian's place untouched.
+//! The seam fit (method §7.12): a composite's Gaussians near a change of
+//! source fitted — colour, opacity and a little of their scale — to what the
+//! sources themselves draw there; every other Gaussian and every Gaussian's
+//! place untouched.
 
 use std::sync::OnceLock;
 
@@ -63,6 +64,7 @@ fn changed(a: &GaussianSet, b: &GaussianSet) -> Vec<usize> {
     (0..a.len())
         .filter(|&i| {
             a.opacity_logit[i].to_bits() != b.opacity_logit[i].to_bits()
+                || a.log_scale[i] != b.log_scale[i]
                 || a.sh[i * stride..(i + 1) * stride]
                     .iter()
                     .zip(&b.sh[i * stride..(i + 1) * stride])
@@ -72,10 +74,7 @@ fn changed(a: &GaussianSet, b: &GaussianSet) -> Vec<usize> {
 }
 
 fn same_places(a: &GaussianSet, b: &GaussianSet) -> bool {
-    a.binding == b.binding
-        && a.position == b.position
-        && a.rotation == b.rotation
-        && a.log_scale == b.log_scale
+    a.binding == b.binding && a.position == b.position && a.rotation == b.rotation
 }
 
 #[test]
@@ -93,6 +92,18 @@ fn a_fit_draws_the_seams_closer_to_the_sources_and_moves_nothing_else() {
         "no closer to the sources' own seams: {report:?}"
     );
     assert!(same_places(&c.gaussians, &fitted), "a fit moved a Gaussian");
+    // Scales move by at most Adam's step a step: the reach changes, a little.
+    let largest = (0..fitted.len())
+        .map(|i| {
+            (fitted.log_scale[i] - c.gaussians.log_scale[i])
+                .abs()
+                .max_element()
+        })
+        .fold(0.0f32, f32::max);
+    assert!(
+        largest > 0.0 && largest <= 1.1 * 0.015 * QUICK.iterations as f32,
+        "log scales moved by up to {largest}"
+    );
     let moved = changed(&c.gaussians, &fitted);
     assert!(
         !moved.is_empty() && moved.len() <= report.fitted,

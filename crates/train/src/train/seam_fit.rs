@@ -11,9 +11,10 @@
 //! weight of the surface point the pixel shows (the cross-fade of
 //! [`SeamField`], method §7.8), and fits the composite's seam Gaussians to
 //! the blend with Adam — over a rig of its own cameras at the rest pose,
-//! never over any ground truth. Positions, scales and rotations stay: the
-//! fit changes what a Gaussian shows, not where it sits, so animation and
-//! the region membership are untouched.
+//! never over any ground truth. Positions and rotations stay, and scales
+//! move only a little: the fit changes what a Gaussian shows and how far it
+//! reaches, not where it sits, so animation and the region membership are
+//! untouched.
 
 use std::sync::Arc;
 
@@ -29,7 +30,7 @@ use super::adam::AdamGroup;
 use super::capture::{rasterize, rig};
 use super::holes::Obscurer;
 use super::model::{Render, Trainable, SH_STRIDE};
-use super::project::TrainCamera;
+use super::project::{TrainCamera, GEOMETRY};
 use super::raster::Rasterizer;
 
 /// Learning rate of the SH DC coefficients (3DGS's feature rate).
@@ -38,6 +39,12 @@ const LR_DC: f64 = 0.0025;
 const REST_FACTOR: f64 = 1.0 / 20.0;
 /// Learning rate of the opacity logits (3DGS's).
 const LR_OPACITY: f64 = 0.05;
+/// Learning rate of the log scales: three times 3DGS's 0.005, which gained
+/// two thirds as much (method §7.12).
+const LR_SCALE: f64 = 0.015;
+/// Rings of triangles round those within the seam field whose Gaussians are
+/// fitted too: a Gaussian a triangle or two away still reaches into the seam.
+const SEAM_RINGS: usize = 2;
 /// The jaw's opening in the rig's second pose, radians.
 const OPEN_JAW_RAD: f32 = 0.12;
 
@@ -173,6 +180,28 @@ fn error(image: &[f64], view: &View, count: f64) -> (f64, Vec<f64>) {
     (sum, d)
 }
 
+/// Per triangle: whether its Gaussians are fitted — its centre lies within
+/// the seam field of another source, or it is within [`SEAM_RINGS`] rings of
+/// one that does.
+fn near_seams(model: &HeadModel, field: &SeamField, looks: &[u32]) -> Vec<bool> {
+    let mut near: Vec<bool> = model
+        .triangles
+        .iter()
+        .zip(looks)
+        .map(|(&tri, &own)| field.blend_at(tri, [1.0 / 3.0; 3], own).is_some())
+        .collect();
+    for _ in 0..SEAM_RINGS {
+        let mut touched = vec![false; model.vertex_count()];
+        for (tri, _) in model.triangles.iter().zip(&near).filter(|(_, &n)| n) {
+            tri.iter().for_each(|&v| touched[v as usize] = true);
+        }
+        for (tri, n) in model.triangles.iter().zip(near.iter_mut()) {
+            *n |= tri.iter().any(|&v| touched[v as usize]);
+        }
+    }
+    near
+}
+
 /// A whole head from one source, as the recipe would make it, ready to draw.
 struct Whole {
     drawable: Trainable,
@@ -207,6 +236,7 @@ pub struct SeamFitter {
     views: Vec<View>,
     sh_steps: AdamGroup,
     opacity_steps: AdamGroup,
+    scale_steps: AdamGroup,
     rasterizer: Rasterizer,
     /// Squared error and pixels over the views, before and after.
     before: (f64, usize),
@@ -221,19 +251,14 @@ impl SeamFitter {
         let looks = looks(model, composite);
         let field = SeamField::new(model, &looks);
         let trainable = drawable(&composite.gaussians);
-        // Beside another source, and drawable: a hidden Gaussian stays as it came.
+        let near = near_seams(model, &field, &looks);
+        // Near a seam, and drawable: a hidden Gaussian stays as it came.
         let on_seam: Vec<bool> = composite
             .gaussians
             .binding
             .iter()
             .zip(&trainable.opacity_logit)
-            .map(|(&t, &opacity)| {
-                let tri = model.triangles[t as usize];
-                opacity.is_finite()
-                    && field
-                        .blend_at(tri, [1.0 / 3.0; 3], looks[t as usize])
-                        .is_some()
-            })
+            .map(|(&t, &opacity)| opacity.is_finite() && near[t as usize])
             .collect();
         let fitted = on_seam.iter().filter(|&&s| s).count();
         let (cameras, _) = rig(options.cameras, false, [options.size; 2]);
@@ -251,6 +276,7 @@ impl SeamFitter {
             views: Vec::new(),
             sh_steps: AdamGroup::new(LR_DC, SH_STRIDE, n),
             opacity_steps: AdamGroup::new(LR_OPACITY, 1, n),
+            scale_steps: AdamGroup::new(LR_SCALE, 3, n),
             rasterizer: Rasterizer::Cpu,
             before: (0.0, 0),
             after: (0.0, 0),
@@ -408,7 +434,33 @@ impl SeamFitter {
         self.sh_steps.step(&mut self.trainable.sh, &grads.sh);
         self.opacity_steps
             .step(&mut self.trainable.opacity_logit, &grads.opacity_logit);
+        self.step_scales(&grads.geometry);
         Ok(())
+    }
+
+    /// An Adam step on the seam Gaussians' log scales (the geometry
+    /// gradient's entries 3-5); every other Gaussian's gradient is zero.
+    fn step_scales(&mut self, geometry: &[[f64; GEOMETRY]]) {
+        let mut scales: Vec<f64> = self
+            .trainable
+            .geometry
+            .iter()
+            .flat_map(|g| g.log_scale)
+            .collect();
+        let grads: Vec<f64> = geometry
+            .iter()
+            .zip(&self.on_seam)
+            .flat_map(|(g, &seam)| if seam { [g[3], g[4], g[5]] } else { [0.0; 3] })
+            .collect();
+        self.scale_steps.step(&mut scales, &grads);
+        for (g, s) in self
+            .trainable
+            .geometry
+            .iter_mut()
+            .zip(scales.chunks_exact(3))
+        {
+            g.log_scale = [s[0], s[1], s[2]];
+        }
     }
 
     /// `composite`'s Gaussians with the seam Gaussians as fitted so far, and
@@ -422,6 +474,8 @@ impl SeamFitter {
         let stride = out.sh_stride();
         for i in (0..out.len()).filter(|&i| self.on_seam[i]) {
             out.opacity_logit[i] = self.trainable.opacity_logit[i] as f32;
+            out.log_scale[i] =
+                glam::DVec3::from_array(self.trainable.geometry[i].log_scale).as_vec3();
             for k in 0..stride {
                 out.sh[i * stride + k] = self.trainable.sh[i * SH_STRIDE + k] as f32;
             }
