@@ -6,7 +6,12 @@ use common::visage;
 const SMALL: [&str; 2] = ["--gaussians-per-avatar", "11000"];
 
 fn compose_json(recipe: &str) -> serde_json::Value {
+    compose_json_with(recipe, &[])
+}
+
+fn compose_json_with(recipe: &str, extra: &[&str]) -> serde_json::Value {
     let mut args = vec!["compose", "--recipe", recipe, "--json"];
+    args.extend(extra);
     args.extend(SMALL);
     let out = visage(&args);
     assert!(
@@ -143,18 +148,7 @@ fn a_recipes_seam_fit_runs_unless_turned_off() {
     let recipe = std::env::temp_dir().join(format!("visage-fit-{}.toml", std::process::id()));
     std::fs::write(&recipe, text).unwrap();
     let path = recipe.to_str().unwrap();
-    let compose = |extra: &[&str]| {
-        let mut args = vec!["compose", "--recipe", path, "--json"];
-        args.extend(extra);
-        args.extend(SMALL);
-        let out = visage(&args);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
-    };
+    let compose = |extra: &[&str]| compose_json_with(path, extra);
     let plain = compose_json("recipes/three-sources.toml");
     assert_eq!(plain["fit"], "off");
     assert!(plain["seam_fit"].is_null());

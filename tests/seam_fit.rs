@@ -175,6 +175,15 @@ fn a_composer_runs_the_recipes_fit_keeps_it_and_gives_it_back() {
     let composed = composer.composite().gaussians.clone();
     let pending = composer.fit_progress().expect("a fit is pending");
     assert_eq!(pending.done, 0);
+    // A pending fit keeps its progress over a new frame or camera (the
+    // editor draws frames between its units).
+    for _ in 0..3 {
+        composer.fit_step().unwrap();
+    }
+    let mut turned = r.clone();
+    turned.camera.yaw_deg = 30.0;
+    composer.update(&turned).unwrap();
+    assert_eq!(composer.fit_progress().map(|p| p.done), Some(3));
     let generation = composer.generation();
     let mut heard = Vec::new();
     let report = composer
@@ -186,7 +195,7 @@ fn a_composer_runs_the_recipes_fit_keeps_it_and_gives_it_back() {
     assert!(heard
         .iter()
         .enumerate()
-        .all(|(k, &(d, t))| d == k + 1 && t == total));
+        .all(|(k, &(d, t))| d == k + 4 && t == total));
     assert_eq!(composer.fit_progress(), None);
     assert_ne!(composer.generation(), generation, "drawers re-upload");
     let fitted = composer.composite().gaussians.clone();

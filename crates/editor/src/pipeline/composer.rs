@@ -182,10 +182,14 @@ impl Composer {
     /// Puts the engine's own Gaussians back where a fit was shown, and
     /// returns the fitted ones with their report.
     fn unfit(&mut self) -> Option<(GaussianSet, FitReport)> {
+        if !matches!(self.fit, FitState::Fitted { .. }) {
+            // A pending fit keeps its progress.
+            return None;
+        }
         let FitState::Fitted { composed, report } =
             std::mem::replace(&mut self.fit, FitState::None)
         else {
-            return None;
+            unreachable!("matched above");
         };
         let c = self.composite.as_mut().expect("a fit is of a composite");
         Some((std::mem::replace(&mut c.gaussians, composed), report))
