@@ -221,6 +221,20 @@ fn a_composer_runs_the_recipes_fit_keeps_it_and_gives_it_back() {
     assert_eq!(composer.generation(), generation);
     assert!(changed(&fitted, &composer.composite().gaussians).is_empty());
 
+    // Other fit options: the composed Gaussians are shown (drawers
+    // re-upload) until the fit is done again under them.
+    let generation = composer.generation();
+    composer.set_fit_options(SeamFit {
+        iterations: 5,
+        ..QUICK
+    });
+    assert_ne!(composer.generation(), generation);
+    assert!(changed(&composed, &composer.composite().gaussians).is_empty());
+    assert!(composer.fit_progress().is_some());
+    composer.set_fit_options(QUICK);
+    composer.finish_fit(&mut |_| {}).unwrap();
+    assert!(changed(&fitted, &composer.composite().gaussians).is_empty());
+
     // Fit off: the composed Gaussians, bit for bit; on again: fitted again.
     r.post.fit = Fit::Off;
     composer.update(&r).unwrap();

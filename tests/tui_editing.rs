@@ -505,6 +505,20 @@ fn the_seam_fit_runs_in_the_background_and_can_be_turned_off() {
     tmux.wait_for("the fit done", LONG, |s| {
         s.contains("seam fit done") && s.contains("post ours") && !s.contains("fitting")
     });
+    // A snapshot asked during a fit waits for it and shows it done.
+    let still = temp("fit-still.png");
+    std::fs::remove_file(&still).ok();
+    tmux.keys(&[":"]);
+    tmux.type_text("set-gaussians eyes bram");
+    tmux.keys(&["Enter"]);
+    tmux.wait_for("the second fit", LONG, |s| s.contains("fitting seams"));
+    tmux.keys(&[":"]);
+    tmux.type_text(&format!("snapshot {}", still.display()));
+    tmux.keys(&["Enter"]);
+    tmux.wait_for("the still", LONG, |s| {
+        s.contains("wrote") && s.contains("post ours") && !s.contains("fitting")
+    });
+    assert!(still.exists());
     tmux.keys(&[":"]);
     tmux.type_text("fit off");
     tmux.keys(&["Enter"]);

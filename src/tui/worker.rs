@@ -167,7 +167,19 @@ fn work(mut workbench: Workbench, mailbox: &(Mutex<Mailbox>, Condvar), replies: 
         };
         let reply = match job {
             Job::Frame(f) => draw(&mut workbench, f),
-            Job::Task(task) => run_task(&mut workbench, task),
+            Job::Task(task) => {
+                let fitting = workbench.fit_progress().is_some();
+                let reply = run_task(&mut workbench, task);
+                // A still or an export finishes the fit first: say so before
+                // the task's own reply, which the status line shows last.
+                if fitting
+                    && workbench.fit_progress().is_none()
+                    && replies.send(Reply::Fit(None)).is_err()
+                {
+                    return;
+                }
+                reply
+            }
             Job::FitStep => fit_step(&mut workbench),
         };
         if replies.send(reply).is_err() {

@@ -102,7 +102,10 @@ impl Composer {
         if options != self.fit_options {
             self.fit_options = options;
             if !matches!(self.fit, FitState::None) {
-                self.unfit();
+                if self.unfit().is_some() {
+                    // The composed Gaussians are back on show.
+                    self.generation += 1;
+                }
                 self.fit = FitState::Pending(None);
             }
         }
