@@ -71,6 +71,47 @@ fn usage_errors_name_the_argument_and_the_values_allowed() {
     );
 }
 
+/// `--seam-fit-size` where no seam fit runs is a mistake said in one line,
+/// not a size silently ignored.
+#[test]
+fn a_seam_fit_size_without_a_fit_is_refused() {
+    let out = temp("no-fit.ply");
+    let o = out.to_str().unwrap();
+    let recipe = "recipes/three-sources.toml";
+    let says = ["--seam-fit-size", "no [post] fit"];
+    fails(
+        &[
+            "--gaussians-per-avatar",
+            "2000",
+            "export",
+            "--recipe",
+            recipe,
+            "--format",
+            "ply",
+            "--seam-fit-size",
+            "64",
+            "-o",
+            o,
+        ],
+        &says,
+    );
+    fails(
+        &[
+            "--gaussians-per-avatar",
+            "2000",
+            "compose",
+            "--recipe",
+            recipe,
+            "--seam-fit",
+            "0",
+            "--seam-fit-size",
+            "64",
+        ],
+        &says,
+    );
+    assert!(!out.exists(), "nothing written");
+}
+
 #[test]
 fn the_real_problem_comes_before_needs_a_terminal() {
     // The tests run without a terminal: the named file's problem must win.

@@ -34,6 +34,9 @@ pub struct ComposeArgs {
     json: bool,
 }
 
+/// The error for `--seam-fit-size` where no seam fit runs.
+pub(super) const SIZE_WITHOUT_FIT: &str = "--seam-fit-size sizes a seam fit, and none runs: the recipe has no [post] fit = \"seams\" (give --seam-fit STEPS)";
+
 /// The seam fit (method §7.12) of a command that composes a recipe.
 #[derive(Args, Debug, Clone)]
 pub struct FitArgs {
@@ -44,31 +47,36 @@ pub struct FitArgs {
     #[arg(long, value_name = "STEPS")]
     seam_fit: Option<usize>,
     /// The width and height of the seam fit's views, in pixels (the fit
-    /// needs the resolution the composite will be looked at).
-    #[arg(long, value_name = "PX", default_value_t = SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096))]
-    seam_fit_size: u32,
+    /// needs the resolution the composite will be looked at) [default: 256].
+    #[arg(long, value_name = "PX", value_parser = clap::value_parser!(u32).range(16..=4096))]
+    seam_fit_size: Option<u32>,
 }
 
 impl FitArgs {
     /// No fit, whatever the recipe says (benchmarks of drawing speed).
     pub const OFF: FitArgs = FitArgs {
         seam_fit: Some(0),
-        seam_fit_size: 256,
+        seam_fit_size: None,
     };
 
-    /// The recipe with `--seam-fit` applied to its `[post] fit`.
-    fn apply(&self, recipe: &mut Recipe) {
+    /// The recipe with `--seam-fit` applied to its `[post] fit`; a size for
+    /// a fit that will not run is a mistake worth saying.
+    fn apply(&self, recipe: &mut Recipe) -> Result<()> {
         match self.seam_fit {
             Some(0) => recipe.post.fit = Fit::Off,
             Some(_) => recipe.post.fit = Fit::Seams,
             None => {}
         }
+        if self.seam_fit_size.is_some() && recipe.post.fit == Fit::Off {
+            return Err(crate::error::Error::input(SIZE_WITHOUT_FIT));
+        }
+        Ok(())
     }
 
     fn options(&self) -> SeamFit {
         SeamFit {
             iterations: self.seam_fit.unwrap_or(SeamFit::default().iterations),
-            size: self.seam_fit_size,
+            size: self.seam_fit_size.unwrap_or(SeamFit::default().size),
             ..SeamFit::default()
         }
     }
@@ -115,7 +123,7 @@ pub fn build(
     fit: &FitArgs,
 ) -> Result<(Composer, BuildTimings)> {
     let mut recipe = Recipe::load(recipe_path)?;
-    fit.apply(&mut recipe);
+    fit.apply(&mut recipe)?;
     let (mut composer, timings) =
         Composer::build(&db_args.spec(), |_| recipe, frame, Some(recipe_path))?;
     composer.set_fit_options(fit.options());

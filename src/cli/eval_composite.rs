@@ -42,10 +42,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         }
         .map(|iterations| SeamFit {
             iterations,
-            size: args.seam_fit_size,
+            size: args.seam_fit_size.unwrap_or(SeamFit::default().size),
             ..SeamFit::default()
         }),
     };
+    if args.seam_fit_size.is_some() && options.fit.is_none() {
+        return Err(Error::input(super::compose::SIZE_WITHOUT_FIT));
+    }
     let (report, pictures) = evaluate_composite(&trained, &recipe, &dataset, &options)?;
     if let Some(path) = &args.picture {
         let mut images = Vec::new();

@@ -265,9 +265,10 @@ pub struct EvalArgs {
     #[arg(long, value_name = "STEPS", requires = "composite")]
     pub(super) seam_fit: Option<usize>,
     /// With --composite: the width and height of the seam fit's views, in
-    /// pixels (the fit needs the resolution the composite is looked at).
-    #[arg(long, value_name = "PX", default_value_t = crate::train::seam_fit::SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096), requires = "composite")]
-    pub(super) seam_fit_size: u32,
+    /// pixels (the fit needs the resolution the composite is looked at)
+    /// [default: 256].
+    #[arg(long, value_name = "PX", value_parser = clap::value_parser!(u32).range(16..=4096), requires = "composite")]
+    pub(super) seam_fit_size: Option<u32>,
     #[command(flatten)]
     head: HeadArgs,
     /// Side-by-side grid (render | ground truth) of the first views, as PNG.
