@@ -61,6 +61,15 @@ pub struct FitProgress {
     pub total: usize,
 }
 
+impl FitProgress {
+    fn of(fitter: &SeamFitter) -> Self {
+        Self {
+            done: fitter.done(),
+            total: fitter.total(),
+        }
+    }
+}
+
 /// A composite on its engine, kept up to date with a recipe and posed.
 pub struct Composer {
     engine: Engine,
@@ -207,18 +216,14 @@ impl Composer {
         recomposed: bool,
     ) {
         let pending = std::mem::replace(&mut self.fit, FitState::None);
-        if wanted == Fit::Off {
+        if wanted == Fit::Off || recomposed {
             if fitted.is_some() {
                 // The composed Gaussians are back on show.
                 self.generation += 1;
             }
-            return;
-        }
-        if recomposed {
-            if fitted.is_some() {
-                self.generation += 1;
+            if wanted == Fit::Seams {
+                self.fit = FitState::Pending(None);
             }
-            self.fit = FitState::Pending(None);
             return;
         }
         self.fit = match fitted {
@@ -240,13 +245,11 @@ impl Composer {
     /// fit asked for, or it is done).
     pub fn fit_progress(&self) -> Option<FitProgress> {
         match &self.fit {
-            FitState::Pending(fitter) => Some(fitter.as_ref().map_or_else(
-                FitProgress::default,
-                |f| FitProgress {
-                    done: f.done(),
-                    total: f.total(),
-                },
-            )),
+            FitState::Pending(fitter) => Some(
+                fitter
+                    .as_deref()
+                    .map_or_else(FitProgress::default, FitProgress::of),
+            ),
             _ => None,
         }
     }
@@ -274,10 +277,7 @@ impl Composer {
             self.fit = FitState::None;
             return Err(e);
         }
-        let progress = FitProgress {
-            done: f.done(),
-            total: f.total(),
-        };
+        let progress = FitProgress::of(f);
         if f.finished() {
             let (set, report) = f.result(c);
             self.fit = FitState::Fitted {

@@ -333,11 +333,10 @@ impl Workbench {
     /// Writes the current frame as a standard 3DGS PLY (a scene: in the
     /// format the path's extension names).
     pub fn export_ply(&mut self, recipe: &Recipe, path: &Path) -> Result<usize> {
-        match &mut self.content {
+        // A file holds the composite the recipe makes, fit included.
+        self.settle(recipe)?;
+        match &self.content {
             Content::Composite(composer) => {
-                composer.update(recipe)?;
-                // A file holds the composite the recipe makes, fit included.
-                composer.finish_fit(&mut |_| {})?;
                 let scene = composer.scene();
                 crate::io::splat::write_scene(path, &scene)?;
                 Ok(scene.len())
