@@ -160,6 +160,18 @@ fn a_recipes_seam_fit_runs_unless_turned_off() {
         fitted["seam_fit"]
     );
     assert_ne!(fitted["composite_hash"], plain["composite_hash"]);
+    // On the CPU unless asked: the same composite on every machine.
+    assert_eq!(fitted["seam_fit"]["renderer"], "cpu");
+    let on_gpu = compose(&[
+        "--seam-fit",
+        "5",
+        "--seam-fit-size",
+        "32",
+        "--seam-fit-renderer",
+        "gpu",
+    ]);
+    assert_eq!(on_gpu["seam_fit"]["renderer"], "gpu");
+    assert_eq!(on_gpu["seam_fit"]["fitted"], fitted["seam_fit"]["fitted"]);
     let off = compose(&["--seam-fit", "0"]);
     assert_eq!(off["fit"], "off");
     assert_eq!(off["composite_hash"], plain["composite_hash"]);

@@ -74,7 +74,7 @@ fn usage_errors_name_the_argument_and_the_values_allowed() {
 /// `--seam-fit-size` where no seam fit runs is a mistake said in one line,
 /// not a size silently ignored.
 #[test]
-fn a_seam_fit_size_without_a_fit_is_refused() {
+fn a_seam_fit_size_or_renderer_without_a_fit_is_refused() {
     let out = temp("no-fit.ply");
     let o = out.to_str().unwrap();
     let recipe = "recipes/three-sources.toml";
@@ -108,6 +108,18 @@ fn a_seam_fit_size_without_a_fit_is_refused() {
             "64",
         ],
         &says,
+    );
+    fails(
+        &[
+            "--gaussians-per-avatar",
+            "2000",
+            "compose",
+            "--recipe",
+            recipe,
+            "--seam-fit-renderer",
+            "gpu",
+        ],
+        &["--seam-fit-renderer", "no [post] fit"],
     );
     assert!(!out.exists(), "nothing written");
 }

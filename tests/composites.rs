@@ -532,6 +532,17 @@ fn bench_composites_trains_once_and_reports_every_recipe() {
         first["mean"]["ceiling_border_psnr_db"],
         first["recipes"][0]["report"]["ceiling_border"]["psnr_db"]
     );
+    // The band's gap pairs each recipe's band with its own interior.
+    let gaps: Vec<f64> = rows
+        .iter()
+        .filter_map(|r| {
+            let band = r["report"]["border"]["psnr_db"].as_f64()?;
+            Some(r["report"]["interior"]["psnr_db"].as_f64().unwrap() - band)
+        })
+        .collect();
+    assert!(!gaps.is_empty());
+    let gap = first["mean"]["border_gap_db"].as_f64().unwrap();
+    assert!((gap - gaps.iter().sum::<f64>() / gaps.len() as f64).abs() < 1e-9);
     assert!(first["sources"]
         .as_array()
         .unwrap()

@@ -11,6 +11,7 @@ use visage::compose::engine::{Composite, Engine};
 use visage::compose::recipe::{Fit, PostProcess, Recipe};
 use visage::model::builtin::build_head;
 use visage::pipeline::composer::Composer;
+use visage::render::Backend;
 use visage::train::seam_fit::{fit_seams, SeamFit};
 
 fn new_engine() -> Engine {
@@ -36,6 +37,7 @@ const QUICK: SeamFit = SeamFit {
     iterations: 40,
     size: 48,
     cameras: 4,
+    renderer: Backend::Cpu,
 };
 
 fn recipe(groups: &[(&str, usize)]) -> Recipe {
@@ -112,6 +114,43 @@ fn a_fit_draws_the_seams_closer_to_the_sources_and_moves_nothing_else() {
     );
     assert!(fitted.sh.iter().all(|x| x.is_finite()));
     assert!(fitted.opacity_logit.iter().all(|x| x.is_finite()));
+}
+
+#[test]
+fn a_fit_drawn_on_a_gpu_lands_where_the_cpus_does() {
+    let c = composite(&[("face", 1), ("hair", 2)]);
+    let (on_cpu, cpu) = fit_seams(engine(), &c, &QUICK, &mut |_, _| {}).unwrap();
+    let gpu_fit = SeamFit {
+        renderer: Backend::Gpu,
+        ..QUICK
+    };
+    let (on_gpu, gpu) =
+        fit_seams(engine(), &c, &gpu_fit, &mut |_, _| {}).expect("a wgpu adapter (lavapipe in CI)");
+    assert!(gpu.on_gpu && !cpu.on_gpu, "{gpu:?} {cpu:?}");
+    assert_eq!((gpu.fitted, gpu.views), (cpu.fitted, cpu.views));
+    // f32 against f64: the same targets and the same fit, to rounding.
+    let close = |a: f64, b: f64| (a - b).abs() <= 0.02 * b;
+    assert!(
+        close(gpu.mse_before, cpu.mse_before) && close(gpu.mse_after, cpu.mse_after),
+        "gpu {gpu:?} against cpu {cpu:?}"
+    );
+    assert!(same_places(&on_cpu, &on_gpu), "a fit moved a Gaussian");
+    let dc = |set: &GaussianSet| -> Vec<f32> {
+        let stride = set.sh_stride();
+        (0..set.len())
+            .flat_map(|i| set.sh[i * stride..i * stride + 3].to_vec())
+            .collect()
+    };
+    let mean_gap = dc(&on_cpu)
+        .iter()
+        .zip(dc(&on_gpu))
+        .map(|(a, b)| (a - b).abs())
+        .sum::<f32>()
+        / (3 * cpu.fitted) as f32;
+    assert!(
+        mean_gap < 0.01,
+        "DC colours differ by {mean_gap} on average"
+    );
 }
 
 #[test]

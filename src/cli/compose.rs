@@ -13,6 +13,7 @@ use crate::io::avatar::{neutral_offset, write_avatar, AvatarParams, FrameParams}
 use crate::io::ply::write_splat_ply;
 use crate::model::regions::{Group, Region};
 use crate::pipeline::composer::{BuildTimings, Composer};
+use crate::render::Backend;
 use crate::text::printable;
 use crate::train::seam_fit::SeamFit;
 
@@ -35,7 +36,13 @@ pub struct ComposeArgs {
 }
 
 /// The error for `--seam-fit-size` where no seam fit runs.
-pub(super) const SIZE_WITHOUT_FIT: &str = "--seam-fit-size sizes a seam fit, and none runs: the recipe has no [post] fit = \"seams\" (give --seam-fit STEPS)";
+/// The one-line error for a seam-fit option (`--seam-fit-size`,
+/// `--seam-fit-renderer`) where no seam fit runs.
+pub(super) fn without_fit(flag: &str) -> crate::error::Error {
+    crate::error::Error::input(format!(
+        "{flag} sets up a seam fit, and none runs: the recipe has no [post] fit = \"seams\" (give --seam-fit STEPS)"
+    ))
+}
 
 /// The seam fit (method §7.12) of a command that composes a recipe.
 #[derive(Args, Debug, Clone)]
@@ -50,6 +57,11 @@ pub struct FitArgs {
     /// needs the resolution the composite will be looked at) [default: 256].
     #[arg(long, value_name = "PX", value_parser = clap::value_parser!(u32).range(16..=4096))]
     seam_fit_size: Option<u32>,
+    /// What draws the seam fit's views: cpu (the same bits on every
+    /// machine), auto (a hardware GPU when there is one, else the CPU) or
+    /// gpu (any adapter, f32) [default: cpu].
+    #[arg(long, value_name = "RENDERER", value_parser = Backend::parse)]
+    seam_fit_renderer: Option<Backend>,
 }
 
 impl FitArgs {
@@ -57,6 +69,7 @@ impl FitArgs {
     pub const OFF: FitArgs = FitArgs {
         seam_fit: Some(0),
         seam_fit_size: None,
+        seam_fit_renderer: None,
     };
 
     /// The recipe with `--seam-fit` applied to its `[post] fit`; a size for
@@ -67,8 +80,13 @@ impl FitArgs {
             Some(_) => recipe.post.fit = Fit::Seams,
             None => {}
         }
-        if self.seam_fit_size.is_some() && recipe.post.fit == Fit::Off {
-            return Err(crate::error::Error::input(SIZE_WITHOUT_FIT));
+        if recipe.post.fit == Fit::Off {
+            if self.seam_fit_size.is_some() {
+                return Err(without_fit("--seam-fit-size"));
+            }
+            if self.seam_fit_renderer.is_some() {
+                return Err(without_fit("--seam-fit-renderer"));
+            }
         }
         Ok(())
     }
@@ -77,6 +95,9 @@ impl FitArgs {
         SeamFit {
             iterations: self.seam_fit.unwrap_or(SeamFit::default().iterations),
             size: self.seam_fit_size.unwrap_or(SeamFit::default().size),
+            renderer: self
+                .seam_fit_renderer
+                .unwrap_or(SeamFit::default().renderer),
             ..SeamFit::default()
         }
     }
@@ -298,6 +319,7 @@ fn report(composer: &Composer, timings: &BuildTimings, frame: Option<usize>) -> 
             "views": f.views,
             "mse_before": f.mse_before,
             "mse_after": f.mse_after,
+            "renderer": if f.on_gpu { "gpu" } else { "cpu" },
         })),
         "gaussians": c.gaussians.len(),
         "extra_gaussians": extra_total,

@@ -43,11 +43,19 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         .map(|iterations| SeamFit {
             iterations,
             size: args.seam_fit_size.unwrap_or(SeamFit::default().size),
+            renderer: args
+                .seam_fit_renderer
+                .unwrap_or(SeamFit::default().renderer),
             ..SeamFit::default()
         }),
     };
-    if args.seam_fit_size.is_some() && options.fit.is_none() {
-        return Err(Error::input(super::compose::SIZE_WITHOUT_FIT));
+    if options.fit.is_none() {
+        if args.seam_fit_size.is_some() {
+            return Err(super::compose::without_fit("--seam-fit-size"));
+        }
+        if args.seam_fit_renderer.is_some() {
+            return Err(super::compose::without_fit("--seam-fit-renderer"));
+        }
     }
     let (report, pictures) = evaluate_composite(&trained, &recipe, &dataset, &options)?;
     if let Some(path) = &args.picture {
@@ -177,6 +185,14 @@ fn print_report(r: &CompositeReport) {
             s.interior.psnr_db,
             s.skin.delta_e,
             s.non_skin.delta_e
+        );
+    }
+    if let Some(fit) = &r.seam_fit {
+        println!(
+            "seam fit: {} Gaussians in {:.1} s on the {}",
+            fit.fitted,
+            fit.ms / 1e3,
+            if fit.on_gpu { "GPU" } else { "CPU" }
         );
     }
     println!("evaluated in {:.1} s", r.eval_ms / 1e3);

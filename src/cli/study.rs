@@ -79,6 +79,11 @@ struct RunArgs {
     /// The width and height of the seam fit's views, in pixels.
     #[arg(long, value_name = "PX", default_value_t = SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096))]
     seam_fit_size: u32,
+    /// What draws the seam fit's views: cpu (the same bits on every
+    /// machine), auto (a hardware GPU when there is one, else the CPU) or
+    /// gpu (any adapter, f32).
+    #[arg(long, value_name = "RENDERER", value_parser = Backend::parse, default_value = "cpu")]
+    seam_fit_renderer: Backend,
 }
 
 /// Arguments of `visage study analyse`.
@@ -195,6 +200,7 @@ fn run_session(args: &RunArgs) -> Result<()> {
         seam_fit: SeamFit {
             iterations: args.seam_fit,
             size: args.seam_fit_size,
+            renderer: args.seam_fit_renderer,
             ..SeamFit::default()
         },
     })?;

@@ -269,6 +269,10 @@ pub struct EvalArgs {
     /// [default: 256].
     #[arg(long, value_name = "PX", value_parser = clap::value_parser!(u32).range(16..=4096), requires = "composite")]
     pub(super) seam_fit_size: Option<u32>,
+    /// With --composite: what draws the seam fit's views: cpu, auto (a
+    /// hardware GPU when there is one, else the CPU) or gpu [default: cpu].
+    #[arg(long, value_name = "RENDERER", value_parser = Backend::parse, requires = "composite")]
+    pub(super) seam_fit_renderer: Option<Backend>,
     #[command(flatten)]
     head: HeadArgs,
     /// Side-by-side grid (render | ground truth) of the first views, as PNG.

@@ -63,6 +63,11 @@ pub struct CompositesBenchArgs {
     /// ours` does; `thesis` never fits); 0: none.
     #[arg(long, value_name = "STEPS", default_value_t = SeamFit::default().iterations)]
     seam_fit: usize,
+    /// What draws the seam fit's views: cpu (the same bits on every
+    /// machine), auto (a hardware GPU when there is one, else the CPU) or
+    /// gpu (any adapter, f32).
+    #[arg(long, value_name = "RENDERER", value_parser = Backend::parse, default_value = "cpu")]
+    seam_fit_renderer: Backend,
     /// Print one JSON document.
     #[arg(long)]
     json: bool,
@@ -117,6 +122,12 @@ struct Means {
     ceiling_non_skin_delta_e: f64,
     ceiling_border_psnr_db: f64,
     ceiling_interior_psnr_db: f64,
+    /// Interior minus band, averaged over the recipes that have a band: the
+    /// figure the band's target reads (the band and interior means above
+    /// are over different recipes when one has no band).
+    border_gap_db: f64,
+    /// The same of the sources on their own truth.
+    ceiling_border_gap_db: f64,
     held_out_psnr_db: f64,
     ceiling_held_out_psnr_db: f64,
 }
@@ -268,6 +279,7 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
     .load()?;
     let fit = SeamFit {
         iterations: args.seam_fit,
+        renderer: args.seam_fit_renderer,
         ..SeamFit::default()
     };
     let mut fitted_any = false;
@@ -339,6 +351,10 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
             ceiling_non_skin_delta_e: mean_of(&|r| r.ceiling_non_skin.delta_e),
             ceiling_border_psnr_db: mean_of(&|r| r.ceiling_border.psnr_db),
             ceiling_interior_psnr_db: mean_of(&|r| r.ceiling_interior.psnr_db),
+            border_gap_db: mean_of(&|r| r.interior.psnr_db - r.border.psnr_db),
+            ceiling_border_gap_db: mean_of(&|r| {
+                r.ceiling_interior.psnr_db - r.ceiling_border.psnr_db
+            }),
             held_out_psnr_db: mean_of(&|r| r.held_out.psnr_db),
             ceiling_held_out_psnr_db: mean_of(&|r| r.ceiling_held_out.psnr_db),
         },
@@ -359,7 +375,12 @@ fn print_table(b: &CompositesBench) {
         b.iterations,
         b.pipeline,
         if b.seam_fit > 0 {
-            format!(", seams fitted in {} steps", b.seam_fit)
+            let on_gpu = b.recipes.iter().any(|r| r.report.seam_fit.is_some_and(|f| f.on_gpu));
+            format!(
+                ", seams fitted in {} steps on the {}",
+                b.seam_fit,
+                if on_gpu { "GPU" } else { "CPU" }
+            )
         } else {
             String::new()
         }
@@ -370,7 +391,7 @@ fn print_table(b: &CompositesBench) {
         }
     }
     println!(
-        "{:<22} {:>7} {:>8} {:>7} {:>9} {:>6} {:>8} {:>8} {:>7} {:>7}",
+        "{:<22} {:>7} {:>8} {:>7} {:>9} {:>6} {:>8} {:>8} {:>7} {:>7} {:>7}",
         "recipe",
         "PSNR",
         "ceiling",
@@ -380,7 +401,8 @@ fn print_table(b: &CompositesBench) {
         "ΔE skin",
         "ΔE other",
         "truth s",
-        "eval s"
+        "eval s",
+        "fit s"
     );
     let row = |name: &str, figures: [f64; 7], times: String| {
         let widths = [7, 8, 7, 9, 6, 8, 8];
@@ -410,7 +432,13 @@ fn print_table(b: &CompositesBench) {
                 p.skin.delta_e,
                 p.non_skin.delta_e,
             ],
-            format!("{:>7.1} {:>7.1}", r.truth_s, p.eval_ms / 1e3),
+            format!(
+                "{:>7.1} {:>7.1} {:>7}",
+                r.truth_s,
+                p.eval_ms / 1e3,
+                p.seam_fit
+                    .map_or("-".to_string(), |f| format!("{:.1}", f.ms / 1e3))
+            ),
         );
     }
     let m = &b.mean;
@@ -435,6 +463,11 @@ fn print_table(b: &CompositesBench) {
             "-".to_string()
         }
     };
+    println!(
+        "border band {} dB under the interior, the sources on their own truth {} dB (means over the recipes with a band)",
+        figure(m.border_gap_db),
+        figure(m.ceiling_border_gap_db)
+    );
     println!(
         "open-mouth views {} dB, closed-mouth views {} dB (means; {} % of head pixels are holes)",
         figure(m.open_mouth_psnr_db),

@@ -277,8 +277,21 @@ pub struct CompositeReport {
     pub sources: Vec<SourceCeiling>,
     /// swap → +shape → +smoothing → +colour.
     pub decomposition: Vec<Step>,
-    /// Milliseconds the evaluation took.
+    /// Milliseconds the evaluation took (the seam fit not counted).
     pub eval_ms: f64,
+    /// The seam fit of the measured composite, where one ran.
+    pub seam_fit: Option<FitRun>,
+}
+
+/// How the seam fit of a measured composite ran.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct FitRun {
+    /// Gaussians fitted.
+    pub fitted: usize,
+    /// Whether its views were drawn on a GPU (f32) rather than the CPU (f64).
+    pub on_gpu: bool,
+    /// Milliseconds it took, its targets included.
+    pub ms: f64,
 }
 
 /// Pictures for a few views: ground truth, composite, error map.
@@ -607,12 +620,22 @@ pub fn decomposition(engine: &Engine, recipe: &Recipe) -> Result<Vec<(&'static s
         .collect()
 }
 
-/// `composite` with its seams fitted (method §7.12).
-pub fn seam_fitted(engine: &Engine, composite: &Composite, fit: &SeamFit) -> Result<Composite> {
-    let (gaussians, _) = fit_seams(engine, composite, fit, &mut |_, _| {})?;
+/// `composite` with its seams fitted (method §7.12), and how the fit ran.
+pub fn seam_fitted(
+    engine: &Engine,
+    composite: &Composite,
+    fit: &SeamFit,
+) -> Result<(Composite, FitRun)> {
+    let start = std::time::Instant::now();
+    let (gaussians, report) = fit_seams(engine, composite, fit, &mut |_, _| {})?;
     let mut fitted = composite.clone();
     fitted.gaussians = gaussians;
-    Ok(fitted)
+    let run = FitRun {
+        fitted: report.fitted,
+        on_gpu: report.on_gpu,
+        ms: start.elapsed().as_secs_f64() * 1e3,
+    };
+    Ok((fitted, run))
 }
 
 /// Evaluates the composite of `recipe` over the sources of `trained` against
@@ -625,13 +648,15 @@ pub fn evaluate_composite(
 ) -> Result<(CompositeReport, Pictures)> {
     let engine = Engine::new(trained.clone())?;
     let mut variants = decomposition(&engine, recipe)?;
+    let mut run = None;
     if let Some(fit) = &options.fit {
-        variants.push((
-            "+seam fit",
-            seam_fitted(&engine, &variants[variants.len() - 1].1, fit)?,
-        ));
+        let (fitted, how) = seam_fitted(&engine, &variants[variants.len() - 1].1, fit)?;
+        variants.push(("+seam fit", fitted));
+        run = Some(how);
     }
-    evaluate_variants(&engine, recipe, dataset, options, &variants)
+    let (mut report, pictures) = evaluate_variants(&engine, recipe, dataset, options, &variants)?;
+    report.seam_fit = run;
+    Ok((report, pictures))
 }
 
 /// [`evaluate_composite`] of composites already built (the decomposition's
@@ -924,6 +949,7 @@ pub fn evaluate_variants(
             })
             .collect(),
         eval_ms: start.elapsed().as_secs_f64() * 1e3,
+        seam_fit: None,
     };
     Ok((report, pictures))
 }

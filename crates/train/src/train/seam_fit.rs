@@ -25,6 +25,7 @@ use crate::compose::seams::SeamField;
 use crate::error::Result;
 use crate::model::head::{HeadModel, Joint, Pose};
 use crate::model::regions::Group;
+use crate::render::Backend;
 
 use super::adam::AdamGroup;
 use super::capture::{rasterize, rig};
@@ -57,15 +58,22 @@ pub struct SeamFit {
     pub size: u32,
     /// Cameras of the rig (a frontal arc, as the training rig's).
     pub cameras: usize,
+    /// What draws the fit's views: `cpu` (f64, the default: the same bits on
+    /// every machine, and on a 16-core GPU server as fast as its GPU), `auto`
+    /// a hardware GPU when there is one and the CPU otherwise, `gpu` any
+    /// wgpu adapter (f32), a software one included.
+    pub renderer: Backend,
 }
 
 impl Default for SeamFit {
-    /// What `--pipeline ours` runs: 200 steps over 8 views at 256².
+    /// What `--pipeline ours` runs: 200 steps over 8 views at 256², on the
+    /// CPU.
     fn default() -> Self {
         Self {
             iterations: 200,
             size: 256,
             cameras: 8,
+            renderer: Backend::Cpu,
         }
     }
 }
@@ -82,6 +90,9 @@ pub struct FitReport {
     pub mse_before: f64,
     /// The same after it.
     pub mse_after: f64,
+    /// Whether the views were drawn on a GPU (wgpu, f32) rather than the
+    /// CPU (f64).
+    pub on_gpu: bool,
 }
 
 /// One view of the rig: what the fit draws the composite with and where it
@@ -150,16 +161,28 @@ fn posed(engine: &Engine, composite: &Composite, pose: &Pose) -> PosedMesh {
     out
 }
 
-fn draw(model: &Trainable, posed: &PosedMesh, camera: &TrainCamera) -> Result<Vec<f64>> {
+fn draw(
+    model: &Trainable,
+    posed: &PosedMesh,
+    camera: &TrainCamera,
+    rasterizer: &mut Rasterizer,
+) -> Result<Vec<f64>> {
     let render = Render::new(
         model,
         &posed.frames,
         camera,
         [0.0; 3],
         &Obscurer::None,
-        &mut Rasterizer::Cpu,
+        rasterizer,
     )?;
     Ok(render.image().to_vec())
+}
+
+/// Squared error of `model` as it is against `view`, and its head pixels.
+fn measure(model: &Trainable, view: &View, rasterizer: &mut Rasterizer) -> Result<(f64, usize)> {
+    let image = draw(model, &view.posed, &view.camera, rasterizer)?;
+    let pixels = view.head.iter().filter(|&&h| h).count();
+    Ok((error(&image, view, 1.0).0, pixels))
 }
 
 /// Squared error per channel against a view's target, summed over its head
@@ -237,7 +260,9 @@ pub struct SeamFitter {
     sh_steps: AdamGroup,
     opacity_steps: AdamGroup,
     scale_steps: AdamGroup,
-    rasterizer: Rasterizer,
+    /// Opened at the first unit of work (opening a GPU can fail, and takes
+    /// a moment a caller making a fitter should not wait for).
+    rasterizer: Option<Rasterizer>,
     /// Squared error and pixels over the views, before and after.
     before: (f64, usize),
     after: (f64, usize),
@@ -277,7 +302,7 @@ impl SeamFitter {
             sh_steps: AdamGroup::new(LR_DC, SH_STRIDE, n),
             opacity_steps: AdamGroup::new(LR_OPACITY, 1, n),
             scale_steps: AdamGroup::new(LR_SCALE, 3, n),
-            rasterizer: Rasterizer::Cpu,
+            rasterizer: None,
             before: (0.0, 0),
             after: (0.0, 0),
             done: 0,
@@ -323,6 +348,9 @@ impl SeamFitter {
         let poses = rig_poses().len();
         let views = self.view_count();
         let unit = self.done;
+        if self.rasterizer.is_none() {
+            self.rasterizer = Some(Rasterizer::open(self.options.renderer)?);
+        }
         if unit < sources {
             let mut recipe = composite.recipe.clone();
             recipe.gaussians = [self.field.sources()[unit] as usize; Group::COUNT];
@@ -343,7 +371,9 @@ impl SeamFitter {
             });
         } else if unit < sources + poses + views {
             let view = self.target(&engine.database().model, unit - sources - poses)?;
-            self.before = add(self.before, self.measure(&view)?);
+            let rasterizer = self.rasterizer.as_mut().expect("opened above");
+            let measured = measure(&self.trainable, &view, rasterizer)?;
+            self.before = add(self.before, measured);
             self.views.push(view);
             if self.views.len() == views {
                 // The targets are drawn: the wholes are no longer needed.
@@ -354,7 +384,8 @@ impl SeamFitter {
             self.adam_step(unit - sources - poses - views)?;
         } else {
             let view = &self.views[unit - sources - poses - views - self.options.iterations];
-            self.after = add(self.after, self.measure(view)?);
+            let rasterizer = self.rasterizer.as_mut().expect("opened above");
+            self.after = add(self.after, measure(&self.trainable, view, rasterizer)?);
         }
         self.done += 1;
         Ok(())
@@ -363,14 +394,15 @@ impl SeamFitter {
     /// View `k` of the rig with its blended target: per pixel, the render of
     /// the head wholly from the source the surface point wears, cross-faded
     /// towards the nearest other source's by the seam weight there.
-    fn target(&self, model: &HeadModel, k: usize) -> Result<View> {
+    fn target(&mut self, model: &HeadModel, k: usize) -> Result<View> {
         let rig = &self.posed[k / self.cameras.len()];
         let camera = &self.cameras[k % self.cameras.len()];
+        let rasterizer = self.rasterizer.as_mut().expect("opened by step");
         let images: Vec<Vec<f64>> = self
             .wholes
             .iter()
             .zip(&rig.wholes)
-            .map(|(w, p)| draw(&w.drawable, p, camera))
+            .map(|(w, p)| draw(&w.drawable, p, camera, rasterizer))
             .collect::<Result<_>>()?;
         let of = |s: u32| {
             let k = self.field.sources().binary_search(&s).unwrap_or(0);
@@ -399,28 +431,21 @@ impl SeamFitter {
         })
     }
 
-    /// Squared error of the Gaussians as they are against `view`, and its
-    /// head pixels.
-    fn measure(&self, view: &View) -> Result<(f64, usize)> {
-        let image = draw(&self.trainable, &view.posed, &view.camera)?;
-        let pixels = view.head.iter().filter(|&&h| h).count();
-        Ok((error(&image, view, 1.0).0, pixels))
-    }
-
     /// Adam step `k`, on view `k` round the rig.
     fn adam_step(&mut self, k: usize) -> Result<()> {
         let view = &self.views[k % self.views.len()];
         let per_view = self.before.1 as f64 / self.views.len() as f64;
+        let rasterizer = self.rasterizer.as_mut().expect("opened by step");
         let render = Render::new(
             &self.trainable,
             &view.posed.frames,
             &view.camera,
             [0.0; 3],
             &Obscurer::None,
-            &mut self.rasterizer,
+            rasterizer,
         )?;
         let (_, d_image) = error(render.image(), view, 3.0 * per_view.max(1.0));
-        let mut grads = render.backward(&self.trainable, &d_image, &mut self.rasterizer)?;
+        let mut grads = render.backward(&self.trainable, &d_image, rasterizer)?;
         for (i, &seam) in self.on_seam.iter().enumerate() {
             let sh = &mut grads.sh[i * SH_STRIDE..(i + 1) * SH_STRIDE];
             if seam {
@@ -488,6 +513,7 @@ impl SeamFitter {
                 views: self.views.len(),
                 mse_before: mean(self.before),
                 mse_after: mean(self.after),
+                on_gpu: matches!(self.rasterizer, Some(Rasterizer::Gpu(_))),
             },
         )
     }
