@@ -13,8 +13,8 @@ use visage::compose::blend::Blender;
 use visage::compose::colour::{weighted_mean_colour, GAIN_RANGE};
 use visage::compose::engine::{Engine, PosedMesh};
 use visage::compose::recipe::{
-    Anchor, AnimationMode, ColourCorrection, GroupEdit, PostProcess, Recipe, ResolvedRecipe,
-    Shading, SkinSource, Smoothing,
+    Anchor, AnimationMode, ColourCorrection, Deform, GroupEdit, PostProcess, Recipe,
+    ResolvedRecipe, Shading, SkinSource, Smoothing,
 };
 use visage::compose::selection::Csr;
 use visage::compose::state_hash;
@@ -594,6 +594,40 @@ fn the_full_composite_has_no_nan_and_is_reproducible() {
         state_hash(e.database(), &resolved),
         state_hash(e.database(), &other)
     );
+}
+
+#[test]
+fn an_update_that_changes_how_gaussians_follow_the_shape_equals_a_fresh_build() {
+    // The post-processing and the shape change together: the update must
+    // reshape under the new recipe's anchor and deform, not the old one's.
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups
+        .insert("eyes".into(), edit(&n[1], &[(&n[1], 0.5), (&n[0], 0.5)]));
+    r.groups
+        .insert("mouth".into(), edit(&n[2], &[(&n[2], 1.0)]));
+    r.post = PostProcess::BEST;
+    let best = resolve(e, &r);
+    let mut affine = best.clone();
+    affine.post.deform = Deform::Affine;
+    let plain = resolve(e, &Recipe::unedited(&n[0]));
+    for (before, after) in [
+        (&plain, &best),
+        (&plain, &affine),
+        (&best, &affine),
+        (&affine, &best),
+    ] {
+        let mut edited = e.compose(before);
+        e.update(&mut edited, after);
+        let fresh = e.compose(after);
+        assert!(
+            edited.gaussians == fresh.gaussians,
+            "{:?} → {:?}",
+            (before.post.anchor, before.post.deform),
+            (after.post.anchor, after.post.deform)
+        );
+    }
 }
 
 #[test]
@@ -1263,7 +1297,6 @@ fn assert_same_gaussians_moved_finitely(
 /// count, opacity or colour, leaves no NaN, and a shape edit rebuilds them.
 #[test]
 fn affine_deformation_follows_reshaped_triangles_and_only_them() {
-    use visage::compose::recipe::Deform;
     let e = engine();
     let n = names(e);
     let mut r = Recipe::unedited(&n[0]);

@@ -812,7 +812,7 @@ impl Engine {
             self.add_border_extras(recipe, composite);
         }
         if Self::follows_reshaping(&recipe.post) {
-            self.follow_reshaped_triangles(composite);
+            self.follow_reshaped_triangles(&recipe.post, composite);
         }
         let triangles = &self.db.model.triangles;
         limit_reach(
@@ -907,9 +907,10 @@ impl Engine {
     }
 
     /// Moves the composite's Gaussians with the blend's reshaping of the
-    /// triangles they follow (method §6.7, §6.8).
-    fn follow_reshaped_triangles(&self, composite: &mut Composite) {
-        let post = composite.recipe.post;
+    /// triangles they follow (method §6.7, §6.8), as `post` says: the
+    /// recipe being applied (an update sets the composite's own recipe only
+    /// after the selection, so that one is still the previous recipe's).
+    fn follow_reshaped_triangles(&self, post: &PostProcess, composite: &mut Composite) {
         let mut used = vec![false; self.db.sources.len()];
         composite.blocks.iter().for_each(|b| used[b.source] = true);
         let sources: Vec<ReshapeSource> = (0..self.db.sources.len())
