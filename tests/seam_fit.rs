@@ -12,6 +12,7 @@ use visage::compose::recipe::{Fit, PostProcess, Recipe};
 use visage::model::builtin::build_head;
 use visage::pipeline::composer::Composer;
 use visage::render::Backend;
+use visage::train::fit_store::{FitKey, FitStore};
 use visage::train::seam_fit::{fit_seams, SeamFit};
 
 fn new_engine() -> Engine {
@@ -295,4 +296,96 @@ fn a_composer_runs_the_recipes_fit_keeps_it_and_gives_it_back() {
     let e = engine();
     let direct = e.compose(&r.resolve(e.database()).unwrap());
     assert!(changed(&direct.gaussians, &recomposed).is_empty());
+}
+
+/// The `.fit` files in a folder.
+fn stored_fits(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    std::fs::read_dir(dir)
+        .map(|d| {
+            d.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "fit"))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+#[test]
+fn a_stored_fit_is_shown_at_once_and_only_for_what_it_was_made_for() {
+    let dir = std::env::temp_dir().join(format!("visage-fit-store-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    let r = recipe(&[("face", 1), ("hair", 2)]);
+    let fitted_by = |options: SeamFit| {
+        let mut composer = Composer::new(new_engine());
+        composer.set_fit_options(options);
+        composer.set_fit_store(Some(FitStore::new(&dir)));
+        composer.update(&r).unwrap();
+        let mut units = 0;
+        composer.finish_fit(&mut |_| units += 1).unwrap();
+        (
+            composer.composite().gaussians.clone(),
+            composer.fit_report().unwrap(),
+            units,
+        )
+    };
+    let (first, report, units) = fitted_by(QUICK);
+    assert!(units > QUICK.iterations, "fitted: {units} units");
+    assert_eq!(stored_fits(&dir).len(), 1, "kept");
+    // The same composite under the same options: no fitting, the same bits.
+    let (again, stored_report, units) = fitted_by(QUICK);
+    assert_eq!(units, 1, "looked up, not fitted");
+    assert!(changed(&first, &again).is_empty());
+    assert_eq!(stored_report, report);
+    // Other options are another fit.
+    let other = SeamFit {
+        iterations: 5,
+        ..QUICK
+    };
+    let (_, _, units) = fitted_by(other);
+    assert!(units > 5, "fitted again: {units} units");
+    assert_eq!(stored_fits(&dir).len(), 2);
+    // A damaged file is passed over and replaced, never applied.
+    for file in stored_fits(&dir) {
+        let mut bytes = std::fs::read(&file).unwrap();
+        let middle = bytes.len() / 2;
+        bytes[middle] ^= 0x40;
+        std::fs::write(&file, bytes).unwrap();
+    }
+    let (refitted, _, units) = fitted_by(QUICK);
+    assert!(units > QUICK.iterations, "fitted again: {units} units");
+    assert!(
+        changed(&first, &refitted).is_empty(),
+        "the same fit, made again"
+    );
+    let (_, _, units) = fitted_by(QUICK);
+    assert_eq!(units, 1, "the replaced file holds");
+    // A composite with nothing on a seam leaves nothing behind.
+    std::fs::remove_dir_all(&dir).ok();
+    let mut composer = Composer::new(new_engine());
+    composer.set_fit_options(QUICK);
+    composer.set_fit_store(Some(FitStore::new(&dir)));
+    composer.update(&recipe(&[])).unwrap();
+    composer.finish_fit(&mut |_| {}).unwrap();
+    assert!(stored_fits(&dir).is_empty());
+}
+
+#[test]
+fn a_fits_key_names_its_recipe_options_and_sources() {
+    let e = engine();
+    let c = composite(&[("face", 1), ("hair", 2)]);
+    let key = FitKey::of(e, &c, &QUICK);
+    assert_eq!(
+        key,
+        FitKey::of(e, &composite(&[("face", 1), ("hair", 2)]), &QUICK)
+    );
+    assert_ne!(key, FitKey::of(e, &composite(&[("face", 1)]), &QUICK));
+    let on_gpu = SeamFit {
+        renderer: Backend::Gpu,
+        ..QUICK
+    };
+    assert_ne!(key, FitKey::of(e, &c, &on_gpu));
+    // A source retrained (one colour changed) is another fit.
+    let mut db = e.database().clone();
+    db.sources[2].gaussians.sh[0] += 0.25;
+    let retrained = Engine::new(db).unwrap();
+    assert_ne!(key, FitKey::of(&retrained, &c, &QUICK));
 }

@@ -281,6 +281,56 @@ fn a_category_post_names_a_preset() {
     assert_eq!(recipe.post.fit, Fit::Off);
 }
 
+/// `study build` fits each edited avatar's seams into the study's fits/
+/// folder (so `study run` need not), or leaves that to the run with
+/// `--seam-fit 0`.
+#[test]
+fn study_build_fits_the_edited_avatars_seams_into_the_folder() {
+    let dir = temp("fits");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("nose.toml"),
+        "base = \"ada\"\n[groups.nose]\ngaussians = \"bram\"\nshape = { bram = 1.0 }\n",
+    )
+    .unwrap();
+    let spec = dir.join("spec.toml");
+    std::fs::write(
+        &spec,
+        "[[category]]\nname = \"edited\"\ndatabase = { db = \"builtin\", gaussians_per_avatar = 500 }\npost = \"ours\"\nrecipes = [\"nose.toml\"]\nunedited = [\"ada\"]\n",
+    )
+    .unwrap();
+    let fits =
+        |out: &Path| -> usize { std::fs::read_dir(out.join("fits")).map_or(0, |d| d.count()) };
+    let out = dir.join("built");
+    let o = visage(&[
+        "study",
+        "build",
+        spec.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--seam-fit",
+        "2",
+        "--seam-fit-size",
+        "16",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    stdout(&o);
+    assert!(err.contains("fitted the seams of 1 avatar into"), "{err}");
+    // The unedited avatar has no seam: only the edited one is kept.
+    assert_eq!(fits(&out), 1, "{err}");
+    let lazy = dir.join("lazy");
+    stdout(&visage(&[
+        "study",
+        "build",
+        spec.to_str().unwrap(),
+        "--out",
+        lazy.to_str().unwrap(),
+        "--seam-fit",
+        "0",
+    ]));
+    assert_eq!(fits(&lazy), 0);
+}
+
 /// `study analyse` from the command line: JSON with the thesis's numbers
 /// and the two plots.
 #[test]
@@ -327,6 +377,8 @@ fn two_participants_run_the_study_in_tmux_and_survive_a_kill() {
         "studies/builtin/spec.toml",
         "--out",
         d,
+        "--seam-fit",
+        "0",
     ]));
     let long = Duration::from_secs(90);
     let run = |tmux: &Tmux, who: &str, status: &Path| {

@@ -317,6 +317,8 @@ fn xterm_vt340_runs_a_study_session_as_sixel() {
     let built = Command::new(env!("CARGO_BIN_EXE_visage"))
         .args(["study", "build", "studies/builtin/spec.toml", "--out"])
         .arg(&study)
+        // The run's fit options: the avatars are shown from their stored fits.
+        .args(["--seam-fit", "2", "--seam-fit-size", "16"])
         .output()
         .unwrap();
     assert!(

@@ -11,6 +11,7 @@ use crate::error::{Error, Result};
 use crate::render::Backend;
 use crate::study::analysis::{analyse, AnalysisOptions};
 use crate::study::design::{build, category_counts, Databases, StudyFolder};
+use crate::study::fits::{fit_avatars, fit_store};
 use crate::study::journal::{read_all, tally};
 use crate::study::plot::write_plots;
 use crate::study::results::Results;
@@ -55,6 +56,21 @@ struct BuildArgs {
     /// Folder to build the study in.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// Steps of the seam fit made now, for each avatar whose
+    /// post-processing asks for one (`post = "ours"`), and kept in the
+    /// study's fits/ folder so `study run` shows it at once; 0: none (each
+    /// is then fitted when first shown). Give `study run` the same fit
+    /// options, or it fits again.
+    #[arg(long, value_name = "STEPS", default_value_t = SeamFit::default().iterations)]
+    seam_fit: usize,
+    /// The width and height of the seam fit's views, in pixels.
+    #[arg(long, value_name = "PX", default_value_t = SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096))]
+    seam_fit_size: u32,
+    /// What draws the seam fit's views: cpu (the same bits on every
+    /// machine), auto (a hardware GPU when there is one, else the CPU) or
+    /// gpu (any adapter, f32).
+    #[arg(long, value_name = "RENDERER", value_parser = Backend::parse, default_value = "cpu")]
+    seam_fit_renderer: Backend,
 }
 
 /// Arguments of `visage study run`.
@@ -172,6 +188,29 @@ fn run_status(args: &StatusArgs) -> Result<()> {
 
 fn run_build(args: &BuildArgs) -> Result<()> {
     let study = build(&args.spec, &args.out, &mut Databases::default())?;
+    if args.seam_fit > 0 {
+        let options = SeamFit {
+            iterations: args.seam_fit,
+            size: args.seam_fit_size,
+            renderer: args.seam_fit_renderer,
+            ..SeamFit::default()
+        };
+        let folder = StudyFolder::open(&args.out)?;
+        let bar = super::train::training_bar(0, "seam fits ");
+        let fitted = fit_avatars(&folder, &options, &mut |k, count, p| {
+            bar.set_length(count as u64);
+            bar.set_position(k as u64);
+            bar.set_message(format!("{}%", 100 * p.done / p.total.max(1)));
+        })?;
+        bar.finish_and_clear();
+        if fitted > 0 {
+            eprintln!(
+                "visage: fitted the seams of {fitted} avatar{} into {}",
+                if fitted == 1 { "" } else { "s" },
+                fit_store(&folder).dir().display()
+            );
+        }
+    }
     let counts: Vec<String> = category_counts(&study)
         .into_iter()
         .map(|(c, n)| format!("{c} {n}"))

@@ -36,6 +36,7 @@ use crate::pipeline::{DatabaseSpec, Workbench};
 use crate::render::image::RgbImage;
 use crate::render::Backend;
 use crate::study::design::{Display, StudyFolder};
+use crate::study::fits::fit_store;
 use crate::study::journal::{journal_path, Answer, Journal};
 use crate::train::seam_fit::SeamFit;
 
@@ -124,6 +125,8 @@ pub fn run_participant(options: RunOptions) -> Result<String> {
             let (db, _) = spec.load()?;
             let mut workbench = Workbench::new(Engine::new(db)?, renderer)?;
             workbench.set_fit_options(seam_fit);
+            // Fits made by `study build` (or for an earlier participant).
+            workbench.set_fit_store(Some(fit_store(&study)));
             workbenches.push((spec.clone(), workbench));
         }
     }

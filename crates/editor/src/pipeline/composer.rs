@@ -19,6 +19,7 @@ use crate::render::settings::RenderSettings;
 use crate::render::{Backend, SplatRenderer};
 use crate::scene::camera::Camera;
 use crate::scene::splats::SplatScene;
+use crate::train::fit_store::{FitKey, FitStore};
 use crate::train::seam_fit::{FitReport, SeamFit, SeamFitter};
 
 use super::lod::LodScene;
@@ -79,6 +80,8 @@ pub struct Composer {
     generation: u64,
     fit: FitState,
     fit_options: SeamFit,
+    /// Where finished fits are looked up before fitting, and kept after.
+    fit_store: Option<FitStore>,
 }
 
 /// How long the last [`Composer::update`] spent, in milliseconds.
@@ -102,7 +105,15 @@ impl Composer {
             generation: 0,
             fit: FitState::None,
             fit_options: SeamFit::default(),
+            fit_store: None,
         }
+    }
+
+    /// Where finished seam fits are kept (`None`, the default: nowhere).
+    /// A fit about to start is first looked up there, and one that finishes
+    /// is saved there.
+    pub fn set_fit_store(&mut self, store: Option<FitStore>) {
+        self.fit_store = store;
     }
 
     /// How a recipe's seam fit runs from now on (default:
@@ -270,6 +281,22 @@ impl Composer {
             return Ok(None);
         };
         let c = self.composite.as_mut().expect("a fit is of a composite");
+        if fitter.is_none() {
+            let stored = self.fit_store.as_ref().and_then(|store| {
+                store.load(
+                    &FitKey::of(&self.engine, c, &self.fit_options),
+                    &c.gaussians,
+                )
+            });
+            if let Some((set, report)) = stored {
+                self.fit = FitState::Fitted {
+                    composed: std::mem::replace(&mut c.gaussians, set),
+                    report,
+                };
+                self.generation += 1;
+                return Ok(Some(FitProgress { done: 1, total: 1 }));
+            }
+        }
         let f = fitter
             .get_or_insert_with(|| Box::new(SeamFitter::new(&self.engine, c, &self.fit_options)));
         if let Err(e) = f.step(&self.engine, c) {
@@ -280,11 +307,22 @@ impl Composer {
         let progress = FitProgress::of(f);
         if f.finished() {
             let (set, report) = f.result(c);
-            self.fit = FitState::Fitted {
-                composed: std::mem::replace(&mut c.gaussians, set),
-                report,
-            };
+            let key = self
+                .fit_store
+                .as_ref()
+                .map(|_| FitKey::of(&self.engine, c, &self.fit_options));
+            let composed = std::mem::replace(&mut c.gaussians, set);
             self.generation += 1;
+            // A fit with nothing on a seam has nothing worth keeping.
+            let saved = match (&self.fit_store, key) {
+                (Some(store), Some(key)) if report.fitted > 0 => {
+                    store.save(&key, &composed, &c.gaussians, &report)
+                }
+                _ => Ok(()),
+            };
+            self.fit = FitState::Fitted { composed, report };
+            // The fit shows even when it could not be kept.
+            saved?;
         }
         Ok(Some(progress))
     }

@@ -27,6 +27,7 @@ use crate::render::settings::RenderSettings;
 use crate::render::Backend;
 use crate::scene::clean::{judge, keep, CleanOptions};
 use crate::scene::splats::SplatScene;
+use crate::train::fit_store::FitStore;
 use crate::train::seam_fit::SeamFit;
 
 /// Debug view toggles.
@@ -200,6 +201,13 @@ impl Workbench {
     pub fn set_fit_options(&mut self, options: SeamFit) {
         if let Content::Composite(composer) = &mut self.content {
             composer.set_fit_options(options);
+        }
+    }
+
+    /// Where finished seam fits are kept (see [`Composer::set_fit_store`]).
+    pub fn set_fit_store(&mut self, store: Option<FitStore>) {
+        if let Content::Composite(composer) = &mut self.content {
+            composer.set_fit_store(store);
         }
     }
 

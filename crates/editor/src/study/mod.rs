@@ -5,6 +5,7 @@
 
 pub mod analysis;
 pub mod design;
+pub mod fits;
 pub mod journal;
 pub mod plot;
 pub mod results;

@@ -12,6 +12,7 @@ pub mod composite_eval;
 pub mod dataset;
 pub mod dual;
 pub mod farm;
+pub mod fit_store;
 pub mod hole_metrics;
 pub mod holes;
 pub mod loss;

@@ -1,0 +1,56 @@
+//! The seam fits of a study's avatars, made once when the study is built and
+//! kept in its folder (`fits/`), so that `study run` shows each avatar at
+//! once instead of making every participant wait for its fit.
+
+use crate::compose::engine::Engine;
+use crate::compose::recipe::Fit;
+use crate::error::Result;
+use crate::pipeline::composer::{Composer, FitProgress};
+use crate::pipeline::DatabaseSpec;
+use crate::train::fit_store::FitStore;
+use crate::train::seam_fit::SeamFit;
+
+use super::design::{StudyAvatar, StudyFolder};
+
+/// The folder of a study that holds its avatars' seam fits.
+pub const FITS_DIR: &str = "fits";
+
+/// Where a study keeps its avatars' seam fits.
+pub fn fit_store(study: &StudyFolder) -> FitStore {
+    FitStore::new(study.dir.join(FITS_DIR))
+}
+
+/// Fits the seams of every avatar whose post-processing asks for a fit,
+/// under `options`, into the study's folder; a fit already there is kept.
+/// `progress` hears the avatar's position among those fitted, their count
+/// and the fit's progress. Returns how many avatars had Gaussians on a
+/// seam to fit (an avatar of one source has none).
+pub fn fit_avatars(
+    study: &StudyFolder,
+    options: &SeamFit,
+    progress: &mut dyn FnMut(usize, usize, FitProgress),
+) -> Result<usize> {
+    let mut wanted: Vec<(&StudyAvatar, DatabaseSpec)> = Vec::new();
+    for avatar in &study.study.avatars {
+        if study.recipe(avatar)?.post.fit == Fit::Seams {
+            wanted.push((avatar, study.category(avatar).database.clone()));
+        }
+    }
+    let count = wanted.len();
+    let (mut done, mut fitted) = (0, 0);
+    // One engine per database, its avatars one after another.
+    while let Some((_, spec)) = wanted.first().cloned() {
+        let (db, _) = spec.load()?;
+        let mut composer = Composer::new(Engine::new(db)?);
+        composer.set_fit_options(*options);
+        composer.set_fit_store(Some(fit_store(study)));
+        for (avatar, _) in wanted.iter().filter(|(_, s)| *s == spec) {
+            composer.update(&study.recipe(avatar)?)?;
+            composer.finish_fit(&mut |p| progress(done, count, p))?;
+            done += 1;
+            fitted += usize::from(composer.fit_report().is_some_and(|r| r.fitted > 0));
+        }
+        wanted.retain(|(_, s)| *s != spec);
+    }
+    Ok(fitted)
+}
