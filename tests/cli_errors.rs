@@ -95,32 +95,22 @@ fn a_seam_fit_size_or_renderer_without_a_fit_is_refused() {
         ],
         &says,
     );
-    fails(
-        &[
-            "--gaussians-per-avatar",
-            "2000",
-            "compose",
-            "--recipe",
-            recipe,
-            "--seam-fit",
-            "0",
+    let compose = [
+        "--gaussians-per-avatar",
+        "2000",
+        "compose",
+        "--recipe",
+        recipe,
+    ];
+    for (options, flag) in [
+        (
+            &["--seam-fit", "0", "--seam-fit-size", "64"][..],
             "--seam-fit-size",
-            "64",
-        ],
-        &says,
-    );
-    fails(
-        &[
-            "--gaussians-per-avatar",
-            "2000",
-            "compose",
-            "--recipe",
-            recipe,
-            "--seam-fit-renderer",
-            "gpu",
-        ],
-        &["--seam-fit-renderer", "no [post] fit"],
-    );
+        ),
+        (&["--seam-fit-renderer", "gpu"][..], "--seam-fit-renderer"),
+    ] {
+        fails(&[&compose[..], options].concat(), &[flag, "no [post] fit"]);
+    }
     assert!(!out.exists(), "nothing written");
 }
 

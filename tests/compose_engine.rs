@@ -596,19 +596,25 @@ fn the_full_composite_has_no_nan_and_is_reproducible() {
     );
 }
 
-#[test]
-fn an_update_that_changes_how_gaussians_follow_the_shape_equals_a_fresh_build() {
-    // The post-processing and the shape change together: the update must
-    // reshape under the new recipe's anchor and deform, not the old one's.
-    let e = engine();
-    let n = names(e);
+/// The first source with the second's eyes at half shape and the third's
+/// mouth, under the best post-processing.
+fn eyes_and_mouth_swapped(n: &[String]) -> Recipe {
     let mut r = Recipe::unedited(&n[0]);
     r.groups
         .insert("eyes".into(), edit(&n[1], &[(&n[1], 0.5), (&n[0], 0.5)]));
     r.groups
         .insert("mouth".into(), edit(&n[2], &[(&n[2], 1.0)]));
     r.post = PostProcess::BEST;
-    let best = resolve(e, &r);
+    r
+}
+
+#[test]
+fn an_update_that_changes_how_gaussians_follow_the_shape_equals_a_fresh_build() {
+    // The post-processing and the shape change together: the update must
+    // reshape under the new recipe's anchor and deform, not the old one's.
+    let e = engine();
+    let n = names(e);
+    let best = resolve(e, &eyes_and_mouth_swapped(&n));
     let mut affine = best.clone();
     affine.post.deform = Deform::Affine;
     let plain = resolve(e, &Recipe::unedited(&n[0]));
@@ -636,14 +642,9 @@ fn a_composite_is_the_same_on_any_number_of_threads_and_after_any_edit() {
     // earlier contents an edit reuses: neither may show in the result.
     let e = engine();
     let n = names(e);
-    let mut r = Recipe::unedited(&n[0]);
-    r.groups
-        .insert("eyes".into(), edit(&n[1], &[(&n[1], 0.5), (&n[0], 0.5)]));
-    r.groups
-        .insert("mouth".into(), edit(&n[2], &[(&n[2], 1.0)]));
+    let mut r = eyes_and_mouth_swapped(&n);
     r.groups.insert("hair".into(), edit(&n[3], &[(&n[3], 1.0)]));
     r.groups.insert("nose".into(), edit(&n[1], &[]));
-    r.post = PostProcess::BEST;
     let best = resolve(e, &r);
     let mut other = best.clone();
     other.gaussians = [1; Group::COUNT];

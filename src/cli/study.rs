@@ -56,11 +56,18 @@ struct BuildArgs {
     /// Folder to build the study in.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Steps of the seam fit made now, for each avatar whose
-    /// post-processing asks for one (`post = "ours"`), and kept in the
-    /// study's fits/ folder so `study run` shows it at once; 0: none (each
-    /// is then fitted when first shown). Give `study run` the same fit
-    /// options, or it fits again.
+    #[command(flatten)]
+    fit: StudyFitArgs,
+}
+
+/// The seam fit of a study's avatars: made by `study build` into the
+/// study's fits/ folder, shown from there by `study run` under the same
+/// options (under others the run fits again, and keeps those fits too).
+#[derive(Args, Debug)]
+struct StudyFitArgs {
+    /// Steps of the seam fit of each avatar whose post-processing asks for
+    /// one (`post = "ours"`); 0: none (`study build` then leaves each fit
+    /// to the run, `study run` shows the avatar unfitted).
     #[arg(long, value_name = "STEPS", default_value_t = SeamFit::default().iterations)]
     seam_fit: usize,
     /// The width and height of the seam fit's views, in pixels.
@@ -71,6 +78,17 @@ struct BuildArgs {
     /// gpu (any adapter, f32).
     #[arg(long, value_name = "RENDERER", value_parser = Backend::parse, default_value = "cpu")]
     seam_fit_renderer: Backend,
+}
+
+impl StudyFitArgs {
+    fn options(&self) -> SeamFit {
+        SeamFit {
+            iterations: self.seam_fit,
+            size: self.seam_fit_size,
+            renderer: self.seam_fit_renderer,
+            ..SeamFit::default()
+        }
+    }
 }
 
 /// Arguments of `visage study run`.
@@ -88,18 +106,8 @@ struct RunArgs {
     /// Renderer: auto (hardware GPU, else CPU), gpu or cpu.
     #[arg(long, value_parser = Backend::parse, default_value = "auto")]
     renderer: Backend,
-    /// Steps of the seam fit run before showing each avatar whose
-    /// post-processing asks for one (`post = "ours"`); 0: none.
-    #[arg(long, value_name = "STEPS", default_value_t = SeamFit::default().iterations)]
-    seam_fit: usize,
-    /// The width and height of the seam fit's views, in pixels.
-    #[arg(long, value_name = "PX", default_value_t = SeamFit::default().size, value_parser = clap::value_parser!(u32).range(16..=4096))]
-    seam_fit_size: u32,
-    /// What draws the seam fit's views: cpu (the same bits on every
-    /// machine), auto (a hardware GPU when there is one, else the CPU) or
-    /// gpu (any adapter, f32).
-    #[arg(long, value_name = "RENDERER", value_parser = Backend::parse, default_value = "cpu")]
-    seam_fit_renderer: Backend,
+    #[command(flatten)]
+    fit: StudyFitArgs,
 }
 
 /// Arguments of `visage study analyse`.
@@ -188,13 +196,8 @@ fn run_status(args: &StatusArgs) -> Result<()> {
 
 fn run_build(args: &BuildArgs) -> Result<()> {
     let study = build(&args.spec, &args.out, &mut Databases::default())?;
-    if args.seam_fit > 0 {
-        let options = SeamFit {
-            iterations: args.seam_fit,
-            size: args.seam_fit_size,
-            renderer: args.seam_fit_renderer,
-            ..SeamFit::default()
-        };
+    if args.fit.seam_fit > 0 {
+        let options = args.fit.options();
         let folder = StudyFolder::open(&args.out)?;
         let bar = super::train::training_bar(0, "seam fits ");
         let fitted = fit_avatars(&folder, &options, &mut |k, count, p| {
@@ -236,12 +239,7 @@ fn run_session(args: &RunArgs) -> Result<()> {
         participant: args.participant.clone(),
         graphics: args.graphics,
         renderer: args.renderer,
-        seam_fit: SeamFit {
-            iterations: args.seam_fit,
-            size: args.seam_fit_size,
-            renderer: args.seam_fit_renderer,
-            ..SeamFit::default()
-        },
+        seam_fit: args.fit.options(),
     })?;
     println!("{summary}");
     Ok(())
