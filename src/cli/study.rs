@@ -66,8 +66,10 @@ struct BuildArgs {
 #[derive(Args, Debug)]
 struct StudyFitArgs {
     /// Steps of the seam fit of each avatar whose post-processing asks for
-    /// one (`post = "ours"`); 0: none (`study build` then leaves each fit
-    /// to the run, `study run` shows the avatar unfitted).
+    /// one (`post = "ours"`): `study build` makes the fits into the study's
+    /// fits/ folder, `study run` shows them from there under the same
+    /// options (and fits under others); 0: none (`study build` then leaves
+    /// each fit to the run, `study run` shows the avatar unfitted).
     #[arg(long, value_name = "STEPS", default_value_t = SeamFit::default().iterations)]
     seam_fit: usize,
     /// The width and height of the seam fit's views, in pixels.
