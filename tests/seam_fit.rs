@@ -358,6 +358,22 @@ fn a_stored_fit_is_shown_at_once_and_only_for_what_it_was_made_for() {
     );
     let (_, _, units) = fitted_by(QUICK);
     assert_eq!(units, 1, "the replaced file holds");
+    // A store that cannot be written: the fit still shows, and the error
+    // waits for whoever asks (study build does; a participant's run not).
+    let blocked = dir.join("a-file");
+    std::fs::write(&blocked, b"not a folder").unwrap();
+    let mut composer = Composer::new(new_engine());
+    composer.set_fit_options(QUICK);
+    composer.set_fit_store(Some(FitStore::new(blocked.join("fits"))));
+    composer.update(&r).unwrap();
+    composer.finish_fit(&mut |_| {}).unwrap();
+    assert!(composer.fit_report().is_some_and(|f| f.fitted > 0));
+    let error = composer.take_store_error().expect("the save failed");
+    assert!(
+        error.to_string().contains("cannot store the seam fit"),
+        "{error}"
+    );
+    assert!(composer.take_store_error().is_none(), "told once");
     // A composite with nothing on a seam leaves nothing behind.
     std::fs::remove_dir_all(&dir).ok();
     let mut composer = Composer::new(new_engine());

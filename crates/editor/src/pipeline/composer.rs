@@ -82,6 +82,8 @@ pub struct Composer {
     fit_options: SeamFit,
     /// Where finished fits are looked up before fitting, and kept after.
     fit_store: Option<FitStore>,
+    /// Why the last finished fit could not be kept, until taken.
+    store_error: Option<Error>,
 }
 
 /// How long the last [`Composer::update`] spent, in milliseconds.
@@ -106,6 +108,7 @@ impl Composer {
             fit: FitState::None,
             fit_options: SeamFit::default(),
             fit_store: None,
+            store_error: None,
         }
     }
 
@@ -114,6 +117,14 @@ impl Composer {
     /// is saved there.
     pub fn set_fit_store(&mut self, store: Option<FitStore>) {
         self.fit_store = store;
+    }
+
+    /// Why the last finished fit could not be saved to the store, once:
+    /// a fit that shows but was not kept is no reason to stop the caller
+    /// (a participant's session), so only a caller that makes fits to keep
+    /// them (`study build`) asks.
+    pub fn take_store_error(&mut self) -> Option<Error> {
+        self.store_error.take()
     }
 
     /// How a recipe's seam fit runs from now on (default:
@@ -314,15 +325,12 @@ impl Composer {
             let composed = std::mem::replace(&mut c.gaussians, set);
             self.generation += 1;
             // A fit with nothing on a seam has nothing worth keeping.
-            let saved = match (&self.fit_store, key) {
-                (Some(store), Some(key)) if report.fitted > 0 => {
-                    store.save(&key, &composed, &c.gaussians, &report)
+            if let (Some(store), Some(key)) = (&self.fit_store, key) {
+                if report.fitted > 0 {
+                    self.store_error = store.save(&key, &composed, &c.gaussians, &report).err();
                 }
-                _ => Ok(()),
-            };
+            }
             self.fit = FitState::Fitted { composed, report };
-            // The fit shows even when it could not be kept.
-            saved?;
         }
         Ok(Some(progress))
     }

@@ -47,6 +47,9 @@ pub fn fit_avatars(
         for (avatar, _) in wanted.iter().filter(|(_, s)| *s == spec) {
             composer.update(&study.recipe(avatar)?)?;
             composer.finish_fit(&mut |p| progress(done, count, p))?;
+            if let Some(e) = composer.take_store_error() {
+                return Err(e);
+            }
             done += 1;
             fitted += usize::from(composer.fit_report().is_some_and(|r| r.fitted > 0));
         }
