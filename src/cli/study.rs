@@ -201,11 +201,21 @@ fn run_build(args: &BuildArgs) -> Result<()> {
     if args.fit.seam_fit > 0 {
         let options = args.fit.options();
         let folder = StudyFolder::open(&args.out)?;
-        let bar = super::train::training_bar(0, "seam fits ");
+        let bar = indicatif::ProgressBar::new(0).with_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} seam fits [{bar:25}] {pos}/{len} avatars done, {msg} ({eta} left)",
+            )
+            .expect("the template is valid")
+            .progress_chars("=> "),
+        );
         let fitted = fit_avatars(&folder, &options, &mut |k, count, p| {
             bar.set_length(count as u64);
             bar.set_position(k as u64);
-            bar.set_message(format!("{}%", 100 * p.done / p.total.max(1)));
+            bar.set_message(format!(
+                "avatar {} at {}%",
+                k + 1,
+                100 * p.done / p.total.max(1)
+            ));
         })?;
         bar.finish_and_clear();
         if fitted > 0 {
