@@ -35,7 +35,6 @@ pub struct ComposeArgs {
     json: bool,
 }
 
-/// The error for `--seam-fit-size` where no seam fit runs.
 /// The one-line error for a seam-fit option (`--seam-fit-size`,
 /// `--seam-fit-renderer`) where no seam fit runs.
 pub(super) fn without_fit(flag: &str) -> crate::error::Error {

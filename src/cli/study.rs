@@ -66,7 +66,7 @@ struct BuildArgs {
 #[derive(Args, Debug)]
 struct StudyFitArgs {
     /// Steps of the seam fit of each avatar whose post-processing asks for
-    /// one (`post = "ours"`): `study build` makes the fits into the study's
+    /// one (`post = "ours"`, or a table with `fit = "seams"`): `study build` makes the fits into the study's
     /// fits/ folder, `study run` shows them from there under the same
     /// options (and fits under others); 0: none (`study build` then leaves
     /// each fit to the run, `study run` shows the avatar unfitted).

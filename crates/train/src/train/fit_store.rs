@@ -3,12 +3,13 @@
 //! study's folder and `study run` shows it at once instead of making every
 //! participant wait for the fit.
 //!
-//! A fit is stored under a key that names everything its result depends on:
-//! the fit's options, the composite's Gaussians and shape, the recipe's
-//! sources, weights and post-processing, and the Gaussians and shapes of
+//! A fit is stored under a key that names what its result depends on: the
+//! fit's options, the composite's Gaussians and shape, the recipe's sources,
+//! weights and post-processing, the head model, the Gaussians and shapes of
 //! every source the recipe draws on (the fit's targets are those sources'
-//! whole heads). Any change, a retrained source included, gives another key,
-//! so a stored fit is never applied to a composite it was not made for.
+//! whole heads) and visage's version. Any change, a retrained source
+//! included, gives another key, so a stored fit is never applied to a
+//! composite it was not made for.
 //! Only the Gaussians the fit changed are stored.
 
 use std::path::{Path, PathBuf};
@@ -16,6 +17,7 @@ use std::path::{Path, PathBuf};
 use crate::avatar::gaussians::GaussianSet;
 use crate::compose::engine::{Composite, Engine};
 use crate::error::{Error, Result};
+use crate::model::head::HeadModel;
 
 use super::seam_fit::{FitReport, SeamFit};
 
@@ -32,56 +34,46 @@ pub struct FitKey([u8; 32]);
 impl FitKey {
     /// The key of fitting `composite` (on `engine`) under `options`.
     pub fn of(engine: &Engine, composite: &Composite, options: &SeamFit) -> FitKey {
-        let mut bytes = Vec::new();
-        bytes.extend_from_slice(&VERSION.to_le_bytes());
-        for n in [options.iterations, options.size as usize, options.cameras] {
-            bytes.extend_from_slice(&(n as u64).to_le_bytes());
+        // Destructured so that a new option cannot be left out unnoticed.
+        let SeamFit {
+            iterations,
+            size,
+            cameras,
+            renderer,
+        } = *options;
+        let mut h = Hashed(blake3::Hasher::new());
+        h.u64(u64::from(VERSION));
+        h.bytes(env!("CARGO_PKG_VERSION").as_bytes());
+        for n in [iterations, size as usize, cameras] {
+            h.u64(n as u64);
         }
-        bytes.extend_from_slice(options.renderer.name().as_bytes());
+        // The option, not the device: `auto` names what the machine has.
+        h.bytes(renderer.name().as_bytes());
         let recipe = &composite.recipe;
-        bytes.extend_from_slice(&(recipe.base as u64).to_le_bytes());
-        for &s in &recipe.gaussians {
-            bytes.extend_from_slice(&(s as u64).to_le_bytes());
-        }
+        h.u64(recipe.base as u64);
+        recipe.gaussians.iter().for_each(|&s| h.u64(s as u64));
         for row in &recipe.shape {
-            row.iter()
-                .for_each(|w| bytes.extend_from_slice(&w.to_le_bytes()));
+            row.iter().for_each(|w| h.bytes(&w.to_le_bytes()));
         }
-        bytes.extend_from_slice(format!("{:?}", recipe.post).as_bytes());
+        h.bytes(format!("{:?}", recipe.post).as_bytes());
         let db = engine.database();
-        let model = &db.model;
-        model
-            .template
-            .iter()
-            .flat_map(|v| v.to_array())
-            .for_each(|x| bytes.extend_from_slice(&x.to_le_bytes()));
-        bytes.extend_from_slice(&(model.triangles.len() as u64).to_le_bytes());
-        composite
-            .neutral
-            .iter()
-            .flat_map(|v| v.to_array())
-            .for_each(|x| bytes.extend_from_slice(&x.to_le_bytes()));
-        set_bytes(&composite.gaussians, &mut bytes);
+        h.model(&db.model);
+        h.vectors(&composite.neutral);
+        h.set(&composite.gaussians);
         let mut sources: Vec<usize> = recipe.gaussians.to_vec();
         sources.extend(recipe.shape_sources());
         sources.sort_unstable();
         sources.dedup();
         for s in sources {
             let source = &db.sources[s];
-            bytes.extend_from_slice(source.name.as_bytes());
-            bytes.push(0);
-            source
-                .shape
-                .iter()
-                .for_each(|x| bytes.extend_from_slice(&x.to_le_bytes()));
-            source
-                .static_offset
-                .iter()
-                .flat_map(|v| v.to_array())
-                .for_each(|x| bytes.extend_from_slice(&x.to_le_bytes()));
-            set_bytes(&source.gaussians, &mut bytes);
+            h.bytes(source.name.as_bytes());
+            source.shape.iter().for_each(|x| h.f32(*x));
+            for v in &source.static_offset {
+                v.to_array().iter().for_each(|x| h.bytes(&x.to_le_bytes()));
+            }
+            h.set(&source.gaussians);
         }
-        FitKey(*blake3::hash(&bytes).as_bytes())
+        FitKey(*h.0.finalize().as_bytes())
     }
 
     /// The file name the fit is stored under.
@@ -91,23 +83,72 @@ impl FitKey {
     }
 }
 
-/// Every parameter of a Gaussian set, little-endian.
-fn set_bytes(set: &GaussianSet, bytes: &mut Vec<u8>) {
-    bytes.push(set.sh_degree);
-    bytes.extend_from_slice(&(set.len() as u64).to_le_bytes());
-    let floats = set
-        .position
-        .iter()
-        .flat_map(|v| v.to_array())
-        .chain(set.rotation.iter().flat_map(|q| q.to_array()))
-        .chain(set.log_scale.iter().flat_map(|v| v.to_array()))
-        .chain(set.opacity_logit.iter().copied())
-        .chain(set.sh.iter().copied());
-    for x in floats {
-        bytes.extend_from_slice(&x.to_le_bytes());
+/// A hash fed little-endian values, a buffer at a time.
+struct Hashed(blake3::Hasher);
+
+impl Hashed {
+    fn bytes(&mut self, bytes: &[u8]) {
+        // The length first: two fields never run into each other.
+        self.0.update(&(bytes.len() as u64).to_le_bytes());
+        self.0.update(bytes);
     }
-    for b in &set.binding {
-        bytes.extend_from_slice(&b.to_le_bytes());
+    fn u64(&mut self, n: u64) {
+        self.0.update(&n.to_le_bytes());
+    }
+    fn f32(&mut self, x: f32) {
+        self.0.update(&x.to_le_bytes());
+    }
+    fn floats(&mut self, floats: impl Iterator<Item = f32>) {
+        let buffer: Vec<u8> = floats.flat_map(f32::to_le_bytes).collect();
+        self.bytes(&buffer);
+    }
+    fn vectors(&mut self, vectors: &[glam::Vec3]) {
+        self.floats(vectors.iter().flat_map(|v| v.to_array()));
+    }
+    /// Everything of the head model the fit reads: the mesh, its regions,
+    /// the bases and skinning that pose it, the mouth cavity.
+    fn model(&mut self, model: &HeadModel) {
+        self.vectors(&model.template);
+        let triangles: Vec<u8> = model
+            .triangles
+            .iter()
+            .flatten()
+            .flat_map(|i| i.to_le_bytes())
+            .collect();
+        self.bytes(&triangles);
+        self.bytes(format!("{:?}", model.triangle_regions).as_bytes());
+        let bases = [Some(&model.shape_basis), Some(&model.expression_basis)];
+        for basis in bases.into_iter().chain([model.pose_correctives.as_ref()]) {
+            let Some(basis) = basis else {
+                self.u64(u64::MAX);
+                continue;
+            };
+            self.u64(basis.len() as u64);
+            (0..basis.len()).for_each(|k| self.vectors(basis.component(k)));
+        }
+        self.bytes(format!("{:?}", model.joint_regressor).as_bytes());
+        self.floats(model.skin_weights.iter().flatten().copied());
+        self.bytes(format!("{:?}", model.mouth_cavity).as_bytes());
+    }
+    /// Every parameter of a Gaussian set.
+    fn set(&mut self, set: &GaussianSet) {
+        let GaussianSet {
+            binding,
+            position,
+            rotation,
+            log_scale,
+            opacity_logit,
+            sh_degree,
+            sh,
+        } = set;
+        self.u64(u64::from(*sh_degree));
+        self.vectors(position);
+        self.floats(rotation.iter().flat_map(|q| q.to_array()));
+        self.vectors(log_scale);
+        self.floats(opacity_logit.iter().copied());
+        self.floats(sh.iter().copied());
+        let binding: Vec<u8> = binding.iter().flat_map(|b| b.to_le_bytes()).collect();
+        self.bytes(&binding);
     }
 }
 
@@ -126,11 +167,6 @@ impl FitStore {
     /// The folder.
     pub fn dir(&self) -> &Path {
         &self.dir
-    }
-
-    /// Whether a fit is stored under `key` (not whether it will load).
-    pub fn contains(&self, key: &FitKey) -> bool {
-        self.dir.join(key.file_name()).is_file()
     }
 
     /// The fitted Gaussians stored under `key`, applied to `composed` (the
@@ -162,8 +198,12 @@ impl FitStore {
             key.file_name(),
             std::process::id()
         ));
-        std::fs::write(&partial, &bytes).map_err(cannot)?;
-        std::fs::rename(&partial, &path).map_err(cannot)
+        let written =
+            std::fs::write(&partial, &bytes).and_then(|()| std::fs::rename(&partial, &path));
+        if written.is_err() {
+            std::fs::remove_file(&partial).ok();
+        }
+        written.map_err(cannot)
     }
 }
 
@@ -180,10 +220,13 @@ fn encode(
     report: &FitReport,
 ) -> Vec<u8> {
     let stride = composed.sh_stride();
+    // The fit moves no Gaussian, so places are not stored.
+    debug_assert!(composed.position == fitted.position && composed.rotation == fitted.rotation);
+    let bits = |v: glam::Vec3| v.to_array().map(f32::to_bits);
     let changed: Vec<usize> = (0..composed.len())
         .filter(|&i| {
             composed.opacity_logit[i].to_bits() != fitted.opacity_logit[i].to_bits()
-                || composed.log_scale[i] != fitted.log_scale[i]
+                || bits(composed.log_scale[i]) != bits(fitted.log_scale[i])
                 || composed.sh[i * stride..(i + 1) * stride]
                     .iter()
                     .zip(&fitted.sh[i * stride..(i + 1) * stride])
@@ -240,6 +283,8 @@ impl Reader<'_> {
     }
 }
 
+/// The fitted set a file holds for `key` over `composed`, or `None` when
+/// the file is anything but exactly that.
 fn decode(bytes: &[u8], key: &FitKey, composed: &GaussianSet) -> Option<(GaussianSet, FitReport)> {
     let (body, check) = bytes.split_at_checked(bytes.len().checked_sub(32)?)?;
     if blake3::hash(body).as_bytes() != check {
@@ -281,4 +326,65 @@ fn decode(bytes: &[u8], key: &FitKey, composed: &GaussianSet) -> Option<(Gaussia
         }
     }
     Some((out, report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn set(n: usize, shift: f32) -> GaussianSet {
+        let mut s = GaussianSet::with_degree(1);
+        s.resize(n, 1);
+        for i in 0..n {
+            s.binding[i] = i as u32;
+            s.opacity_logit[i] = i as f32 + shift;
+            s.log_scale[i] = glam::Vec3::splat(-(i as f32) - shift);
+        }
+        s.sh.iter_mut()
+            .enumerate()
+            .for_each(|(k, x)| *x = k as f32 * 0.01);
+        s
+    }
+
+    #[test]
+    fn a_file_is_read_back_exactly_and_anything_else_is_refused_without_a_panic() {
+        let composed = set(5, 0.0);
+        let mut fitted = composed.clone();
+        fitted.opacity_logit[1] = 7.5;
+        fitted.log_scale[3] = glam::Vec3::new(0.25, -0.0, 1.0);
+        fitted.sh[2 * composed.sh_stride()] = -3.0;
+        let report = FitReport {
+            fitted: 3,
+            views: 16,
+            mse_before: 0.01,
+            mse_after: 0.005,
+            on_gpu: false,
+        };
+        let key = FitKey([7; 32]);
+        let bytes = encode(&key, &composed, &fitted, &report);
+        let (back, read) = decode(&bytes, &key, &composed).expect("its own file");
+        assert_eq!(read, report);
+        assert_eq!(back, fitted);
+        // Another key, another set's shape, every truncation, every flipped byte.
+        assert!(decode(&bytes, &FitKey([8; 32]), &composed).is_none());
+        assert!(decode(&bytes, &key, &set(6, 0.0)).is_none());
+        for len in 0..bytes.len() {
+            assert!(
+                decode(&bytes[..len], &key, &composed).is_none(),
+                "cut at {len}"
+            );
+        }
+        for at in 0..bytes.len() {
+            let mut bad = bytes.clone();
+            bad[at] ^= 0x01;
+            assert!(decode(&bad, &key, &composed).is_none(), "byte {at} flipped");
+        }
+        // A file whose hash holds but whose records point outside the set.
+        let mut body = bytes[..bytes.len() - 32].to_vec();
+        let first_record = 12 + 4 + 32 + 5 * 8 + 8 + 8 + 1;
+        body[first_record..first_record + 8].copy_from_slice(&u64::MAX.to_le_bytes());
+        let hash = *blake3::hash(&body).as_bytes();
+        body.extend_from_slice(&hash);
+        assert!(decode(&body, &key, &composed).is_none());
+    }
 }
