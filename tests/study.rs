@@ -301,33 +301,25 @@ fn study_build_fits_the_edited_avatars_seams_into_the_folder() {
     .unwrap();
     let fits =
         |out: &Path| -> usize { std::fs::read_dir(out.join("fits")).map_or(0, |d| d.count()) };
+    let build = |out: &Path, fit: &[&str]| {
+        let args = [
+            "study",
+            "build",
+            spec.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        visage(&[&args[..], fit].concat())
+    };
     let out = dir.join("built");
-    let o = visage(&[
-        "study",
-        "build",
-        spec.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--seam-fit",
-        "2",
-        "--seam-fit-size",
-        "16",
-    ]);
+    let o = build(&out, &["--seam-fit", "2", "--seam-fit-size", "16"]);
     let err = String::from_utf8_lossy(&o.stderr).to_string();
     stdout(&o);
     assert!(err.contains("fitted the seams of 1 avatar into"), "{err}");
     // The unedited avatar has no seam: only the edited one is kept.
     assert_eq!(fits(&out), 1, "{err}");
     let lazy = dir.join("lazy");
-    stdout(&visage(&[
-        "study",
-        "build",
-        spec.to_str().unwrap(),
-        "--out",
-        lazy.to_str().unwrap(),
-        "--seam-fit",
-        "0",
-    ]));
+    stdout(&build(&lazy, &["--seam-fit", "0"]));
     assert_eq!(fits(&lazy), 0);
 }
 

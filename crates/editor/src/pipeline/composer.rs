@@ -82,6 +82,8 @@ pub struct Composer {
     fit_options: SeamFit,
     /// Where finished fits are looked up before fitting, and kept after.
     fit_store: Option<FitStore>,
+    /// The key the pending fit was looked up by, to save it under.
+    fit_key: Option<FitKey>,
     /// Why the last finished fit could not be kept, until taken.
     store_error: Option<Error>,
 }
@@ -108,6 +110,7 @@ impl Composer {
             fit: FitState::None,
             fit_options: SeamFit::default(),
             fit_store: None,
+            fit_key: None,
             store_error: None,
         }
     }
@@ -293,12 +296,16 @@ impl Composer {
         };
         let c = self.composite.as_mut().expect("a fit is of a composite");
         if fitter.is_none() {
-            let stored = self.fit_store.as_ref().and_then(|store| {
-                store.load(
-                    &FitKey::of(&self.engine, c, &self.fit_options),
-                    &c.gaussians,
-                )
-            });
+            // The composite stays as it is while the fit is pending, so the
+            // key it is looked up by is the one to save it under.
+            self.fit_key = self
+                .fit_store
+                .as_ref()
+                .map(|_| FitKey::of(&self.engine, c, &self.fit_options));
+            let stored = match (&self.fit_store, &self.fit_key) {
+                (Some(store), Some(key)) => store.load(key, &c.gaussians),
+                _ => None,
+            };
             if let Some((set, report)) = stored {
                 self.fit = FitState::Fitted {
                     composed: std::mem::replace(&mut c.gaussians, set),
@@ -318,10 +325,7 @@ impl Composer {
         let progress = FitProgress::of(f);
         if f.finished() {
             let (set, report) = f.result(c);
-            let key = self
-                .fit_store
-                .as_ref()
-                .map(|_| FitKey::of(&self.engine, c, &self.fit_options));
+            let key = self.fit_key.take();
             let composed = std::mem::replace(&mut c.gaussians, set);
             self.generation += 1;
             // A fit with nothing on a seam has nothing worth keeping.
