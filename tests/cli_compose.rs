@@ -102,7 +102,13 @@ fn export_ply_writes_every_gaussian_of_the_frame() {
 #[test]
 fn export_with_a_seam_fit_changes_only_colours_opacities_and_scales() {
     let (plain, _) = export_ply(&[]);
-    let (fitted, said) = export_ply(&["--seam-fit", "20", "--seam-fit-size", "64"]);
+    let (fitted, said) = export_ply(&[
+        "--seam-fit",
+        "20",
+        "--seam-fit-size",
+        "64",
+        "--no-seam-fit-cache",
+    ]);
     assert!(
         said.contains("fitted") && said.contains("seam Gaussians"),
         "{said}"
@@ -132,6 +138,83 @@ fn export_with_a_seam_fit_changes_only_colours_opacities_and_scales() {
         .iter()
         .chain(&fitted.opacity)
         .all(|x| x.is_finite()));
+}
+
+/// `compose` with a short seam fit (32 px views unless `extra` names a
+/// size) and a cache folder of its own: the JSON report, and what it said
+/// on standard error.
+fn compose_cached(cache: &std::path::Path, extra: &[&str]) -> (serde_json::Value, String) {
+    let mut args = vec![
+        "compose",
+        "--recipe",
+        "recipes/three-sources.toml",
+        "--json",
+        "--seam-fit",
+        "5",
+    ];
+    if !extra.contains(&"--seam-fit-size") {
+        args.extend(["--seam-fit-size", "32"]);
+    }
+    args.extend(extra);
+    args.extend(SMALL);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_visage"))
+        .env("NODEVICE_SELECT", "1")
+        .env("VISAGE_CACHE_DIR", cache)
+        .args(&args)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{said}");
+    (serde_json::from_slice(&out.stdout).unwrap(), said)
+}
+
+fn stored_fits(cache: &std::path::Path) -> usize {
+    std::fs::read_dir(cache.join("fits")).map_or(0, |d| {
+        d.filter(|e| {
+            e.as_ref()
+                .is_ok_and(|e| e.file_name().to_string_lossy().ends_with(".fit"))
+        })
+        .count()
+    })
+}
+
+/// A finished seam fit is kept in fits/ of the user's cache folder, and
+/// the next run on the same composite reads it back instead of fitting: the
+/// same composite, and it says so. `--no-seam-fit-cache` fits and keeps
+/// nothing; a cache that cannot be written costs a warning, not the run.
+#[test]
+fn a_finished_seam_fit_is_kept_and_read_back_the_next_time() {
+    let cache = std::env::temp_dir().join(format!("visage-fit-cache-{}", std::process::id()));
+    std::fs::remove_dir_all(&cache).ok();
+    let (first, said) = compose_cached(&cache, &[]);
+    assert_eq!(first["seam_fit"]["stored"], false, "{said}");
+    assert!(said.contains("fitted"), "{said}");
+    assert_eq!(stored_fits(&cache), 1);
+    let (again, said) = compose_cached(&cache, &[]);
+    assert_eq!(again["seam_fit"]["stored"], true, "{said}");
+    assert!(said.contains("read the stored seam fit"), "{said}");
+    assert_eq!(again["composite_hash"], first["composite_hash"]);
+    assert_eq!(again["seam_fit"]["fitted"], first["seam_fit"]["fitted"]);
+    // Other fit options are another fit.
+    let (bigger, _) = compose_cached(&cache, &["--seam-fit-size", "40"]);
+    assert_eq!(bigger["seam_fit"]["stored"], false);
+    assert_eq!(stored_fits(&cache), 2);
+    // Not read, not kept.
+    let elsewhere = cache.join("elsewhere");
+    let (fresh, _) = compose_cached(&elsewhere, &["--no-seam-fit-cache"]);
+    assert_eq!(fresh["seam_fit"]["stored"], false);
+    assert_eq!(fresh["composite_hash"], first["composite_hash"]);
+    assert_eq!(stored_fits(&elsewhere), 0);
+    // A cache folder that is a file: the composite still comes, with a warning.
+    let blocked = cache.join("blocked");
+    std::fs::write(&blocked, b"not a folder").unwrap();
+    let (despite, said) = compose_cached(&blocked, &[]);
+    assert_eq!(despite["composite_hash"], first["composite_hash"]);
+    assert!(
+        said.contains("warning: the seam fit was not kept"),
+        "{said}"
+    );
+    std::fs::remove_dir_all(&cache).ok();
 }
 
 /// A recipe's `[post] fit = "seams"` runs in `compose` (and `export`,

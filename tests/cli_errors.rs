@@ -108,6 +108,7 @@ fn a_seam_fit_size_or_renderer_without_a_fit_is_refused() {
             "--seam-fit-size",
         ),
         (&["--seam-fit-renderer", "gpu"][..], "--seam-fit-renderer"),
+        (&["--no-seam-fit-cache"][..], "--no-seam-fit-cache"),
     ] {
         fails(&[&compose[..], options].concat(), &[flag, "no [post] fit"]);
     }

@@ -30,7 +30,7 @@ fn home(name: &str) -> PathBuf {
 /// code to `status` and keeping the pane open.
 fn visage_line(home: &Path, args: &str, status: &Path) -> String {
     format!(
-        "XDG_STATE_HOME={h}/state XDG_CONFIG_HOME={h}/config {} {args} 2>&1; echo EXIT=$? > {}; sleep 60",
+        "XDG_STATE_HOME={h}/state XDG_CONFIG_HOME={h}/config VISAGE_CACHE_DIR={h}/cache {} {args} 2>&1; echo EXIT=$? > {}; sleep 60",
         env!("CARGO_BIN_EXE_visage"),
         status.display(),
         h = home.display()
@@ -529,4 +529,10 @@ fn the_seam_fit_runs_in_the_background_and_can_be_turned_off() {
     tmux.wait_for("the question", LONG, |s| s.contains("quit?"));
     tmux.keys(&["q"]);
     assert_eq!(exit_code(&status), "EXIT=0");
+    // Both fits were kept in the user's cache, to show at once next time.
+    let kept = std::fs::read_dir(home.join("cache/fits"))
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension() == Some("fit".as_ref()))
+        .count();
+    assert_eq!(kept, 2);
 }

@@ -15,6 +15,7 @@ use crate::model::regions::{Group, Region};
 use crate::pipeline::composer::{BuildTimings, Composer};
 use crate::render::Backend;
 use crate::text::printable;
+use crate::train::fit_store::FitStore;
 use crate::train::seam_fit::SeamFit;
 
 /// Arguments of `visage compose`.
@@ -61,6 +62,11 @@ pub struct FitArgs {
     /// gpu (any adapter, f32) [default: cpu].
     #[arg(long, value_name = "RENDERER", value_parser = Backend::parse)]
     seam_fit_renderer: Option<Backend>,
+    /// Fit even if the fit of this composite is stored, and store nothing
+    /// (by default finished fits are kept in fits/ of visage's cache
+    /// folder, $VISAGE_CACHE_DIR or ~/.cache/visage, and read back).
+    #[arg(long)]
+    no_seam_fit_cache: bool,
 }
 
 impl FitArgs {
@@ -69,6 +75,7 @@ impl FitArgs {
         seam_fit: Some(0),
         seam_fit_size: None,
         seam_fit_renderer: None,
+        no_seam_fit_cache: false,
     };
 
     /// The recipe with `--seam-fit` applied to its `[post] fit`; a size for
@@ -85,6 +92,9 @@ impl FitArgs {
             }
             if self.seam_fit_renderer.is_some() {
                 return Err(without_fit("--seam-fit-renderer"));
+            }
+            if self.no_seam_fit_cache {
+                return Err(without_fit("--no-seam-fit-cache"));
             }
         }
         Ok(())
@@ -147,6 +157,9 @@ pub fn build(
     let (mut composer, timings) =
         Composer::build(&db_args.spec(), |_| recipe, frame, Some(recipe_path))?;
     composer.set_fit_options(fit.options());
+    if !fit.no_seam_fit_cache {
+        composer.set_fit_store(Some(FitStore::user()));
+    }
     finish_fit(&mut composer)?;
     Ok((composer, timings))
 }
@@ -164,10 +177,27 @@ fn finish_fit(composer: &mut Composer) -> Result<()> {
     })?;
     bar.finish_and_clear();
     if let Some(report) = report.filter(|r| r.fitted > 0) {
+        let what = match composer.fit_store() {
+            Some(store) if composer.fit_was_stored() => format!(
+                "read the stored seam fit of {} Gaussians over {} views from {}",
+                report.fitted,
+                report.views,
+                store.dir().display()
+            ),
+            _ => format!(
+                "fitted {} seam Gaussians over {} views",
+                report.fitted, report.views
+            ),
+        };
         eprintln!(
-            "visage: fitted {} seam Gaussians over {} views: error against the sources' own seams {:.2e} → {:.2e}",
-            report.fitted, report.views, report.mse_before, report.mse_after
+            "visage: {what}: error against the sources' own seams {:.2e} → {:.2e}",
+            report.mse_before, report.mse_after
         );
+    }
+    // The fit is done and shows; a cache that cannot keep it costs only
+    // the next run's time.
+    if let Some(e) = composer.take_store_error() {
+        eprintln!("visage: warning: the seam fit was not kept: {e}");
     }
     Ok(())
 }
@@ -319,6 +349,7 @@ fn report(composer: &Composer, timings: &BuildTimings, frame: Option<usize>) -> 
             "mse_before": f.mse_before,
             "mse_after": f.mse_after,
             "renderer": if f.on_gpu { "gpu" } else { "cpu" },
+            "stored": composer.fit_was_stored(),
         })),
         "gaussians": c.gaussians.len(),
         "extra_gaussians": extra_total,

@@ -16,8 +16,8 @@ pub struct LodArgs {
     /// Scene files (.ply, .compressed.ply, .splat or .spz).
     #[arg(required = true)]
     files: Vec<PathBuf>,
-    /// Folder for the caches (default: $VISAGE_CACHE_DIR, else
-    /// $XDG_CACHE_HOME/visage/lod, else ~/.cache/visage/lod).
+    /// Folder for the caches (default: lod/ of visage's cache folder,
+    /// $VISAGE_CACHE_DIR, else $XDG_CACHE_HOME/visage, else ~/.cache/visage).
     #[arg(long, value_name = "DIR")]
     cache_dir: Option<PathBuf>,
     /// Memory the build may take, and the check of a cache found reads

@@ -103,6 +103,22 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     std::fs::write(path, bytes).map_err(|e| FileError::access("write", path, e))
 }
 
+/// The folder visage keeps what it can make again in (level-of-detail
+/// caches in `lod/`, seam fits in `fits/`): `$VISAGE_CACHE_DIR`, else
+/// `$XDG_CACHE_HOME/visage`, else `~/.cache/visage` (the temporary folder's
+/// `visage` where there is no home).
+pub fn cache_root() -> PathBuf {
+    if let Some(dir) = std::env::var_os("VISAGE_CACHE_DIR").filter(|d| !d.is_empty()) {
+        return PathBuf::from(dir);
+    }
+    std::env::var_os("XDG_CACHE_HOME")
+        .filter(|d| !d.is_empty())
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .unwrap_or_else(std::env::temp_dir)
+        .join("visage")
+}
+
 /// A file of the repository's `tests/data/` (the fixtures made by other
 /// tools), for unit tests whatever crate folder they run in.
 #[cfg(test)]

@@ -86,6 +86,8 @@ pub struct Composer {
     fit_key: Option<FitKey>,
     /// Why the last finished fit could not be kept, until taken.
     store_error: Option<Error>,
+    /// Whether the fit on show was read from the store rather than made.
+    fit_from_store: bool,
 }
 
 /// How long the last [`Composer::update`] spent, in milliseconds.
@@ -112,6 +114,7 @@ impl Composer {
             fit_store: None,
             fit_key: None,
             store_error: None,
+            fit_from_store: false,
         }
     }
 
@@ -279,6 +282,17 @@ impl Composer {
         }
     }
 
+    /// Whether the completed seam fit was read from the fit store (see
+    /// [`Composer::set_fit_store`]) rather than made; false while none is.
+    pub fn fit_was_stored(&self) -> bool {
+        self.fit_from_store && matches!(self.fit, FitState::Fitted { .. })
+    }
+
+    /// The store finished fits are kept in, if any.
+    pub fn fit_store(&self) -> Option<&FitStore> {
+        self.fit_store.as_ref()
+    }
+
     /// What the completed seam fit did (`None` until one completes).
     pub fn fit_report(&self) -> Option<FitReport> {
         match &self.fit {
@@ -307,6 +321,7 @@ impl Composer {
                 _ => None,
             };
             if let Some((set, report)) = stored {
+                self.fit_from_store = true;
                 self.fit = FitState::Fitted {
                     composed: std::mem::replace(&mut c.gaussians, set),
                     report,
@@ -334,6 +349,7 @@ impl Composer {
                     self.store_error = store.save(&key, &composed, &c.gaussians, &report).err();
                 }
             }
+            self.fit_from_store = false;
             self.fit = FitState::Fitted { composed, report };
         }
         Ok(Some(progress))

@@ -17,6 +17,7 @@ use crate::render::Backend;
 use crate::scene::camera::{Orbit, UpAxis};
 use crate::scene::splats::SplatScene;
 use crate::scene::upright::{ground_up, nearest_up, UpReason};
+use crate::train::fit_store::FitStore;
 
 /// A scene file to view and the world axis that is up in it.
 #[derive(Clone, Debug, PartialEq)]
@@ -211,7 +212,11 @@ impl Subject {
         match self {
             Subject::Avatars(spec) => {
                 let (db, _) = spec.load()?;
-                Workbench::new(Engine::new(db)?, backend)
+                let mut workbench = Workbench::new(Engine::new(db)?, backend)?;
+                // A composite fitted once, here or by `compose`, shows
+                // fitted at once the next time.
+                workbench.set_fit_store(Some(FitStore::user()));
+                Ok(workbench)
             }
             Subject::Scene(spec) => {
                 let (viewed, _) = spec.load(progress)?;

@@ -156,17 +156,54 @@ impl Hashed {
 #[derive(Clone, Debug)]
 pub struct FitStore {
     dir: PathBuf,
+    /// Bytes the folder's fits may take; past it the least recently used go.
+    limit: Option<u64>,
 }
 
+/// What the user's store of fits ([`FitStore::user`]) may take on disk:
+/// about 1,500 composites of the built-in database at 256² (0.7 MB each),
+/// 400 of a 56-thousand-Gaussian one.
+pub const USER_STORE_LIMIT: u64 = 1 << 30;
+
+/// A partial file older than this was left by a process that died while
+/// writing it (a write takes milliseconds), and is removed when the user's
+/// store is tidied.
+const ABANDONED_PARTIAL: std::time::Duration = std::time::Duration::from_secs(3600);
+
 impl FitStore {
-    /// The store in `dir` (made when the first fit is saved).
+    /// The store in `dir` (made when the first fit is saved), kept whole.
     pub fn new(dir: impl Into<PathBuf>) -> Self {
-        Self { dir: dir.into() }
+        Self {
+            dir: dir.into(),
+            limit: None,
+        }
+    }
+
+    /// The user's store, `fits/` of visage's cache folder
+    /// ([`crate::io::cache_root`]), where the editor, `compose`, `export` and
+    /// `render` keep every fit they finish: a composite fitted once shows at
+    /// once the next time. Capped at [`USER_STORE_LIMIT`]: saving a fit
+    /// removes the least recently used past it.
+    pub fn user() -> Self {
+        Self {
+            dir: crate::io::cache_root().join("fits"),
+            limit: Some(USER_STORE_LIMIT),
+        }
+    }
+
+    /// The same store with another cap on its size (`None`: none).
+    pub fn with_limit(self, limit: Option<u64>) -> Self {
+        Self { limit, ..self }
     }
 
     /// The folder.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// Where the fit of `key` is (or would be) stored.
+    pub fn path(&self, key: &FitKey) -> PathBuf {
+        self.dir.join(key.file_name())
     }
 
     /// The fitted Gaussians stored under `key`, applied to `composed` (the
@@ -175,8 +212,16 @@ impl FitStore {
     /// a set like `composed` (a damaged or foreign file is passed over: the
     /// caller fits again, and saving replaces it).
     pub fn load(&self, key: &FitKey, composed: &GaussianSet) -> Option<(GaussianSet, FitReport)> {
-        let bytes = std::fs::read(self.dir.join(key.file_name())).ok()?;
-        decode(&bytes, key, composed)
+        let path = self.path(key);
+        let found = decode(&std::fs::read(&path).ok()?, key, composed)?;
+        if self.limit.is_some() {
+            // Used now: the last to go when the store is over its size.
+            // A store on a read-only disk still serves, so no error counts.
+            if let Ok(file) = std::fs::File::options().append(true).open(&path) {
+                file.set_modified(std::time::SystemTime::now()).ok();
+            }
+        }
+        Some(found)
     }
 
     /// Stores the fit of `composed` to `fitted` under `key`: the Gaussians
@@ -192,7 +237,7 @@ impl FitStore {
         let bytes = encode(key, composed, fitted, report);
         let cannot = |e: std::io::Error| Error::io("store the seam fit in", &self.dir, e);
         std::fs::create_dir_all(&self.dir).map_err(cannot)?;
-        let path = self.dir.join(key.file_name());
+        let path = self.path(key);
         let partial = self.dir.join(format!(
             "{}.partial.{}",
             key.file_name(),
@@ -203,7 +248,49 @@ impl FitStore {
         if written.is_err() {
             std::fs::remove_file(&partial).ok();
         }
-        written.map_err(cannot)
+        written.map_err(cannot)?;
+        if let Some(limit) = self.limit {
+            self.tidy(limit, &path);
+        }
+        Ok(())
+    }
+
+    /// Removes the least recently used fits until the rest take at most
+    /// `limit` bytes (never `keep`, the fit just saved), and partial files
+    /// a process that died while writing left behind. Best effort: a file
+    /// another process removed first, or one that cannot be removed, is
+    /// passed over.
+    fn tidy(&self, limit: u64, keep: &Path) {
+        let Ok(entries) = std::fs::read_dir(&self.dir) else {
+            return;
+        };
+        let now = std::time::SystemTime::now();
+        let mut fits = Vec::new();
+        for entry in entries.flatten() {
+            let (path, Ok(meta)) = (entry.path(), entry.metadata()) else {
+                continue;
+            };
+            let name = entry.file_name();
+            let name = name.to_string_lossy();
+            let modified = meta.modified().unwrap_or(now);
+            if name.contains(".fit.partial.") {
+                if now.duration_since(modified).unwrap_or_default() > ABANDONED_PARTIAL {
+                    std::fs::remove_file(&path).ok();
+                }
+            } else if name.ends_with(".fit") && meta.is_file() {
+                fits.push((modified, meta.len(), path));
+            }
+        }
+        let mut total: u64 = fits.iter().map(|f| f.1).sum();
+        fits.sort();
+        for (_, bytes, path) in fits {
+            if total <= limit {
+                break;
+            }
+            if path != keep && std::fs::remove_file(&path).is_ok() {
+                total -= bytes;
+            }
+        }
     }
 }
 
@@ -386,5 +473,62 @@ mod tests {
         let hash = *blake3::hash(&body).as_bytes();
         body.extend_from_slice(&hash);
         assert!(decode(&body, &key, &composed).is_none());
+    }
+
+    #[test]
+    fn a_capped_store_drops_the_least_recently_used_fits_and_abandoned_partials() {
+        let dir = std::env::temp_dir().join(format!("visage-fit-store-cap-{}", std::process::id()));
+        std::fs::remove_dir_all(&dir).ok();
+        let composed = set(40, 0.0);
+        let fitted = set(40, 1.0);
+        let report = FitReport {
+            fitted: 40,
+            ..FitReport::default()
+        };
+        let one = encode(&FitKey([0; 32]), &composed, &fitted, &report).len() as u64;
+        // Room for two fits and a half.
+        let store = FitStore::new(&dir).with_limit(Some(2 * one + one / 2));
+        let keys = [FitKey([1; 32]), FitKey([2; 32]), FitKey([3; 32])];
+        let age = |key: &FitKey, seconds: u64| {
+            let file = std::fs::File::options()
+                .append(true)
+                .open(store.path(key))
+                .unwrap();
+            let then = std::time::SystemTime::now() - std::time::Duration::from_secs(seconds);
+            file.set_modified(then).unwrap();
+        };
+        store.save(&keys[0], &composed, &fitted, &report).unwrap();
+        age(&keys[0], 300);
+        store.save(&keys[1], &composed, &fitted, &report).unwrap();
+        age(&keys[1], 200);
+        // Reading the older fit makes it the more recently used of the two.
+        assert!(store.load(&keys[0], &composed).is_some());
+        let partial = dir.join("0101010101010101.fit.partial.1");
+        std::fs::write(&partial, b"half").unwrap();
+        let fresh_partial = dir.join("0202020202020202.fit.partial.2");
+        std::fs::write(&fresh_partial, b"half").unwrap();
+        let file = std::fs::File::options()
+            .append(true)
+            .open(&partial)
+            .unwrap();
+        file.set_modified(std::time::SystemTime::now() - 2 * ABANDONED_PARTIAL)
+            .unwrap();
+        store.save(&keys[2], &composed, &fitted, &report).unwrap();
+        assert!(store.load(&keys[0], &composed).is_some(), "used last: kept");
+        assert!(
+            store.load(&keys[1], &composed).is_none(),
+            "least recently used: gone"
+        );
+        assert!(
+            store.load(&keys[2], &composed).is_some(),
+            "just saved: kept"
+        );
+        assert!(!partial.exists(), "an abandoned partial file is removed");
+        assert!(fresh_partial.exists(), "one being written is left alone");
+        // A store kept whole (a study's) never drops a fit.
+        let whole = FitStore::new(&dir);
+        whole.save(&keys[1], &composed, &fitted, &report).unwrap();
+        assert!(keys.iter().all(|k| whole.load(k, &composed).is_some()));
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -18,6 +18,7 @@ use glam::Vec3;
 
 use super::{Layout, Member, NodeLink};
 use crate::error::{Error, Result};
+use crate::io::cache_root;
 use crate::scene::camera::UpAxis;
 use crate::scene::splats::SplatScene;
 
@@ -218,18 +219,10 @@ pub fn read_error(path: &Path, error: std::io::Error) -> Error {
     crate::io::FileError::access("read", path, error).into()
 }
 
-/// The folder caches live in: `$VISAGE_CACHE_DIR`, else
-/// `$XDG_CACHE_HOME/visage/lod`, else `~/.cache/visage/lod`.
+/// The folder level-of-detail caches live in: `lod/` of visage's cache
+/// folder ([`cache_root`]).
 pub fn cache_dir() -> PathBuf {
-    if let Some(dir) = std::env::var_os("VISAGE_CACHE_DIR").filter(|d| !d.is_empty()) {
-        return PathBuf::from(dir);
-    }
-    let base = std::env::var_os("XDG_CACHE_HOME")
-        .filter(|d| !d.is_empty())
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
-        .unwrap_or_else(std::env::temp_dir);
-    base.join("visage").join("lod")
+    cache_root().join("lod")
 }
 
 /// The cache file of a source with this fingerprint.
