@@ -318,6 +318,25 @@ fn study_build_fits_the_edited_avatars_seams_into_the_folder() {
     assert!(err.contains("fitted the seams of 1 avatar into"), "{err}");
     // The unedited avatar has no seam: only the edited one is kept.
     assert_eq!(fits(&out), 1, "{err}");
+    // Built again (a kill in the middle, say): the fit is found, not redone.
+    let o = build(&out, &["--seam-fit", "2", "--seam-fit-size", "16"]);
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    stdout(&o);
+    assert!(
+        err.contains("1 of them there from an earlier build"),
+        "{err}"
+    );
+    assert_eq!(fits(&out), 1, "{err}");
+    // Under other options: the new fit replaces the one no run would use.
+    let o = build(&out, &["--seam-fit", "2", "--seam-fit-size", "20"]);
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    stdout(&o);
+    assert!(!err.contains("earlier build"), "{err}");
+    assert!(
+        err.contains("removed 1 fit of no avatar of this build"),
+        "{err}"
+    );
+    assert_eq!(fits(&out), 1, "{err}");
     let lazy = dir.join("lazy");
     stdout(&build(&lazy, &["--seam-fit", "0"]));
     assert_eq!(fits(&lazy), 0);

@@ -208,7 +208,7 @@ fn run_build(args: &BuildArgs) -> Result<()> {
             .expect("the template is valid")
             .progress_chars("=> "),
         );
-        let fitted = fit_avatars(&folder, &options, &mut |k, count, p| {
+        let summary = fit_avatars(&folder, &options, &mut |k, count, p| {
             bar.set_length(count as u64);
             bar.set_position(k as u64);
             bar.set_message(format!(
@@ -218,10 +218,24 @@ fn run_build(args: &BuildArgs) -> Result<()> {
             ));
         })?;
         bar.finish_and_clear();
-        if fitted > 0 {
+        let plural = |n: usize| if n == 1 { "" } else { "s" };
+        if summary.fitted + summary.stored > 0 {
+            let earlier = match summary.stored {
+                0 => String::new(),
+                n => format!(" ({n} of them there from an earlier build)"),
+            };
+            let n = summary.fitted + summary.stored;
             eprintln!(
-                "visage: fitted the seams of {fitted} avatar{} into {}",
-                if fitted == 1 { "" } else { "s" },
+                "visage: fitted the seams of {n} avatar{}{earlier} into {}",
+                plural(n),
+                fit_store(&folder).dir().display()
+            );
+        }
+        if summary.removed > 0 {
+            eprintln!(
+                "visage: removed {} fit{} of no avatar of this build from {}",
+                summary.removed,
+                plural(summary.removed),
                 fit_store(&folder).dir().display()
             );
         }

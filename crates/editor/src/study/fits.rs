@@ -7,7 +7,7 @@ use crate::compose::recipe::Fit;
 use crate::error::Result;
 use crate::pipeline::composer::{Composer, FitProgress};
 use crate::pipeline::DatabaseSpec;
-use crate::train::fit_store::FitStore;
+use crate::train::fit_store::{FitKey, FitStore};
 use crate::train::seam_fit::SeamFit;
 
 use super::design::{StudyAvatar, StudyFolder};
@@ -20,16 +20,30 @@ pub fn fit_store(study: &StudyFolder) -> FitStore {
     FitStore::new(study.dir.join(FITS_DIR))
 }
 
+/// What [`fit_avatars`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FitSummary {
+    /// Avatars fitted now.
+    pub fitted: usize,
+    /// Avatars whose fit was in the folder already (an earlier build under
+    /// the same options, one a kill interrupted included).
+    pub stored: usize,
+    /// Fits in the folder of no avatar of this build (another spec or other
+    /// fit options built into the same folder before), removed so that the
+    /// folder ships only what its runs can use.
+    pub removed: usize,
+}
+
 /// Fits the seams of every avatar whose post-processing asks for a fit,
-/// under `options`, into the study's folder; a fit already there is kept.
-/// `progress` hears the avatar's position among those fitted, their count
-/// and the fit's progress. Returns how many avatars had Gaussians on a
-/// seam to fit (an avatar of one source has none).
+/// under `options`, into the study's folder; a fit already there is kept,
+/// and any other fit in the folder removed. `progress` hears the avatar's
+/// position among those fitted, their count and the fit's progress. Counts
+/// only avatars with Gaussians on a seam (an avatar of one source has none).
 pub fn fit_avatars(
     study: &StudyFolder,
     options: &SeamFit,
     progress: &mut dyn FnMut(usize, usize, FitProgress),
-) -> Result<usize> {
+) -> Result<FitSummary> {
     let mut wanted: Vec<(&StudyAvatar, DatabaseSpec)> = Vec::new();
     for avatar in &study.study.avatars {
         if study.recipe(avatar)?.post.fit == Fit::Seams {
@@ -37,7 +51,9 @@ pub fn fit_avatars(
         }
     }
     let count = wanted.len();
-    let (mut done, mut fitted) = (0, 0);
+    let mut done = 0;
+    let mut summary = FitSummary::default();
+    let mut keys = Vec::with_capacity(count);
     // One engine per database, its avatars one after another.
     while let Some((_, spec)) = wanted.first().cloned() {
         let (db, _) = spec.load()?;
@@ -46,14 +62,23 @@ pub fn fit_avatars(
         composer.set_fit_store(Some(fit_store(study)));
         for (avatar, _) in wanted.iter().filter(|(_, s)| *s == spec) {
             composer.update(&study.recipe(avatar)?)?;
+            // Keyed as composed, before the fit replaces the Gaussians.
+            keys.push(FitKey::of(composer.engine(), composer.composite(), options));
             composer.finish_fit(&mut |p| progress(done, count, p))?;
             if let Some(e) = composer.take_store_error() {
                 return Err(e);
             }
             done += 1;
-            fitted += usize::from(composer.fit_report().is_some_and(|r| r.fitted > 0));
+            if composer.fit_report().is_some_and(|r| r.fitted > 0) {
+                if composer.fit_was_stored() {
+                    summary.stored += 1;
+                } else {
+                    summary.fitted += 1;
+                }
+            }
         }
         wanted.retain(|(_, s)| *s != spec);
     }
-    Ok(fitted)
+    summary.removed = fit_store(study).remove_all_but(&keys)?;
+    Ok(summary)
 }

@@ -255,6 +255,27 @@ impl FitStore {
         Ok(())
     }
 
+    /// Removes every fit in the folder but those of `keep`; returns how
+    /// many went. A missing folder holds none.
+    pub fn remove_all_but(&self, keep: &[FitKey]) -> Result<usize> {
+        let cannot = |e: std::io::Error| Error::io("tidy the seam fits in", &self.dir, e);
+        let entries = match std::fs::read_dir(&self.dir) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+            other => other.map_err(cannot)?,
+        };
+        let kept: Vec<String> = keep.iter().map(FitKey::file_name).collect();
+        let mut removed = 0;
+        for entry in entries {
+            let entry = entry.map_err(cannot)?;
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if name.ends_with(".fit") && !kept.contains(&name) {
+                std::fs::remove_file(entry.path()).map_err(cannot)?;
+                removed += 1;
+            }
+        }
+        Ok(removed)
+    }
+
     /// Removes the least recently used fits until the rest take at most
     /// `limit` bytes (never `keep`, the fit just saved), and partial files
     /// a process that died while writing left behind. Best effort: a file
