@@ -519,6 +519,13 @@ fn the_seam_fit_runs_in_the_background_and_can_be_turned_off() {
         s.contains("wrote") && s.contains("post ours") && !s.contains("fitting")
     });
     assert!(still.exists());
+    // Back to the first edit: its fit is read from the cache, not redone.
+    tmux.keys(&[":"]);
+    tmux.type_text("undo");
+    tmux.keys(&["Enter"]);
+    tmux.wait_for("the stored fit", LONG, |s| {
+        s.contains("seam fit done (read from the cache)")
+    });
     tmux.keys(&[":"]);
     tmux.type_text("fit off");
     tmux.keys(&["Enter"]);

@@ -583,11 +583,18 @@ impl App {
                     self.status = message;
                 }
                 Reply::Failed(message) => self.status = message,
-                Reply::Fit(progress) => {
-                    if progress.is_none() && self.picture.info.fit.is_some() {
+                Reply::Fit(progress, stored) => {
+                    // A fit read from the cache is done at its first step,
+                    // before any progress was shown.
+                    if progress.is_none() && (self.picture.info.fit.is_some() || stored) {
                         // Done: draw the fitted composite.
                         self.picture.version += 1;
-                        self.status = "seam fit done".into();
+                        self.status = if stored {
+                            "seam fit done (read from the cache)"
+                        } else {
+                            "seam fit done"
+                        }
+                        .into();
                     }
                     self.picture.info.fit = progress;
                 }

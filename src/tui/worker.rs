@@ -72,8 +72,9 @@ pub enum Reply {
     /// A frame or question failed.
     Failed(String),
     /// The seam fit went on in the background: how far it is, or `None`
-    /// once it is done (the composite shows it from the next frame).
-    Fit(Option<FitProgress>),
+    /// once it is done (the composite shows it from the next frame), and
+    /// whether it was read from the fit store rather than made.
+    Fit(Option<FitProgress>, bool),
 }
 
 #[derive(Default)]
@@ -174,7 +175,9 @@ fn work(mut workbench: Workbench, mailbox: &(Mutex<Mailbox>, Condvar), replies: 
                 // the task's own reply, which the status line shows last.
                 if fitting
                     && workbench.fit_progress().is_none()
-                    && replies.send(Reply::Fit(None)).is_err()
+                    && replies
+                        .send(Reply::Fit(None, workbench.fit_was_stored()))
+                        .is_err()
                 {
                     return;
                 }
@@ -210,7 +213,7 @@ fn draw(workbench: &mut Workbench, job: FrameJob) -> Reply {
 /// frame asked for meanwhile waits at most that long.
 fn fit_step(workbench: &mut Workbench) -> Reply {
     match workbench.fit_step() {
-        Ok(_) => Reply::Fit(workbench.fit_progress()),
+        Ok(_) => Reply::Fit(workbench.fit_progress(), workbench.fit_was_stored()),
         Err(e) => Reply::Failed(format!(
             "seam fit failed (the composite shows unfitted): {e}"
         )),

@@ -211,6 +211,15 @@ impl Workbench {
         }
     }
 
+    /// Whether the seam fit on show was read from the fit store rather than
+    /// made (see [`Composer::fit_was_stored`]).
+    pub fn fit_was_stored(&self) -> bool {
+        match &self.content {
+            Content::Composite(composer) => composer.fit_was_stored(),
+            Content::Scene(_) => false,
+        }
+    }
+
     /// How far the composite's seam fit is while one is pending (`None`:
     /// none asked for, or it is done).
     pub fn fit_progress(&self) -> Option<FitProgress> {
