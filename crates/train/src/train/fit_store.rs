@@ -44,6 +44,8 @@ impl FitKey {
         let mut h = Hashed(blake3::Hasher::new());
         h.u64(u64::from(VERSION));
         h.bytes(env!("CARGO_PKG_VERSION").as_bytes());
+        // The code itself (build.rs): another build's fit is not this one's.
+        h.bytes(env!("VISAGE_FIT_CODE").as_bytes());
         for n in [iterations, size as usize, cameras] {
             h.u64(n as u64);
         }
@@ -255,8 +257,9 @@ impl FitStore {
         Ok(())
     }
 
-    /// Removes every fit in the folder but those of `keep`; returns how
-    /// many went. A missing folder holds none.
+    /// Removes every fit in the folder but those of `keep`, and partial
+    /// files a process that died while writing left; returns how many fits
+    /// went. A missing folder holds none.
     pub fn remove_all_but(&self, keep: &[FitKey]) -> Result<usize> {
         let cannot = |e: std::io::Error| Error::io("tidy the seam fits in", &self.dir, e);
         let entries = match std::fs::read_dir(&self.dir) {
@@ -271,6 +274,8 @@ impl FitStore {
             if name.ends_with(".fit") && !kept.contains(&name) {
                 std::fs::remove_file(entry.path()).map_err(cannot)?;
                 removed += 1;
+            } else if abandoned(&entry) {
+                std::fs::remove_file(entry.path()).ok();
             }
         }
         Ok(removed)
@@ -294,10 +299,8 @@ impl FitStore {
             let name = entry.file_name();
             let name = name.to_string_lossy();
             let modified = meta.modified().unwrap_or(now);
-            if name.contains(".fit.partial.") {
-                if now.duration_since(modified).unwrap_or_default() > ABANDONED_PARTIAL {
-                    std::fs::remove_file(&path).ok();
-                }
+            if abandoned(&entry) {
+                std::fs::remove_file(&path).ok();
             } else if name.ends_with(".fit") && meta.is_file() {
                 fits.push((modified, meta.len(), path));
             }
@@ -308,11 +311,31 @@ impl FitStore {
             if total <= limit {
                 break;
             }
-            if path != keep && std::fs::remove_file(&path).is_ok() {
-                total -= bytes;
+            if path == keep {
+                continue;
+            }
+            // Removed, or by another process tidying the same store first.
+            match std::fs::remove_file(&path) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {}
+                _ => total -= bytes,
             }
         }
     }
+}
+
+/// Whether a folder entry is a partial fit file over [`ABANDONED_PARTIAL`]
+/// old: left by a writer that died.
+fn abandoned(entry: &std::fs::DirEntry) -> bool {
+    let partial = entry
+        .file_name()
+        .to_string_lossy()
+        .contains(".fit.partial.");
+    let age = entry
+        .metadata()
+        .and_then(|m| m.modified())
+        .ok()
+        .and_then(|t| std::time::SystemTime::now().duration_since(t).ok());
+    partial && age.is_some_and(|a| a > ABANDONED_PARTIAL)
 }
 
 /// Floats stored per changed Gaussian beside its index: opacity logit, log
