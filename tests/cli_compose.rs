@@ -235,8 +235,16 @@ fn a_recipes_seam_fit_runs_unless_turned_off() {
     let plain = compose_json("recipes/three-sources.toml");
     assert_eq!(plain["fit"], "off");
     assert!(plain["seam_fit"].is_null());
-    let fitted = compose(&["--seam-fit", "5", "--seam-fit-size", "32"]);
+    // Fitted here and now, never read from the tests' shared cache.
+    let fitted = compose(&[
+        "--seam-fit",
+        "5",
+        "--seam-fit-size",
+        "32",
+        "--no-seam-fit-cache",
+    ]);
     assert_eq!(fitted["fit"], "seams");
+    assert_eq!(fitted["seam_fit"]["stored"], false);
     assert!(
         fitted["seam_fit"]["fitted"].as_u64().unwrap() > 0,
         "{}",
@@ -252,6 +260,7 @@ fn a_recipes_seam_fit_runs_unless_turned_off() {
         "32",
         "--seam-fit-renderer",
         "gpu",
+        "--no-seam-fit-cache",
     ]);
     assert_eq!(on_gpu["seam_fit"]["renderer"], "gpu");
     assert_eq!(on_gpu["seam_fit"]["fitted"], fitted["seam_fit"]["fitted"]);

@@ -15,8 +15,9 @@ fn temp(name: &str) -> std::path::PathBuf {
 
 fn editor_command(extra: &str, status: &Path) -> String {
     format!(
-        "XDG_STATE_HOME={} {} --graphics halfblocks --gaussians-per-avatar 11000 --source-count 4 {extra} 2>/dev/null; echo EXIT=$? > {}; sleep 60",
+        "XDG_STATE_HOME={} VISAGE_CACHE_DIR={} {} --graphics halfblocks --gaussians-per-avatar 11000 --source-count 4 {extra} 2>/dev/null; echo EXIT=$? > {}; sleep 60",
         temp("state").display(),
+        common::test_cache_dir().display(),
         env!("CARGO_BIN_EXE_visage"),
         status.display()
     )

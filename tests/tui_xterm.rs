@@ -4,6 +4,8 @@
 //! terminal is killed the editor must exit (not spin on a dead tty). Needs Xvfb,
 //! xterm, xwd and X fonts (installed by .ci/setup).
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -188,6 +190,7 @@ fn editor_running(marker: &str) -> bool {
 fn xterm_running_visage(display: &str) -> Command {
     let mut xterm = Command::new("xterm");
     xterm
+        .env("VISAGE_CACHE_DIR", common::test_cache_dir())
         .args(["-display", display, "-T", TITLE, "-ti", "vt340"])
         .args(["-geometry", "110x36+0+0"])
         .args(["-xrm", "XTerm*numColorRegisters: 256"])

@@ -64,7 +64,8 @@ pub struct FitArgs {
     seam_fit_renderer: Option<Backend>,
     /// Fit even if the fit of this composite is stored, and store nothing
     /// (by default finished fits are kept in fits/ of visage's cache
-    /// folder, $VISAGE_CACHE_DIR or ~/.cache/visage, and read back).
+    /// folder — $VISAGE_CACHE_DIR, else $XDG_CACHE_HOME/visage, else
+    /// ~/.cache/visage — and read back).
     #[arg(long)]
     no_seam_fit_cache: bool,
 }

@@ -183,7 +183,20 @@ fn work(mut workbench: Workbench, mailbox: &(Mutex<Mailbox>, Condvar), replies: 
                 }
                 reply
             }
-            Job::FitStep => fit_step(&mut workbench),
+            Job::FitStep => {
+                let reply = fit_step(&mut workbench);
+                // The fit shows either way; a cache that cannot keep it is
+                // said after it, on the status line.
+                match workbench.take_store_error() {
+                    Some(e) => {
+                        if replies.send(reply).is_err() {
+                            return;
+                        }
+                        Reply::Failed(format!("the seam fit was not kept in the cache: {e}"))
+                    }
+                    None => reply,
+                }
+            }
         };
         if replies.send(reply).is_err() {
             return;

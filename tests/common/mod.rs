@@ -18,9 +18,11 @@ pub fn visage(args: &[&str]) -> Output {
         .unwrap()
 }
 
-/// Where level-of-detail caches built by tests go (not the user's cache):
-/// `$VISAGE_CACHE_DIR` when set (`.ci/run` sets it), else a folder in the
-/// temporary folder.
+/// The cache folder tests use (level-of-detail caches in `lod/`, seam
+/// fits in `fits/`; never the user's): `$VISAGE_CACHE_DIR` when set
+/// (`.ci/run` sets it), else a folder in the temporary folder. Shared by
+/// every test and kept between runs, so a test that must watch a seam fit
+/// run passes `--no-seam-fit-cache` or a folder of its own.
 pub fn test_cache_dir() -> PathBuf {
     std::env::var_os("VISAGE_CACHE_DIR")
         .map(PathBuf::from)

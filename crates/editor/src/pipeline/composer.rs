@@ -82,7 +82,8 @@ pub struct Composer {
     fit_options: SeamFit,
     /// Where finished fits are looked up before fitting, and kept after.
     fit_store: Option<FitStore>,
-    /// The key the pending fit was looked up by, to save it under.
+    /// The key the pending or completed fit was looked up by (and is saved
+    /// under).
     fit_key: Option<FitKey>,
     /// Why the last finished fit could not be kept, until taken.
     store_error: Option<Error>,
@@ -288,6 +289,13 @@ impl Composer {
         self.fit_from_store && matches!(self.fit, FitState::Fitted { .. })
     }
 
+    /// The key the completed seam fit is stored under (it was looked up by
+    /// it first); `None` while none is completed or without a store.
+    pub fn fit_key(&self) -> Option<FitKey> {
+        self.fit_key
+            .filter(|_| matches!(self.fit, FitState::Fitted { .. }))
+    }
+
     /// The store finished fits are kept in, if any.
     pub fn fit_store(&self) -> Option<&FitStore> {
         self.fit_store.as_ref()
@@ -340,13 +348,12 @@ impl Composer {
         let progress = FitProgress::of(f);
         if f.finished() {
             let (set, report) = f.result(c);
-            let key = self.fit_key.take();
             let composed = std::mem::replace(&mut c.gaussians, set);
             self.generation += 1;
             // A fit with nothing on a seam has nothing worth keeping.
-            if let (Some(store), Some(key)) = (&self.fit_store, key) {
+            if let (Some(store), Some(key)) = (&self.fit_store, &self.fit_key) {
                 if report.fitted > 0 {
-                    self.store_error = store.save(&key, &composed, &c.gaussians, &report).err();
+                    self.store_error = store.save(key, &composed, &c.gaussians, &report).err();
                 }
             }
             self.fit_from_store = false;

@@ -211,6 +211,15 @@ impl Workbench {
         }
     }
 
+    /// Why the last finished seam fit could not be kept in the fit store,
+    /// once (see [`Composer::take_store_error`]).
+    pub fn take_store_error(&mut self) -> Option<crate::error::Error> {
+        match &mut self.content {
+            Content::Composite(composer) => composer.take_store_error(),
+            Content::Scene(_) => None,
+        }
+    }
+
     /// Whether the seam fit on show was read from the fit store rather than
     /// made (see [`Composer::fit_was_stored`]).
     pub fn fit_was_stored(&self) -> bool {

@@ -7,7 +7,7 @@ use crate::compose::recipe::Fit;
 use crate::error::Result;
 use crate::pipeline::composer::{Composer, FitProgress};
 use crate::pipeline::DatabaseSpec;
-use crate::train::fit_store::{FitKey, FitStore};
+use crate::train::fit_store::FitStore;
 use crate::train::seam_fit::SeamFit;
 
 use super::design::{StudyAvatar, StudyFolder};
@@ -20,7 +20,8 @@ pub fn fit_store(study: &StudyFolder) -> FitStore {
     FitStore::new(study.dir.join(FITS_DIR))
 }
 
-/// What [`fit_avatars`] did.
+/// What [`fit_avatars`] did, counting each fit once (avatars that differ
+/// in motion or camera alone share one).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FitSummary {
     /// Avatars fitted now.
@@ -62,13 +63,17 @@ pub fn fit_avatars(
         composer.set_fit_store(Some(fit_store(study)));
         for (avatar, _) in wanted.iter().filter(|(_, s)| *s == spec) {
             composer.update(&study.recipe(avatar)?)?;
-            // Keyed as composed, before the fit replaces the Gaussians.
-            keys.push(FitKey::of(composer.engine(), composer.composite(), options));
             composer.finish_fit(&mut |p| progress(done, count, p))?;
             if let Some(e) = composer.take_store_error() {
                 return Err(e);
             }
             done += 1;
+            // Avatars that differ in motion or camera alone share a fit:
+            // each fit is counted once.
+            let Some(key) = composer.fit_key().filter(|k| !keys.contains(k)) else {
+                continue;
+            };
+            keys.push(key);
             if composer.fit_report().is_some_and(|r| r.fitted > 0) {
                 if composer.fit_was_stored() {
                     summary.stored += 1;
