@@ -2,6 +2,7 @@
 //! contract (0 ok, 1 a check failed, 2 bad input, always one line on stderr).
 
 mod bench;
+mod cache;
 mod camera;
 mod capture;
 mod clean;
@@ -61,6 +62,8 @@ enum Command {
     Clean(clean::CleanArgs),
     /// Build (or find and check) the level-of-detail cache of scene files, ahead of viewing them.
     Lod(lod::LodArgs),
+    /// Where visage's cache folder is and what it holds; --clear gives the disk back.
+    Cache(cache::CacheArgs),
     /// Capture a multi-view dataset (GaussianAvatars layout) of a built-in source.
     Capture(capture::CaptureArgs),
     /// Train a GaussianAvatars avatar from a multi-view dataset.
@@ -105,6 +108,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Some(Command::Convert(args)) => convert::run(&args),
         Some(Command::Clean(args)) => clean::run(&args),
         Some(Command::Lod(args)) => lod::run(&args),
+        Some(Command::Cache(args)) => cache::run(&args),
         Some(Command::Bench(args)) => bench::run(&args),
         Some(Command::Random(args)) => random::run(&args),
         Some(Command::Study(args)) => study::run(&args),

@@ -3,6 +3,7 @@
 //! GaussianAvatars avatar folders, folder databases and the fixtures generator.
 
 pub mod avatar;
+pub mod cache;
 pub mod compressed_ply;
 pub mod fixtures;
 pub mod flame;
@@ -18,6 +19,8 @@ pub mod splat;
 pub mod spz;
 
 use std::path::{Path, PathBuf};
+
+pub use cache::cache_root;
 
 /// Why a file could not be read or written.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -101,22 +104,6 @@ pub fn read_file(path: &Path) -> Result<Vec<u8>> {
 /// Writes a whole file.
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     std::fs::write(path, bytes).map_err(|e| FileError::access("write", path, e))
-}
-
-/// The folder visage keeps what it can make again in (level-of-detail
-/// caches in `lod/`, seam fits in `fits/`): `$VISAGE_CACHE_DIR`, else
-/// `$XDG_CACHE_HOME/visage`, else `~/.cache/visage` (the temporary folder's
-/// `visage` where there is no home).
-pub fn cache_root() -> PathBuf {
-    if let Some(dir) = std::env::var_os("VISAGE_CACHE_DIR").filter(|d| !d.is_empty()) {
-        return PathBuf::from(dir);
-    }
-    std::env::var_os("XDG_CACHE_HOME")
-        .filter(|d| !d.is_empty())
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
-        .unwrap_or_else(std::env::temp_dir)
-        .join("visage")
 }
 
 /// A file of the repository's `tests/data/` (the fixtures made by other

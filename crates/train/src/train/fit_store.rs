@@ -167,11 +167,6 @@ pub struct FitStore {
 /// 400 of a 56-thousand-Gaussian one.
 pub const USER_STORE_LIMIT: u64 = 1 << 30;
 
-/// A partial file older than this was left by a process that died while
-/// writing it (a write takes milliseconds), and is removed when the user's
-/// store is tidied.
-const ABANDONED_PARTIAL: std::time::Duration = std::time::Duration::from_secs(3600);
-
 impl FitStore {
     /// The store in `dir` (made when the first fit is saved), kept whole.
     pub fn new(dir: impl Into<PathBuf>) -> Self {
@@ -323,19 +318,14 @@ impl FitStore {
     }
 }
 
-/// Whether a folder entry is a partial fit file over [`ABANDONED_PARTIAL`]
-/// old: left by a writer that died.
+/// Whether a folder entry is a partial fit file whose writer is gone (a
+/// process killed while saving; a save takes milliseconds).
 fn abandoned(entry: &std::fs::DirEntry) -> bool {
-    let partial = entry
+    entry
         .file_name()
         .to_string_lossy()
-        .contains(".fit.partial.");
-    let age = entry
-        .metadata()
-        .and_then(|m| m.modified())
-        .ok()
-        .and_then(|t| std::time::SystemTime::now().duration_since(t).ok());
-    partial && age.is_some_and(|a| a > ABANDONED_PARTIAL)
+        .contains(".fit.partial.")
+        && !crate::io::cache::writer_alive(&entry.path())
 }
 
 /// Floats stored per changed Gaussian beside its index: opacity logit, log
@@ -547,16 +537,14 @@ mod tests {
         age(&keys[1], 200);
         // Reading the older fit makes it the more recently used of the two.
         assert!(store.load(&keys[0], &composed).is_some());
-        let partial = dir.join("0101010101010101.fit.partial.1");
+        // One left by a process that is gone, one being written by this one.
+        let partial = dir.join("0101010101010101.fit.partial.4000000000");
         std::fs::write(&partial, b"half").unwrap();
-        let fresh_partial = dir.join("0202020202020202.fit.partial.2");
+        let fresh_partial = dir.join(format!(
+            "0202020202020202.fit.partial.{}",
+            std::process::id()
+        ));
         std::fs::write(&fresh_partial, b"half").unwrap();
-        let file = std::fs::File::options()
-            .append(true)
-            .open(&partial)
-            .unwrap();
-        file.set_modified(std::time::SystemTime::now() - 2 * ABANDONED_PARTIAL)
-            .unwrap();
         store.save(&keys[2], &composed, &fitted, &report).unwrap();
         assert!(store.load(&keys[0], &composed).is_some(), "used last: kept");
         assert!(
