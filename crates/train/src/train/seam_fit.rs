@@ -21,7 +21,7 @@ use std::sync::Arc;
 use crate::avatar::gaussians::GaussianSet;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
 use crate::compose::recipe::AnimationMode;
-use crate::compose::seams::SeamField;
+use crate::compose::seams::{SeamBlend, SeamField, SeamNeighbours};
 use crate::error::Result;
 use crate::model::head::{HeadModel, Joint, Pose};
 use crate::model::regions::Group;
@@ -48,6 +48,9 @@ const LR_SCALE: f64 = 0.015;
 const SEAM_RINGS: usize = 2;
 /// The jaw's opening in the rig's second pose, radians.
 const OPEN_JAW_RAD: f32 = 0.12;
+/// The look of a triangle outside the hair group in [`hair_looks`]: no
+/// source's index.
+const NOT_HAIR: u32 = u32::MAX - 1;
 
 /// How the fit runs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -114,6 +117,48 @@ fn looks(model: &HeadModel, composite: &Composite) -> Vec<u32> {
         .iter()
         .map(|r| composite.recipe.gaussians[r.group().index()] as u32)
         .collect()
+}
+
+/// Per triangle: the source of its hair where it is in the hair group,
+/// [`NOT_HAIR`] elsewhere — the looks whose [`SeamField`] says how near a
+/// point is to another source's hair.
+fn hair_looks(model: &HeadModel, looks: &[u32]) -> Vec<u32> {
+    model
+        .triangle_regions
+        .iter()
+        .zip(looks)
+        .map(|(r, &look)| {
+            if r.group() == Group::Hair {
+                look
+            } else {
+                NOT_HAIR
+            }
+        })
+        .collect()
+}
+
+/// The source the target cross-fades towards at a point wearing `own`, and
+/// how far: the seam field's nearest other source and weight (`seam`, §7.8),
+/// less, on a triangle outside the hair group, the part of it that
+/// source's hair accounts for (`hair`, from the field of [`hair_looks`]).
+/// A hair seam borders hair on skin: on the skin side the other person
+/// shows skin too, which the truth gives the base's tone, so blending in
+/// their transferred skin brings only the transfer's errors (and their own
+/// hair's overhang, which the composite's hair Gaussians already draw).
+fn cross_fade(
+    seam: Option<SeamBlend>,
+    hair: Option<SeamBlend>,
+    own: u32,
+    in_hair_group: bool,
+) -> (u32, f64) {
+    let Some(seam) = seam else {
+        return (own, 0.0);
+    };
+    let hair_part = match hair {
+        Some(h) if !in_hair_group && h.other == seam.other => f64::from(h.weight),
+        _ => 0.0,
+    };
+    (seam.other, (f64::from(seam.weight) - hair_part).max(0.0))
 }
 
 /// `set` to draw, with any Gaussian that holds a NaN or an infinity hidden
@@ -250,6 +295,8 @@ pub struct SeamFitter {
     options: SeamFit,
     looks: Vec<u32>,
     field: SeamField,
+    /// How near each point is to another source's hair ([`hair_looks`]).
+    hair_field: SeamField,
     on_seam: Vec<bool>,
     fitted: usize,
     trainable: Trainable,
@@ -274,7 +321,9 @@ impl SeamFitter {
     pub fn new(engine: &Engine, composite: &Composite, options: &SeamFit) -> SeamFitter {
         let model = &engine.database().model;
         let looks = looks(model, composite);
-        let field = SeamField::new(model, &looks);
+        let neighbours = SeamNeighbours::new(&model.template);
+        let field = SeamField::with_neighbours(model, &neighbours, &looks);
+        let hair_field = SeamField::with_neighbours(model, &neighbours, &hair_looks(model, &looks));
         let trainable = drawable(&composite.gaussians);
         let near = near_seams(model, &field, &looks);
         // Near a seam, and drawable: a hidden Gaussian stays as it came.
@@ -292,6 +341,7 @@ impl SeamFitter {
             options: *options,
             looks,
             field,
+            hair_field,
             on_seam,
             fitted,
             trainable,
@@ -413,11 +463,15 @@ impl SeamFitter {
         let mut head = vec![false; hits.len()];
         for (p, hit) in hits.iter().enumerate() {
             let Some((tri, bary, _)) = hit else { continue };
-            let own = self.looks[*tri as usize];
-            let (other, w) = self
-                .field
-                .blend_at(model.triangles[*tri as usize], *bary, own)
-                .map_or((own, 0.0), |b| (b.other, f64::from(b.weight)));
+            let t = *tri as usize;
+            let own = self.looks[t];
+            let corners = model.triangles[t];
+            let (other, w) = cross_fade(
+                self.field.blend_at(corners, *bary, own),
+                self.hair_field.blend_at(corners, *bary, NOT_HAIR),
+                own,
+                model.triangle_regions[t].group() == Group::Hair,
+            );
             head[p] = true;
             for c in 0..3 {
                 goal[3 * p + c] = (1.0 - w) * of(own)[3 * p + c] + w * of(other)[3 * p + c];
@@ -539,4 +593,37 @@ pub fn fit_seams(
         progress(fitter.done(), fitter.total());
     }
     Ok(fitter.result(composite))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn blend(other: u32, weight: f32) -> Option<SeamBlend> {
+        Some(SeamBlend { other, weight })
+    }
+
+    #[test]
+    fn the_skin_side_of_a_hair_seam_keeps_its_own_source() {
+        // Away from every seam: the point's own source alone.
+        assert_eq!(cross_fade(None, None, 3, false), (3, 0.0));
+        // Skin beside source 5's hair, nothing of 5 nearer than its hair.
+        assert_eq!(cross_fade(blend(5, 0.4), blend(5, 0.4), 3, false), (5, 0.0));
+        // The hair side of the same seam cross-fades as before.
+        assert_eq!(
+            cross_fade(blend(3, 0.4), blend(5, 0.1), 5, true),
+            (3, f64::from(0.4f32))
+        );
+        // Another source's skin nearer than its hair: only the hair's part goes.
+        let (other, w) = cross_fade(blend(5, 0.45), blend(5, 0.15), 3, false);
+        assert_eq!(other, 5);
+        assert!((w - 0.3).abs() < 1e-6, "{w}");
+        // Hair of someone else than the nearest other source: no change.
+        assert_eq!(
+            cross_fade(blend(5, 0.4), blend(6, 0.4), 3, false),
+            (5, f64::from(0.4f32))
+        );
+        // Never below zero.
+        assert_eq!(cross_fade(blend(5, 0.2), blend(5, 0.3), 3, false), (5, 0.0));
+    }
 }
