@@ -62,6 +62,19 @@ pub struct CacheUsage {
     pub partial_bytes: u64,
 }
 
+impl CacheUsage {
+    /// Counts one entry of `bytes`, partial or finished.
+    fn add(&mut self, partial: bool, bytes: u64) {
+        if partial {
+            self.partial += 1;
+            self.partial_bytes += bytes;
+        } else {
+            self.files += 1;
+            self.bytes += bytes;
+        }
+    }
+}
+
 impl CacheKind {
     /// Its folder under `root`.
     pub fn dir(&self, root: &Path) -> PathBuf {
@@ -86,14 +99,7 @@ impl CacheKind {
     pub fn usage(&self, root: &Path) -> Result<CacheUsage> {
         let mut usage = CacheUsage::default();
         for (path, partial) in self.entries(root)? {
-            let bytes = size(&path);
-            if partial {
-                usage.partial += 1;
-                usage.partial_bytes += bytes;
-            } else {
-                usage.files += 1;
-                usage.bytes += bytes;
-            }
+            usage.add(partial, size(&path));
         }
         Ok(usage)
     }
@@ -120,13 +126,7 @@ impl CacheKind {
                 Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
                 Err(e) => return Err(Error::io("remove", &path, e)),
             }
-            if partial {
-                removed.partial += 1;
-                removed.partial_bytes += bytes;
-            } else {
-                removed.files += 1;
-                removed.bytes += bytes;
-            }
+            removed.add(partial, bytes);
         }
         Ok(removed)
     }

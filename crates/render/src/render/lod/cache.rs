@@ -18,7 +18,7 @@ use glam::Vec3;
 
 use super::{Layout, Member, NodeLink};
 use crate::error::{Error, Result};
-use crate::io::cache_root;
+use crate::io::cache::{cache_root, writer_alive};
 use crate::scene::camera::UpAxis;
 use crate::scene::splats::SplatScene;
 
@@ -383,13 +383,8 @@ fn remove_abandoned_partials(path: &Path) {
     };
     for entry in entries.flatten() {
         let file = entry.file_name().to_string_lossy().into_owned();
-        let Some(pid) = prefixes.iter().find_map(|p| file.strip_prefix(p.as_str())) else {
-            continue;
-        };
-        let alive = pid
-            .parse::<u32>()
-            .is_ok_and(|pid| Path::new(&format!("/proc/{pid}")).exists());
-        if alive {
+        let ours = prefixes.iter().any(|p| file.starts_with(p.as_str()));
+        if !ours || writer_alive(&entry.path()) {
             continue;
         }
         if entry.path().is_dir() {
