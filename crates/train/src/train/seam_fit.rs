@@ -7,7 +7,8 @@
 //! side by side, and what they draw where their footprints overlap is
 //! neither source's. So the fit renders, per source, the whole head from
 //! that source (the recipe's shape, colour and post-processing, every
-//! group's Gaussians from it), blends those renders per pixel by the seam
+//! group's Gaussians from it; across a seam, with the source's own skin),
+//! blends those renders per pixel by the seam
 //! weight of the surface point the pixel shows (the cross-fade of
 //! [`SeamField`], method §7.8), and fits the composite's seam Gaussians to
 //! the blend with Adam — over a rig of its own cameras at the rest pose,
@@ -20,11 +21,11 @@ use std::sync::Arc;
 
 use crate::avatar::gaussians::GaussianSet;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
-use crate::compose::recipe::AnimationMode;
+use crate::compose::recipe::{AnimationMode, SkinSource};
 use crate::compose::seams::{SeamBlend, SeamField, SeamNeighbours};
 use crate::error::Result;
 use crate::model::head::{HeadModel, Joint, Pose};
-use crate::model::regions::Group;
+use crate::model::regions::{Group, Region};
 use crate::render::Backend;
 
 use super::adam::AdamGroup;
@@ -276,10 +277,98 @@ struct Whole {
     composite: Composite,
 }
 
-/// The composite and the wholes posed at one of the rig's poses.
+/// A source's whole head as each side of a seam asks for it.
+struct Wholes {
+    /// As the recipe makes it: what the composite's Gaussians of this
+    /// source draw, the target on the source's own side of a seam.
+    own: Whole,
+    /// With the source's own skin under its features, for the target's
+    /// far side where this source is the other one; `None` where that is
+    /// `own` (the recipe keeps the sources' skin, or this is the base).
+    across: Option<Across>,
+}
+
+/// A source's whole head with its own skin, and how far the far side of a
+/// seam may trust it, per region ([`trust`]).
+struct Across {
+    whole: Whole,
+    trust: [f64; Region::COUNT],
+}
+
+/// The share of a seam's far side taken from the other source's own skin
+/// rather than from the base's skin under its features, in a region whose
+/// colour transfer scaled the source's colours by `gain` (the region's mean
+/// per-channel gain): 1/g of the largest channel's g, and all of it where
+/// the transfer does not brighten. A gain multiplies whatever the source's
+/// training got wrong (method §13.3), so its skin is taken at the inverse
+/// of the gain, which keeps those errors at the size they had on the
+/// source; a non-finite gain trusts none of it.
+fn trust(gain: glam::Vec3) -> f64 {
+    let g = f64::from(gain.max_element());
+    if !gain.is_finite() {
+        0.0
+    } else if g <= 1.0 {
+        1.0
+    } else {
+        1.0 / g
+    }
+}
+
+/// A source's whole head drawn in one view, each way [`Wholes`] holds it.
+struct Drawn<'a> {
+    own: Vec<f64>,
+    across: Option<(Vec<f64>, &'a [f64; Region::COUNT])>,
+}
+
+impl Drawn<'_> {
+    /// Channel `i` of the far side of a seam at a point of region `region`:
+    /// the source's own skin by its [`trust`] there, the rest as `own`.
+    fn far(&self, i: usize, region: Region) -> f64 {
+        match &self.across {
+            Some((across, trust)) => {
+                let a = trust[region.index()];
+                (1.0 - a) * self.own[i] + a * across[i]
+            }
+            None => self.own[i],
+        }
+    }
+}
+
+/// Source `source`'s whole head: the recipe with every group's Gaussians
+/// from it, and, where the recipe puts the base's skin under a swapped
+/// region's features (`skin = "base"`, method §7.11), the same with the
+/// source's own skin too. The far side of a seam shows that source's look
+/// on the base's tone — its stubble as the source's Gaussians carry it,
+/// moved by the colour transfer; the base's skin in their place (what
+/// `skin = "base"` gives a head wholly swapped, wherever the likeness
+/// reads light stubble as skin) drops the stubble a bearded source's mouth
+/// trails into the base's face.
+fn wholes(engine: &Engine, composite: &Composite, source: u32) -> Wholes {
+    let mut recipe = composite.recipe.clone();
+    recipe.gaussians = [source as usize; Group::COUNT];
+    let whole = |recipe: &_| {
+        let composite = engine.compose(recipe);
+        Whole {
+            drawable: drawable(&composite.gaussians),
+            composite,
+        }
+    };
+    let own = whole(&recipe);
+    let across =
+        (recipe.post.skin != SkinSource::Source && source as usize != recipe.base).then(|| {
+            recipe.post.skin = SkinSource::Source;
+            let whole = whole(&recipe);
+            let trust = whole.composite.colour_gains.map(trust);
+            Across { whole, trust }
+        });
+    Wholes { own, across }
+}
+
+/// The composite and the wholes posed at one of the rig's poses, the
+/// wholes as [`Wholes`] holds them.
 struct PosedRig {
     composite: Arc<PosedMesh>,
-    wholes: Vec<PosedMesh>,
+    wholes: Vec<(PosedMesh, Option<PosedMesh>)>,
 }
 
 /// A seam fit in progress, one unit of work at a time, so that a caller
@@ -300,7 +389,7 @@ pub struct SeamFitter {
     on_seam: Vec<bool>,
     fitted: usize,
     trainable: Trainable,
-    wholes: Vec<Whole>,
+    wholes: Vec<Wholes>,
     posed: Vec<PosedRig>,
     cameras: Vec<TrainCamera>,
     views: Vec<View>,
@@ -402,13 +491,8 @@ impl SeamFitter {
             self.rasterizer = Some(Rasterizer::open(self.options.renderer)?);
         }
         if unit < sources {
-            let mut recipe = composite.recipe.clone();
-            recipe.gaussians = [self.field.sources()[unit] as usize; Group::COUNT];
-            let whole = engine.compose(&recipe);
-            self.wholes.push(Whole {
-                drawable: drawable(&whole.gaussians),
-                composite: whole,
-            });
+            self.wholes
+                .push(wholes(engine, composite, self.field.sources()[unit]));
         } else if unit < sources + poses {
             let pose = rig_poses()[unit - sources];
             self.posed.push(PosedRig {
@@ -416,7 +500,13 @@ impl SeamFitter {
                 wholes: self
                     .wholes
                     .iter()
-                    .map(|w| posed(engine, &w.composite, &pose))
+                    .map(|w| {
+                        let across = w.across.as_ref().map(|a| &a.whole);
+                        (
+                            posed(engine, &w.own.composite, &pose),
+                            across.map(|a| posed(engine, &a.composite, &pose)),
+                        )
+                    })
                     .collect(),
             });
         } else if unit < sources + poses + views {
@@ -443,21 +533,25 @@ impl SeamFitter {
 
     /// View `k` of the rig with its blended target: per pixel, the render of
     /// the head wholly from the source the surface point wears, cross-faded
-    /// towards the nearest other source's by the seam weight there.
+    /// towards the nearest other source's (with that source's own skin as
+    /// far as [`trust`] allows, [`wholes`]) by the seam weight there.
     fn target(&mut self, model: &HeadModel, k: usize) -> Result<View> {
         let rig = &self.posed[k / self.cameras.len()];
         let camera = &self.cameras[k % self.cameras.len()];
         let rasterizer = self.rasterizer.as_mut().expect("opened by step");
-        let images: Vec<Vec<f64>> = self
-            .wholes
-            .iter()
-            .zip(&rig.wholes)
-            .map(|(w, p)| draw(&w.drawable, p, camera, rasterizer))
-            .collect::<Result<_>>()?;
-        let of = |s: u32| {
-            let k = self.field.sources().binary_search(&s).unwrap_or(0);
-            &images[k]
-        };
+        let mut images = Vec::with_capacity(self.wholes.len());
+        for (whole, (own, across)) in self.wholes.iter().zip(&rig.wholes) {
+            let across = match (&whole.across, across) {
+                (Some(a), Some(posed)) => Some((
+                    draw(&a.whole.drawable, posed, camera, rasterizer)?,
+                    &a.trust,
+                )),
+                _ => None,
+            };
+            let own = draw(&whole.own.drawable, own, camera, rasterizer)?;
+            images.push(Drawn { own, across });
+        }
+        let of = |s: u32| &images[self.field.sources().binary_search(&s).unwrap_or(0)];
         let hits = rasterize(&rig.composite.vertices, &model.triangles, camera);
         let mut goal = vec![0.0; 3 * hits.len()];
         let mut head = vec![false; hits.len()];
@@ -473,8 +567,10 @@ impl SeamFitter {
                 model.triangle_regions[t].group() == Group::Hair,
             );
             head[p] = true;
-            for c in 0..3 {
-                goal[3 * p + c] = (1.0 - w) * of(own)[3 * p + c] + w * of(other)[3 * p + c];
+            let region = model.triangle_regions[t];
+            for (c, goal) in goal[3 * p..3 * p + 3].iter_mut().enumerate() {
+                let i = 3 * p + c;
+                *goal = (1.0 - w) * of(own).own[i] + w * of(other).far(i, region);
             }
         }
         Ok(View {
@@ -625,5 +721,79 @@ mod tests {
         );
         // Never below zero.
         assert_eq!(cross_fade(blend(5, 0.2), blend(5, 0.3), 3, false), (5, 0.0));
+    }
+
+    #[test]
+    fn a_source_s_skin_is_trusted_across_a_seam_at_the_inverse_of_its_gain() {
+        use glam::Vec3;
+        // Unmoved or darkened: its errors grow no larger, all of it.
+        assert_eq!(trust(Vec3::ONE), 1.0);
+        assert_eq!(trust(Vec3::new(0.4, 0.6, 0.9)), 1.0);
+        // Brightened: the largest channel's gain decides.
+        assert_eq!(trust(Vec3::new(1.5, 4.0, 2.0)), 0.25);
+        assert!((trust(Vec3::splat(1.25)) - 0.8).abs() < 1e-12);
+        // A gain of nothing sensible: none of it.
+        assert_eq!(trust(Vec3::new(f32::NAN, 1.0, 1.0)), 0.0);
+        assert_eq!(trust(Vec3::new(1.0, f32::INFINITY, 1.0)), 0.0);
+    }
+
+    /// The sources of a whole's Gaussians, block by block.
+    fn sources(whole: &Whole) -> Vec<usize> {
+        let mut sources: Vec<usize> = whole.composite.blocks.iter().map(|b| b.source).collect();
+        sources.sort_unstable();
+        sources.dedup();
+        sources
+    }
+
+    #[test]
+    fn across_a_seam_a_source_shows_its_own_skin() {
+        use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
+        use crate::compose::recipe::{PostProcess, Recipe};
+        use crate::model::builtin::build_head;
+
+        let options = SyntheticOptions {
+            seed: 5,
+            sources: 2,
+            gaussians_per_avatar: 3_000,
+        };
+        let engine = Engine::new(builtin_database(build_head(), options).unwrap()).unwrap();
+        let names: Vec<String> = engine
+            .database()
+            .sources
+            .iter()
+            .map(|s| s.name.clone())
+            .collect();
+        let text = format!(
+            "base = \"{}\"\n[groups.mouth]\ngaussians = \"{}\"\nshape = {{ {} = 1.0 }}\n",
+            names[0], names[1], names[1]
+        );
+        let mut recipe = Recipe::from_toml(&text).unwrap();
+        recipe.post = PostProcess::BEST;
+        assert_eq!(recipe.post.skin, SkinSource::Base);
+        let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
+
+        // The swapped source's whole as the recipe makes it has the base's
+        // skin under its features; across a seam it is the source alone.
+        let swapped = wholes(&engine, &composite, 1);
+        assert_eq!(sources(&swapped.own), [0, 1]);
+        let across = swapped.across.expect("the recipe puts the base's skin in");
+        assert_eq!(sources(&across.whole), [1]);
+        assert_eq!(
+            across.whole.composite.neutral,
+            swapped.own.composite.neutral
+        );
+        let gains = across.whole.composite.colour_gains;
+        for (trusted, gain) in across.trust.iter().zip(gains) {
+            assert_eq!(*trusted, trust(gain));
+        }
+
+        // The base's whole, and any whole where the recipe keeps the
+        // sources' skin, is the same on both sides: drawn once.
+        assert!(wholes(&engine, &composite, 0).across.is_none());
+        recipe.post.skin = SkinSource::Source;
+        let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
+        let swapped = wholes(&engine, &composite, 1);
+        assert!(swapped.across.is_none());
+        assert_eq!(sources(&swapped.own), [1]);
     }
 }
