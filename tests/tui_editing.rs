@@ -496,14 +496,12 @@ fn the_seam_fit_runs_in_the_background_and_can_be_turned_off() {
     tmux.keys(&[":"]);
     tmux.type_text("set-gaussians nose bram");
     tmux.keys(&["Enter"]);
-    tmux.wait_for("the fit under way", LONG, |s| {
-        s.contains("post ours (fitting seams")
-    });
+    tmux.wait_for("the fit under way", LONG, |s| s.contains("post ours (fit "));
     // The editor answers while the fit runs.
     tmux.keys(&["Down"]);
     tmux.wait_for("the next group", LONG, |s| s.contains("▶eyes"));
     tmux.wait_for("the fit done", LONG, |s| {
-        s.contains("seam fit done") && s.contains("post ours") && !s.contains("fitting")
+        s.contains("seam fit done") && s.contains("post ours") && !s.contains("(fit ")
     });
     // A snapshot asked during a fit waits for it and shows it done.
     let still = temp("fit-still.png");
@@ -511,12 +509,12 @@ fn the_seam_fit_runs_in_the_background_and_can_be_turned_off() {
     tmux.keys(&[":"]);
     tmux.type_text("set-gaussians eyes bram");
     tmux.keys(&["Enter"]);
-    tmux.wait_for("the second fit", LONG, |s| s.contains("fitting seams"));
+    tmux.wait_for("the second fit", LONG, |s| s.contains("(fit "));
     tmux.keys(&[":"]);
     tmux.type_text(&format!("snapshot {}", still.display()));
     tmux.keys(&["Enter"]);
     tmux.wait_for("the still", LONG, |s| {
-        s.contains("wrote") && s.contains("post ours") && !s.contains("fitting")
+        s.contains("wrote") && s.contains("post ours") && !s.contains("(fit ")
     });
     assert!(still.exists());
     // Back to the first edit: its fit is read from the cache, not redone.

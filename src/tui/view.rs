@@ -716,7 +716,7 @@ fn post_text(r: &Recipe, fit: Option<FitProgress>) -> String {
     let lower = |d: &dyn std::fmt::Debug| format!("{d:?}").to_lowercase();
     let running = match (r.post.fit, fit) {
         (crate::compose::recipe::Fit::Seams, Some(p)) => {
-            format!(" (fitting seams {}%)", 100 * p.done / p.total.max(1))
+            format!(" (fit {}%)", 100 * p.done / p.total.max(1))
         }
         _ => String::new(),
     };
@@ -747,6 +747,23 @@ mod tests {
         assert_eq!(weight_text(1.0), "1");
         assert_eq!(weight_text(1.0 / 3.0), "0.333");
         assert_eq!(weight_text(0.0), "0");
+    }
+
+    #[test]
+    fn a_running_seam_fit_keeps_the_post_line_on_one_line_at_80_columns() {
+        let mut recipe = Recipe::from_toml("base = \"cleo\"").unwrap();
+        recipe.post = crate::compose::recipe::PostProcess::BEST;
+        let fit = FitProgress {
+            done: 99,
+            total: 100,
+        };
+        let line = post_text(&recipe, Some(fit));
+        assert_eq!(line, " base cleo post ours (fit 99%)");
+        // The panel's inside: its width less the two borders.
+        let inside = usize::from(panel_width(80)) - 2;
+        assert_eq!(wrap(&line, inside, 3), vec![line.as_str()]);
+        // Done, or no fit in the recipe: no progress shown.
+        assert_eq!(post_text(&recipe, None), " base cleo post ours");
     }
 
     #[test]

@@ -7,8 +7,9 @@
 //! side by side, and what they draw where their footprints overlap is
 //! neither source's. So the fit renders, per source, the whole head from
 //! that source (the recipe's shape, colour and post-processing, every
-//! group's Gaussians from it; across a seam, with the source's own skin),
-//! blends those renders per pixel by the seam
+//! group's Gaussians from it; across a seam, partly with the source's own
+//! skin where the recipe puts the base's skin under its features), blends
+//! those renders per pixel by the seam
 //! weight of the surface point the pixel shows (the cross-fade of
 //! [`SeamField`], method §7.8), and fits the composite's seam Gaussians to
 //! the blend with Adam — over a rig of its own cameras at the rest pose,
@@ -289,25 +290,28 @@ struct Wholes {
 }
 
 /// A source's whole head with its own skin, and how far the far side of a
-/// seam may trust it, per region ([`trust`]).
+/// seam may trust it.
 struct Across {
+    /// The recipe's whole head from the source, with `skin = "source"`.
     whole: Whole,
+    /// Per region, the share of the far side taken from `whole` ([`trust`]).
     trust: [f64; Region::COUNT],
 }
 
 /// The share of a seam's far side taken from the other source's own skin
 /// rather than from the base's skin under its features, in a region whose
 /// colour transfer scaled the source's colours by `gain` (the region's mean
-/// per-channel gain): 1/g of the largest channel's g, and all of it where
-/// the transfer does not brighten. A gain multiplies whatever the source's
-/// training got wrong (method §13.3), so its skin is taken at the inverse
-/// of the gain, which keeps those errors at the size they had on the
-/// source; a non-finite gain trusts none of it.
+/// per-channel gain): 1/g, g the largest channel of `gain`, and all of it
+/// where the transfer does not brighten. A gain multiplies whatever the
+/// source's training got wrong (method §13.3), so mixing its skin in at a
+/// share of 1/g keeps those errors at the size they had on the source; a
+/// gain that is not finite trusts none of it.
 fn trust(gain: glam::Vec3) -> f64 {
-    let g = f64::from(gain.max_element());
     if !gain.is_finite() {
-        0.0
-    } else if g <= 1.0 {
+        return 0.0;
+    }
+    let g = f64::from(gain.max_element());
+    if g <= 1.0 {
         1.0
     } else {
         1.0 / g
@@ -316,7 +320,9 @@ fn trust(gain: glam::Vec3) -> f64 {
 
 /// A source's whole head drawn in one view, each way [`Wholes`] holds it.
 struct Drawn<'a> {
+    /// [`Wholes::own`] drawn: RGB per pixel.
     own: Vec<f64>,
+    /// [`Wholes::across`] drawn, with its trust per region.
     across: Option<(Vec<f64>, &'a [f64; Region::COUNT])>,
 }
 
@@ -332,6 +338,14 @@ impl Drawn<'_> {
             None => self.own[i],
         }
     }
+}
+
+/// Channel `i` of the target at a point of region `region` that wears the
+/// source drawn as `own`, at seam weight `w` towards the source drawn as
+/// `other`: the own side as the recipe makes it, the far side with the
+/// other source's own skin as far as it is trusted ([`Drawn::far`]).
+fn blended(own: &Drawn, other: &Drawn, w: f64, i: usize, region: Region) -> f64 {
+    (1.0 - w) * own.own[i] + w * other.far(i, region)
 }
 
 /// Source `source`'s whole head: the recipe with every group's Gaussians
@@ -355,7 +369,7 @@ fn wholes(engine: &Engine, composite: &Composite, source: u32) -> Wholes {
     };
     let own = whole(&recipe);
     let across =
-        (recipe.post.skin != SkinSource::Source && source as usize != recipe.base).then(|| {
+        (recipe.post.skin == SkinSource::Base && source as usize != recipe.base).then(|| {
             recipe.post.skin = SkinSource::Source;
             let whole = whole(&recipe);
             let trust = whole.composite.colour_gains.map(trust);
@@ -374,7 +388,8 @@ struct PosedRig {
 /// A seam fit in progress, one unit of work at a time, so that a caller
 /// that must stay responsive (the editor's render worker) can interleave it
 /// with other work, see how far it is, and drop it when the composite
-/// changes. The units: compose each source's whole head, pose the rig's two
+/// changes. The units: compose each source's whole head (twice for a
+/// swapped source under `skin = "base"`, [`wholes`]), pose the rig's two
 /// poses, draw each view's target (and measure the composite there), take
 /// each Adam step, and measure each view again. [`fit_seams`] runs them all.
 ///
@@ -546,7 +561,8 @@ impl SeamFitter {
                     draw(&a.whole.drawable, posed, camera, rasterizer)?,
                     &a.trust,
                 )),
-                _ => None,
+                (None, None) => None,
+                _ => unreachable!("a far-side whole is posed exactly where one was composed"),
             };
             let own = draw(&whole.own.drawable, own, camera, rasterizer)?;
             images.push(Drawn { own, across });
@@ -560,17 +576,16 @@ impl SeamFitter {
             let t = *tri as usize;
             let own = self.looks[t];
             let corners = model.triangles[t];
+            let region = model.triangle_regions[t];
             let (other, w) = cross_fade(
                 self.field.blend_at(corners, *bary, own),
                 self.hair_field.blend_at(corners, *bary, NOT_HAIR),
                 own,
-                model.triangle_regions[t].group() == Group::Hair,
+                region.group() == Group::Hair,
             );
             head[p] = true;
-            let region = model.triangle_regions[t];
             for (c, goal) in goal[3 * p..3 * p + 3].iter_mut().enumerate() {
-                let i = 3 * p + c;
-                *goal = (1.0 - w) * of(own).own[i] + w * of(other).far(i, region);
+                *goal = blended(of(own), of(other), w, 3 * p + c, region);
             }
         }
         Ok(View {
@@ -737,6 +752,31 @@ mod tests {
         assert_eq!(trust(Vec3::new(1.0, f32::INFINITY, 1.0)), 0.0);
     }
 
+    #[test]
+    fn the_far_side_mixes_in_the_other_source_s_own_skin_by_region() {
+        let mut trusted = [1.0; Region::COUNT];
+        trusted[Region::Nose.index()] = 0.25;
+        let plain = |v: f64| Drawn {
+            own: vec![v; 3],
+            across: None,
+        };
+        let base = plain(0.2);
+        let swapped = Drawn {
+            own: vec![0.4; 3],
+            across: Some((vec![0.8; 3], &trusted)),
+        };
+        let near = |a: f64, b: f64| (a - b).abs() < 1e-12;
+        // No far-side whole: the plain cross-fade of the two.
+        assert!(near(blended(&swapped, &base, 0.5, 1, Region::Nose), 0.3));
+        // The swapped source's own skin on the far side, by the region's trust.
+        assert!(near(swapped.far(2, Region::Nose), 0.5));
+        assert!(near(swapped.far(2, Region::Skin), 0.8));
+        assert!(near(blended(&base, &swapped, 0.5, 0, Region::Nose), 0.35));
+        // Its own side is as the recipe makes it, and w = 0 is the own side alone.
+        assert!(near(blended(&swapped, &base, 0.0, 0, Region::Skin), 0.4));
+        assert!(near(blended(&base, &swapped, 0.0, 0, Region::Skin), 0.2));
+    }
+
     /// The sources of a whole's Gaussians, block by block.
     fn sources(whole: &Whole) -> Vec<usize> {
         let mut sources: Vec<usize> = whole.composite.blocks.iter().map(|b| b.source).collect();
@@ -786,6 +826,8 @@ mod tests {
         for (trusted, gain) in across.trust.iter().zip(gains) {
             assert_eq!(*trusted, trust(gain));
         }
+        // The base is lighter than this source somewhere: not all trusted.
+        assert!(across.trust.iter().any(|&t| t < 1.0), "{gains:?}");
 
         // The base's whole, and any whole where the recipe keeps the
         // sources' skin, is the same on both sides: drawn once.
