@@ -368,6 +368,9 @@ fn wholes(engine: &Engine, composite: &Composite, source: u32) -> Wholes {
         }
     };
     let own = whole(&recipe);
+    // The shape is the recipe's, whichever source's Gaussians it wears:
+    // every whole is posed as the composite is.
+    debug_assert_eq!(own.composite.neutral, composite.neutral);
     let across =
         (recipe.post.skin == SkinSource::Base && source as usize != recipe.base).then(|| {
             recipe.post.skin = SkinSource::Source;
@@ -376,13 +379,6 @@ fn wholes(engine: &Engine, composite: &Composite, source: u32) -> Wholes {
             Across { whole, trust }
         });
     Wholes { own, across }
-}
-
-/// The composite and the wholes posed at one of the rig's poses, the
-/// wholes as [`Wholes`] holds them.
-struct PosedRig {
-    composite: Arc<PosedMesh>,
-    wholes: Vec<(PosedMesh, Option<PosedMesh>)>,
 }
 
 /// A seam fit in progress, one unit of work at a time, so that a caller
@@ -405,7 +401,9 @@ pub struct SeamFitter {
     fitted: usize,
     trainable: Trainable,
     wholes: Vec<Wholes>,
-    posed: Vec<PosedRig>,
+    /// The composite posed at each of the rig's poses: the wholes too, as
+    /// they share its shape ([`wholes`]).
+    posed: Vec<Arc<PosedMesh>>,
     cameras: Vec<TrainCamera>,
     views: Vec<View>,
     sh_steps: AdamGroup,
@@ -510,20 +508,7 @@ impl SeamFitter {
                 .push(wholes(engine, composite, self.field.sources()[unit]));
         } else if unit < sources + poses {
             let pose = rig_poses()[unit - sources];
-            self.posed.push(PosedRig {
-                composite: Arc::new(posed(engine, composite, &pose)),
-                wholes: self
-                    .wholes
-                    .iter()
-                    .map(|w| {
-                        let across = w.across.as_ref().map(|a| &a.whole);
-                        (
-                            posed(engine, &w.own.composite, &pose),
-                            across.map(|a| posed(engine, &a.composite, &pose)),
-                        )
-                    })
-                    .collect(),
-            });
+            self.posed.push(Arc::new(posed(engine, composite, &pose)));
         } else if unit < sources + poses + views {
             let view = self.target(&engine.database().model, unit - sources - poses)?;
             let rasterizer = self.rasterizer.as_mut().expect("opened above");
@@ -555,20 +540,16 @@ impl SeamFitter {
         let camera = &self.cameras[k % self.cameras.len()];
         let rasterizer = self.rasterizer.as_mut().expect("opened by step");
         let mut images = Vec::with_capacity(self.wholes.len());
-        for (whole, (own, across)) in self.wholes.iter().zip(&rig.wholes) {
-            let across = match (&whole.across, across) {
-                (Some(a), Some(posed)) => Some((
-                    draw(&a.whole.drawable, posed, camera, rasterizer)?,
-                    &a.trust,
-                )),
-                (None, None) => None,
-                _ => unreachable!("a far-side whole is posed exactly where one was composed"),
+        for whole in &self.wholes {
+            let across = match &whole.across {
+                Some(a) => Some((draw(&a.whole.drawable, rig, camera, rasterizer)?, &a.trust)),
+                None => None,
             };
-            let own = draw(&whole.own.drawable, own, camera, rasterizer)?;
+            let own = draw(&whole.own.drawable, rig, camera, rasterizer)?;
             images.push(Drawn { own, across });
         }
         let of = |s: u32| &images[self.field.sources().binary_search(&s).unwrap_or(0)];
-        let hits = rasterize(&rig.composite.vertices, &model.triangles, camera);
+        let hits = rasterize(&rig.vertices, &model.triangles, camera);
         let mut goal = vec![0.0; 3 * hits.len()];
         let mut head = vec![false; hits.len()];
         for (p, hit) in hits.iter().enumerate() {
@@ -590,7 +571,7 @@ impl SeamFitter {
         }
         Ok(View {
             camera: *camera,
-            posed: rig.composite.clone(),
+            posed: rig.clone(),
             goal,
             head,
         })
