@@ -326,6 +326,12 @@ impl Engine {
         &self.blender
     }
 
+    /// The light baked into a source's colours, fitted to its skin (method
+    /// §7.10); None where its skin could not tell one.
+    pub fn light(&self, source: usize) -> Option<&BakedLight> {
+        self.lights.get(source)?.as_ref()
+    }
+
     /// Neutral mesh of a source.
     pub fn source_neutral(&self, source: usize) -> &[Vec3] {
         &self.neutrals[source]

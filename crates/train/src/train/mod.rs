@@ -21,6 +21,7 @@ pub mod posing;
 pub mod project;
 pub mod raster;
 pub mod seam_fit;
+mod seam_light;
 pub mod sitter;
 pub mod target;
 pub mod trainer;

@@ -13,7 +13,10 @@
 //! weight of the surface point the pixel shows (the cross-fade of
 //! [`SeamField`], method §7.8), and fits the composite's seam Gaussians to
 //! the blend with Adam — over a rig of its own cameras at the rest pose,
-//! never over any ground truth. Positions and rotations stay, and scales
+//! never over any ground truth. Where the recipe relights its Gaussians,
+//! the wholes are relit pixel by pixel instead, and the Gaussians whose
+//! light the shape moved are fitted too, in their DC colour alone
+//! ([`super::seam_light`]). Positions and rotations stay, and scales
 //! move only a little: the fit changes what a Gaussian shows and how far it
 //! reaches, not where it sits, so animation and the region membership are
 //! untouched.
@@ -22,7 +25,7 @@ use std::sync::Arc;
 
 use crate::avatar::gaussians::GaussianSet;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
-use crate::compose::recipe::{AnimationMode, SkinSource};
+use crate::compose::recipe::{AnimationMode, Shading, SkinSource};
 use crate::compose::seams::{SeamBlend, SeamField, SeamNeighbours};
 use crate::error::Result;
 use crate::model::head::{HeadModel, Joint, Pose};
@@ -35,6 +38,7 @@ use super::holes::Obscurer;
 use super::model::{Render, Trainable, SH_STRIDE};
 use super::project::{TrainCamera, GEOMETRY};
 use super::raster::Rasterizer;
+use super::seam_light::{self, PixelLight};
 
 /// Learning rate of the SH DC coefficients (3DGS's feature rate).
 const LR_DC: f64 = 0.0025;
@@ -86,7 +90,8 @@ impl Default for SeamFit {
 /// What a fit did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FitReport {
-    /// Gaussians on a seam (the ones fitted).
+    /// Gaussians fitted: those on a seam, and (in their DC colour alone)
+    /// those whose triangle's light the composite's shape moved.
     pub fitted: usize,
     /// Views of the rig.
     pub views: usize,
@@ -276,6 +281,10 @@ fn near_seams(model: &HeadModel, field: &SeamField, looks: &[u32]) -> Vec<bool> 
 struct Whole {
     drawable: Trainable,
     composite: Composite,
+    /// When the fit relights its targets per pixel ([`seam_light`]): the
+    /// same whole with the light its Gaussians were trained under, once per
+    /// source of its Gaussians.
+    parts: Vec<(usize, Trainable)>,
 }
 
 /// A source's whole head as each side of a seam asks for it.
@@ -287,6 +296,16 @@ struct Wholes {
     /// far side where this source is the other one; `None` where that is
     /// `own` (the recipe keeps the sources' skin, or this is the base).
     across: Option<Across>,
+}
+
+impl Wholes {
+    /// The sources whose Gaussians these wholes hold.
+    fn sources(&self) -> impl Iterator<Item = usize> + '_ {
+        let across = self.across.iter().map(|a| &a.whole);
+        std::iter::once(&self.own)
+            .chain(across)
+            .flat_map(|w| w.parts.iter().map(|(s, _)| *s))
+    }
 }
 
 /// A source's whole head with its own skin, and how far the far side of a
@@ -360,11 +379,21 @@ fn blended(own: &Drawn, other: &Drawn, w: f64, i: usize, region: Region) -> f64 
 fn wholes(engine: &Engine, composite: &Composite, source: u32) -> Wholes {
     let mut recipe = composite.recipe.clone();
     recipe.gaussians = [source as usize; Group::COUNT];
+
     let whole = |recipe: &_| {
         let composite = engine.compose(recipe);
+        let parts = if seam_light::relights(&composite) {
+            let mut kept = recipe.clone();
+            kept.post.shading = Shading::Kept;
+            let kept = engine.compose(&kept);
+            seam_light::parts(&kept, &drawable(&kept.gaussians))
+        } else {
+            Vec::new()
+        };
         Whole {
             drawable: drawable(&composite.gaussians),
             composite,
+            parts,
         }
     };
     let own = whole(&recipe);
@@ -401,6 +430,11 @@ pub struct SeamFitter {
     fitted: usize,
     trainable: Trainable,
     wholes: Vec<Wholes>,
+    /// Per Gaussian: fitted in its DC colour alone, for the light on its
+    /// triangle ([`seam_light::light_moved`]) rather than for a seam.
+    light_only: Vec<bool>,
+    /// Made with the wholes when the targets are relit per pixel.
+    light: Option<PixelLight>,
     /// The composite posed at each of the rig's poses: the wholes too, as
     /// they share its shape ([`wholes`]).
     posed: Vec<Arc<PosedMesh>>,
@@ -436,7 +470,23 @@ impl SeamFitter {
             .zip(&trainable.opacity_logit)
             .map(|(&t, &opacity)| opacity.is_finite() && near[t as usize])
             .collect();
-        let fitted = on_seam.iter().filter(|&&s| s).count();
+        // Away from seams, where the targets are relit per pixel: the
+        // Gaussians whose light changed, in their DC colour.
+        let light_only: Vec<bool> = if seam_light::relights(composite) {
+            seam_light::light_moved(engine, composite)
+                .iter()
+                .zip(&on_seam)
+                .zip(&trainable.opacity_logit)
+                .map(|((&moved, &seam), opacity)| moved && !seam && opacity.is_finite())
+                .collect()
+        } else {
+            vec![false; on_seam.len()]
+        };
+        let fitted = on_seam
+            .iter()
+            .zip(&light_only)
+            .filter(|&(&seam, &light)| seam || light)
+            .count();
         let (cameras, _) = rig(options.cameras, false, [options.size; 2]);
         let n = trainable.len();
         SeamFitter {
@@ -448,6 +498,8 @@ impl SeamFitter {
             fitted,
             trainable,
             wholes: Vec::new(),
+            light_only,
+            light: None,
             posed: Vec::new(),
             cameras,
             views: Vec::new(),
@@ -507,6 +559,12 @@ impl SeamFitter {
             self.wholes
                 .push(wholes(engine, composite, self.field.sources()[unit]));
         } else if unit < sources + poses {
+            if unit == sources && seam_light::relights(composite) {
+                let mut drawn: Vec<usize> = self.wholes.iter().flat_map(Wholes::sources).collect();
+                drawn.sort_unstable();
+                drawn.dedup();
+                self.light = Some(PixelLight::new(engine, composite, &drawn));
+            }
             let pose = rig_poses()[unit - sources];
             self.posed.push(Arc::new(posed(engine, composite, &pose)));
         } else if unit < sources + poses + views {
@@ -519,6 +577,7 @@ impl SeamFitter {
                 // The targets are drawn: the wholes are no longer needed.
                 self.wholes = Vec::new();
                 self.posed = Vec::new();
+                self.light = None;
             }
         } else if unit < sources + poses + views + self.options.iterations {
             self.adam_step(unit - sources - poses - views)?;
@@ -540,16 +599,31 @@ impl SeamFitter {
         let camera = &self.cameras[k % self.cameras.len()];
         let rasterizer = self.rasterizer.as_mut().expect("opened by step");
         let mut images = Vec::with_capacity(self.wholes.len());
+        let hits = rasterize(&rig.vertices, &model.triangles, camera);
+        let light = self.light.as_ref();
+        let lit = |whole: &Whole, rasterizer: &mut Rasterizer| -> Result<Vec<f64>> {
+            let relit = draw(&whole.drawable, rig, camera, rasterizer)?;
+            let Some(light) = light else {
+                return Ok(relit);
+            };
+            let parts = whole
+                .parts
+                .iter()
+                .map(|(s, part)| Ok((*s, draw(part, rig, camera, rasterizer)?)))
+                .collect::<Result<Vec<_>>>()?;
+            Ok(seam_light::relit_target(
+                model, light, &hits, &relit, &parts,
+            ))
+        };
         for whole in &self.wholes {
             let across = match &whole.across {
-                Some(a) => Some((draw(&a.whole.drawable, rig, camera, rasterizer)?, &a.trust)),
+                Some(a) => Some((lit(&a.whole, rasterizer)?, &a.trust)),
                 None => None,
             };
-            let own = draw(&whole.own.drawable, rig, camera, rasterizer)?;
+            let own = lit(&whole.own, rasterizer)?;
             images.push(Drawn { own, across });
         }
         let of = |s: u32| &images[self.field.sources().binary_search(&s).unwrap_or(0)];
-        let hits = rasterize(&rig.vertices, &model.triangles, camera);
         let mut goal = vec![0.0; 3 * hits.len()];
         let mut head = vec![false; hits.len()];
         for (p, hit) in hits.iter().enumerate() {
@@ -594,7 +668,10 @@ impl SeamFitter {
         let mut grads = render.backward(&self.trainable, &d_image, rasterizer)?;
         for (i, &seam) in self.on_seam.iter().enumerate() {
             let sh = &mut grads.sh[i * SH_STRIDE..(i + 1) * SH_STRIDE];
-            if seam {
+            if self.light_only[i] {
+                sh[3..].fill(0.0);
+                grads.opacity_logit[i] = 0.0;
+            } else if seam {
                 sh[3..].iter_mut().for_each(|g| *g *= REST_FACTOR);
             } else {
                 // A zero gradient keeps Adam's moments at zero: no step.
@@ -643,7 +720,7 @@ impl SeamFitter {
         }
         let mut out = composite.gaussians.clone();
         let stride = out.sh_stride();
-        for i in (0..out.len()).filter(|&i| self.on_seam[i]) {
+        for i in (0..out.len()).filter(|&i| self.on_seam[i] || self.light_only[i]) {
             out.opacity_logit[i] = self.trainable.opacity_logit[i] as f32;
             out.log_scale[i] =
                 glam::DVec3::from_array(self.trainable.geometry[i].log_scale).as_vec3();

@@ -1,0 +1,313 @@
+//! The light in a seam fit's targets (method §7.12, "The light").
+//!
+//! A source's Gaussians carry the light of its own capture. `shading =
+//! "relit"` (method §7.10) gives each Gaussian one gain for the surface it
+//! sits on in the composite, but a Gaussian spans a piece of surface whose
+//! exposure changes from point to point — a crease the blend flattens, a
+//! hollow it deepens — and one gain cannot follow that. The fit's targets
+//! can: a whole head drawn with the light its Gaussians were trained under
+//! (`shading = "kept"`) is relit at each pixel by its source's light, for
+//! the surface point the pixel shows on the composite over the same point
+//! on the source's own neutral mesh. A whole under `skin = "base"` holds
+//! Gaussians of two people, each trained under their own light on their own
+//! face, so it is drawn once per person (the others' Gaussians black but
+//! still in front) and each drawing relit by its own person's light.
+
+use glam::Vec3;
+
+use crate::avatar::gaussians::rgb_to_dc;
+use crate::compose::engine::{Composite, Engine};
+use crate::compose::recipe::Shading;
+use crate::compose::shading::{vertex_exposures, BakedLight, Exposure};
+use crate::model::head::HeadModel;
+use crate::model::regions::Region;
+
+use super::model::{Trainable, SH_STRIDE};
+
+/// Whether a composite's seam fit relights its targets pixel by pixel: when
+/// the recipe relights its Gaussians (a recipe that keeps the sources'
+/// light asks for their light as it was).
+pub(super) fn relights(composite: &Composite) -> bool {
+    composite.recipe.post.shading == Shading::Relit
+}
+
+/// The mouth's inside and the teeth, where the per-pixel light stays the
+/// per-Gaussian one: a light fitted to a person's skin says nothing of
+/// surfaces facing into the mouth, and the mouth's inner shape moves with
+/// the lips' (measured: relit per pixel there, random-02's teeth lost 2 dB).
+pub(super) fn inner(region: Region) -> bool {
+    matches!(
+        region,
+        Region::TeethUpper | Region::TeethLower | Region::LipsInside
+    )
+}
+
+/// What relights a target pixel by pixel: the exposure at every vertex of
+/// the composite's neutral mesh and of each source's, with each source's
+/// light.
+pub(super) struct PixelLight {
+    composite: Vec<Exposure>,
+    /// Per source of the database: its neutral's vertex exposures and its
+    /// light, for the sources the composite's wholes draw on (None for the
+    /// rest).
+    sources: Vec<Option<(Vec<Exposure>, BakedLight)>>,
+}
+
+impl PixelLight {
+    /// The light of `sources` (database indices) on `composite`'s surface.
+    pub(super) fn new(engine: &Engine, composite: &Composite, sources: &[usize]) -> PixelLight {
+        let model = &engine.database().model;
+        let mut per_source = vec![None; engine.database().sources.len()];
+        for &s in sources {
+            if let Some(light) = engine.light(s) {
+                let exposures = vertex_exposures(engine.source_neutral(s), &model.triangles);
+                per_source[s] = Some((exposures, *light));
+            }
+        }
+        PixelLight {
+            composite: vertex_exposures(&composite.neutral, &model.triangles),
+            sources: per_source,
+        }
+    }
+
+    /// The gain that relights what source `s`'s Gaussians show at
+    /// barycentric `bary` of the triangle with `corners`: its light there on
+    /// the composite over its light at the same point of its own neutral;
+    /// one where it has no light or either surface no normal.
+    pub(super) fn gain(&self, s: usize, corners: [u32; 3], bary: [f32; 3]) -> Vec3 {
+        let Some(Some((own, light))) = self.sources.get(s) else {
+            return Vec3::ONE;
+        };
+        let here = Exposure::at(&self.composite, corners, bary);
+        let there = Exposure::at(own, corners, bary);
+        if here.normal == Vec3::ZERO || there.normal == Vec3::ZERO {
+            return Vec3::ONE;
+        }
+        light.gain(there, here)
+    }
+}
+
+/// `whole` drawn once per source of its Gaussians: per source, the whole
+/// with every other source's Gaussians black (colour zero, SH bands zero)
+/// but as opaque as before, so the drawings add up to the whole.
+pub(super) fn parts(whole: &Composite, drawable: &Trainable) -> Vec<(usize, Trainable)> {
+    let mut sources: Vec<usize> = whole.blocks.iter().map(|b| b.source).collect();
+    sources.sort_unstable();
+    sources.dedup();
+    let black = f64::from(rgb_to_dc(0.0));
+    sources
+        .into_iter()
+        .map(|s| {
+            let mut part = drawable.clone();
+            for block in whole.blocks.iter().filter(|b| b.source != s) {
+                for i in block.start..block.end {
+                    let sh = &mut part.sh[i * SH_STRIDE..(i + 1) * SH_STRIDE];
+                    sh.fill(0.0);
+                    sh[..3].fill(black);
+                }
+            }
+            (s, part)
+        })
+        .collect()
+}
+
+/// A whole's target image: per pixel showing surface (`hits`: triangle and
+/// barycentric point), the sum of its parts' drawings (`parts`, per source)
+/// each relit by its source's [`PixelLight::gain`] there; on the mouth's
+/// inside, on the teeth and off the surface, `relit` (the whole drawn with
+/// the per-Gaussian light).
+pub(super) fn relit_target(
+    model: &HeadModel,
+    light: &PixelLight,
+    hits: &[Option<(u32, [f32; 3], f64)>],
+    relit: &[f64],
+    parts: &[(usize, Vec<f64>)],
+) -> Vec<f64> {
+    let mut out = relit.to_vec();
+    for (p, hit) in hits.iter().enumerate() {
+        let Some((t, bary, _)) = hit else { continue };
+        if inner(model.triangle_regions[*t as usize]) {
+            continue;
+        }
+        let corners = model.triangles[*t as usize];
+        let pixel = &mut out[3 * p..3 * p + 3];
+        pixel.fill(0.0);
+        for (s, image) in parts {
+            let gain = light.gain(*s, corners, *bary);
+            for c in 0..3 {
+                pixel[c] += image[3 * p + c] * f64::from(gain[c]);
+            }
+        }
+    }
+    out
+}
+
+/// Per Gaussian of `composite`: whether the light on its parent triangle
+/// changed — any corner's normal or cavity on the composite's neutral off
+/// its source's by more than 10⁻³. Those the fit moves in their DC colour
+/// alone (the light lives there, §7.10); where nothing moved nothing is
+/// fitted, so a composite on its sources' own shapes keeps its bits.
+pub(super) fn light_moved(engine: &Engine, composite: &Composite) -> Vec<bool> {
+    let model = &engine.database().model;
+    let here = vertex_exposures(&composite.neutral, &model.triangles);
+    let mut moved_by_source: Vec<Option<Vec<bool>>> = vec![None; engine.database().sources.len()];
+    let mut out = vec![false; composite.gaussians.len()];
+    for block in &composite.blocks {
+        let moved = moved_by_source[block.source].get_or_insert_with(|| {
+            let there = vertex_exposures(engine.source_neutral(block.source), &model.triangles);
+            model
+                .triangles
+                .iter()
+                .map(|corners| {
+                    corners.iter().any(|&v| {
+                        let (a, b) = (here[v as usize], there[v as usize]);
+                        (a.normal - b.normal).length() > 1e-3 || (a.cavity - b.cavity).abs() > 1e-3
+                    })
+                })
+                .collect()
+        });
+        for (i, flag) in out.iter_mut().enumerate().take(block.end).skip(block.start) {
+            let t = composite.gaussians.binding[i] as usize;
+            *flag = moved.get(t).copied().unwrap_or(false);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::avatar::binding::triangle_frames;
+    use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
+    use crate::compose::recipe::{PostProcess, Recipe};
+    use crate::model::builtin::build_head;
+    use crate::render::Backend;
+    use crate::train::capture::rig;
+    use crate::train::holes::Obscurer;
+    use crate::train::model::Render;
+    use crate::train::raster::Rasterizer;
+
+    fn engine() -> Engine {
+        let options = SyntheticOptions {
+            seed: 5,
+            sources: 2,
+            gaussians_per_avatar: 3_000,
+        };
+        Engine::new(builtin_database(build_head(), options).unwrap()).unwrap()
+    }
+
+    /// The composite of source 1's mouth on source 0, with the mouth's shape
+    /// when `reshaped`, post-processed as `post ours`.
+    fn mouth_swap(engine: &Engine, reshaped: bool) -> Composite {
+        let name = |s: usize| engine.database().sources[s].name.clone();
+        let shape = if reshaped {
+            format!("shape = {{ {} = 1.0 }}\n", name(1))
+        } else {
+            String::new()
+        };
+        let text = format!(
+            "base = \"{}\"\n[groups.mouth]\ngaussians = \"{}\"\n{shape}",
+            name(0),
+            name(1)
+        );
+        let mut recipe = Recipe::from_toml(&text).unwrap();
+        recipe.post = PostProcess::BEST;
+        engine.compose(&recipe.resolve(engine.database()).unwrap())
+    }
+
+    #[test]
+    fn a_head_drawn_person_by_person_adds_up_to_itself() {
+        let engine = engine();
+        let composite = mouth_swap(&engine, true);
+        let whole = Trainable::from_set(&composite.gaussians);
+        let parts = parts(&composite, &whole);
+        assert_eq!(parts.iter().map(|(s, _)| *s).collect::<Vec<_>>(), [0, 1]);
+        let model = &engine.database().model;
+        let frames = triangle_frames(&composite.neutral, &model.triangles);
+        let (cameras, _) = rig(2, false, [48, 48]);
+        let mut rasterizer = Rasterizer::open(Backend::Cpu).unwrap();
+        for camera in &cameras {
+            let mut draw = |t: &Trainable| {
+                let r = Render::new(
+                    t,
+                    &frames,
+                    camera,
+                    [0.0; 3],
+                    &Obscurer::None,
+                    &mut rasterizer,
+                );
+                r.unwrap().image().to_vec()
+            };
+            let all = draw(&whole);
+            let drawn: Vec<Vec<f64>> = parts.iter().map(|(_, p)| draw(p)).collect();
+            for (p, &value) in all.iter().enumerate() {
+                let sum: f64 = drawn.iter().map(|d| d[p]).sum();
+                assert!(
+                    (sum - value).abs() < 1e-6,
+                    "pixel {p}: {sum} against {value}"
+                );
+            }
+            // Each person shows somewhere: the split is not all one side.
+            for d in &drawn {
+                assert!(d.iter().any(|&v| v > 0.05));
+            }
+        }
+    }
+
+    #[test]
+    fn the_light_moves_only_where_the_shape_does() {
+        let engine = engine();
+        // Source 1's Gaussians on the base's shape: its own light moved, the
+        // base's did not.
+        let swapped = mouth_swap(&engine, false);
+        let moved = light_moved(&engine, &swapped);
+        for block in &swapped.blocks {
+            let any = moved[block.start..block.end].iter().any(|&m| m);
+            if block.source == 0 {
+                assert!(!any, "the base's own shape moved in {:?}", block.region);
+            }
+        }
+        let of_source_1 = swapped.blocks.iter().filter(|b| b.source == 1);
+        assert!(of_source_1.flat_map(|b| &moved[b.start..b.end]).any(|&m| m));
+        // The mouth's shape too moves some of the base's light round it.
+        let reshaped = mouth_swap(&engine, true);
+        let moved = light_moved(&engine, &reshaped);
+        let base = reshaped.blocks.iter().filter(|b| b.source == 0);
+        assert!(base.flat_map(|b| &moved[b.start..b.end]).any(|&m| m));
+    }
+
+    #[test]
+    fn a_target_is_relit_pixel_by_pixel_but_in_the_mouth() {
+        let engine = engine();
+        let model = &engine.database().model;
+        let composite = mouth_swap(&engine, false);
+        let light = PixelLight::new(&engine, &composite, &[0, 1]);
+        let region_triangle =
+            |r: Region| model.triangle_regions.iter().position(|&x| x == r).unwrap() as u32;
+        let (teeth, skin) = (
+            region_triangle(Region::TeethUpper),
+            region_triangle(Region::Skin),
+        );
+        let at = [1.0 / 3.0; 3];
+        let hits = [Some((teeth, at, 1.0)), Some((skin, at, 1.0)), None];
+        let relit = vec![0.9; 9];
+        let parts = [(0, vec![0.2; 9]), (1, vec![0.1; 9])];
+        let out = relit_target(model, &light, &hits, &relit, &parts);
+        assert_eq!(
+            &out[0..3],
+            &[0.9; 3],
+            "the teeth keep the per-Gaussian light"
+        );
+        assert_eq!(&out[6..9], &[0.9; 3], "off the surface nothing is relit");
+        // The base on its own shape keeps its light; source 1's is relit.
+        let corners = model.triangles[skin as usize];
+        assert_eq!(light.gain(0, corners, at), Vec3::ONE);
+        let gain = light.gain(1, corners, at);
+        for c in 0..3 {
+            let expected = 0.2 + 0.1 * f64::from(gain[c]);
+            assert!((out[3 + c] - expected).abs() < 1e-12);
+        }
+        // A source without a light, or past the database, is not relit.
+        assert_eq!(light.gain(7, corners, at), Vec3::ONE);
+    }
+}
