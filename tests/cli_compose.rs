@@ -110,7 +110,7 @@ fn export_with_a_seam_fit_changes_only_colours_opacities_and_scales() {
         "--no-seam-fit-cache",
     ]);
     assert!(
-        said.contains("fitted") && said.contains("seam Gaussians"),
+        said.contains("fitted") && said.contains("Gaussians (at seams"),
         "{said}"
     );
     assert_eq!(plain.len(), fitted.len());

@@ -1,7 +1,7 @@
 //! The seam fit (method §7.12): a composite's Gaussians near a change of
 //! source fitted — colour, opacity and a little of their scale — to what the
-//! sources themselves draw there; every other Gaussian and every Gaussian's
-//! place untouched.
+//! sources themselves draw there, and where the recipe relights, the colour
+//! of those whose light the shape moved; every Gaussian's place untouched.
 
 use std::sync::OnceLock;
 

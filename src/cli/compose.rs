@@ -186,12 +186,12 @@ fn finish_fit(composer: &mut Composer) -> Result<()> {
                 store.dir().display()
             ),
             _ => format!(
-                "fitted {} seam Gaussians over {} views",
+                "fitted {} Gaussians (at seams, and where the shape moved the light) over {} views",
                 report.fitted, report.views
             ),
         };
         eprintln!(
-            "visage: {what}: error against the sources' own seams {:.2e} → {:.2e}",
+            "visage: {what}: error against the fit's targets {:.2e} → {:.2e}",
             report.mse_before, report.mse_after
         );
     }

@@ -149,7 +149,9 @@ pub enum Fit {
     #[default]
     Off,
     /// The colours and opacities of the Gaussians beside a change of source
-    /// fitted to what the sources themselves draw there (the seam fit). The
+    /// fitted to what the sources themselves draw there (the seam fit), and,
+    /// where the Gaussians are relit, the colours of those whose light the
+    /// shape moved, to the sources relit pixel by pixel. The
     /// engine composes without it; whoever shows or writes the composite
     /// runs it (seconds, not milliseconds: the editor in the background).
     Seams,

@@ -350,7 +350,7 @@ impl Composer {
             let (set, report) = f.result(c);
             let composed = std::mem::replace(&mut c.gaussians, set);
             self.generation += 1;
-            // A fit with nothing on a seam has nothing worth keeping.
+            // A fit with nothing fitted has nothing worth keeping.
             if let (Some(store), Some(key)) = (&self.fit_store, &self.fit_key) {
                 if report.fitted > 0 {
                     self.store_error = store.save(key, &composed, &c.gaussians, &report).err();

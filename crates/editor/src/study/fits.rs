@@ -39,7 +39,8 @@ pub struct FitSummary {
 /// under `options`, into the study's folder; a fit already there is kept,
 /// and any other fit in the folder removed. `progress` hears the avatar's
 /// position among those fitted, their count and the fit's progress. Counts
-/// only avatars with Gaussians on a seam (an avatar of one source has none).
+/// only avatars with Gaussians to fit (an avatar of one source on its own
+/// shape has none).
 pub fn fit_avatars(
     study: &StudyFolder,
     options: &SeamFit,

@@ -16,7 +16,7 @@
 //! never over any ground truth. Where the recipe relights its Gaussians,
 //! the wholes are relit pixel by pixel instead, and the Gaussians whose
 //! light the shape moved are fitted too, in their DC colour alone
-//! ([`super::seam_light`]). Positions and rotations stay, and scales
+//! (`seam_light`). Positions and rotations stay, and scales
 //! move only a little: the fit changes what a Gaussian shows and how far it
 //! reaches, not where it sits, so animation and the region membership are
 //! untouched.
@@ -38,7 +38,7 @@ use super::holes::Obscurer;
 use super::model::{Render, Trainable, SH_STRIDE};
 use super::project::{TrainCamera, GEOMETRY};
 use super::raster::Rasterizer;
-use super::seam_light::{self, PixelLight};
+use super::seam_light::{self, KeptWhole, PixelLight};
 
 /// Learning rate of the SH DC coefficients (3DGS's feature rate).
 const LR_DC: f64 = 0.0025;
@@ -281,10 +281,9 @@ fn near_seams(model: &HeadModel, field: &SeamField, looks: &[u32]) -> Vec<bool> 
 struct Whole {
     drawable: Trainable,
     composite: Composite,
-    /// When the fit relights its targets per pixel ([`seam_light`]): the
-    /// same whole with the light its Gaussians were trained under, once per
-    /// source of its Gaussians.
-    parts: Vec<(usize, Trainable)>,
+    /// When the fit relights its targets per pixel (`seam_light`): the
+    /// same whole with the light its Gaussians were trained under.
+    kept: Option<KeptWhole>,
 }
 
 /// A source's whole head as each side of a seam asks for it.
@@ -304,7 +303,7 @@ impl Wholes {
         let across = self.across.iter().map(|a| &a.whole);
         std::iter::once(&self.own)
             .chain(across)
-            .flat_map(|w| w.parts.iter().map(|(s, _)| *s))
+            .flat_map(|w| w.kept.iter().flat_map(|k| k.sources().iter().copied()))
     }
 }
 
@@ -382,18 +381,16 @@ fn wholes(engine: &Engine, composite: &Composite, source: u32) -> Wholes {
 
     let whole = |recipe: &_| {
         let composite = engine.compose(recipe);
-        let parts = if seam_light::relights(&composite) {
+        let kept = seam_light::relights(&composite).then(|| {
             let mut kept = recipe.clone();
             kept.post.shading = Shading::Kept;
             let kept = engine.compose(&kept);
-            seam_light::parts(&kept, &drawable(&kept.gaussians))
-        } else {
-            Vec::new()
-        };
+            KeptWhole::new(&kept, drawable(&kept.gaussians))
+        });
         Whole {
             drawable: drawable(&composite.gaussians),
             composite,
-            parts,
+            kept,
         }
     };
     let own = whole(&recipe);
@@ -414,7 +411,8 @@ fn wholes(engine: &Engine, composite: &Composite, source: u32) -> Wholes {
 /// that must stay responsive (the editor's render worker) can interleave it
 /// with other work, see how far it is, and drop it when the composite
 /// changes. The units: compose each source's whole head (twice for a
-/// swapped source under `skin = "base"`, [`wholes`]), pose the rig's two
+/// swapped source under `skin = "base"`, [`wholes`], and each again with
+/// the trained light where the recipe relights), pose the rig's two
 /// poses, draw each view's target (and measure the composite there), take
 /// each Adam step, and measure each view again. [`fit_seams`] runs them all.
 ///
@@ -431,7 +429,7 @@ pub struct SeamFitter {
     trainable: Trainable,
     wholes: Vec<Wholes>,
     /// Per Gaussian: fitted in its DC colour alone, for the light on its
-    /// triangle ([`seam_light::light_moved`]) rather than for a seam.
+    /// triangle (`seam_light::light_moved`) rather than for a seam.
     light_only: Vec<bool>,
     /// Made with the wholes when the targets are relit per pixel.
     light: Option<PixelLight>,
@@ -513,7 +511,8 @@ impl SeamFitter {
         }
     }
 
-    /// Nothing to fit: no Gaussian on a seam, no steps or no cameras.
+    /// Nothing to fit: no Gaussian on a seam or under moved light, no steps
+    /// or no cameras.
     fn idle(&self) -> bool {
         self.fitted == 0 || self.options.iterations == 0 || self.options.cameras == 0
     }
@@ -593,7 +592,9 @@ impl SeamFitter {
     /// View `k` of the rig with its blended target: per pixel, the render of
     /// the head wholly from the source the surface point wears, cross-faded
     /// towards the nearest other source's (with that source's own skin as
-    /// far as [`trust`] allows, [`wholes`]) by the seam weight there.
+    /// far as [`trust`] allows, [`wholes`]) by the seam weight there; each
+    /// whole relit pixel by pixel where the recipe relights
+    /// (`seam_light::relit_target`).
     fn target(&mut self, model: &HeadModel, k: usize) -> Result<View> {
         let rig = &self.posed[k / self.cameras.len()];
         let camera = &self.cameras[k % self.cameras.len()];
@@ -606,10 +607,13 @@ impl SeamFitter {
             let Some(light) = light else {
                 return Ok(relit);
             };
-            let parts = whole
-                .parts
+            let Some(kept) = &whole.kept else {
+                return Ok(relit);
+            };
+            let parts = kept
+                .sources()
                 .iter()
-                .map(|(s, part)| Ok((*s, draw(part, rig, camera, rasterizer)?)))
+                .map(|&s| Ok((s, draw(&kept.part(s), rig, camera, rasterizer)?)))
                 .collect::<Result<Vec<_>>>()?;
             Ok(seam_light::relit_target(
                 model, light, &hits, &relit, &parts,
@@ -711,7 +715,8 @@ impl SeamFitter {
         }
     }
 
-    /// `composite`'s Gaussians with the seam Gaussians as fitted so far, and
+    /// `composite`'s Gaussians with those fitted (on a seam, or under moved
+    /// light) as fitted so far, and
     /// what the fit did (the error after is over the views measured again
     /// so far: complete once [`SeamFitter::finished`]).
     pub fn result(&self, composite: &Composite) -> (GaussianSet, FitReport) {
@@ -746,8 +751,10 @@ fn add(a: (f64, usize), b: (f64, usize)) -> (f64, usize) {
     (a.0 + b.0, a.1 + b.1)
 }
 
-/// The composite's Gaussians with those on a seam fitted (see the module
-/// documentation); unchanged where the composite shows one source.
+/// The composite's Gaussians with those on a seam fitted, and those whose
+/// light the shape moved where the recipe relights (see the module
+/// documentation); unchanged where the composite shows one source on its
+/// own shape.
 /// `progress` hears the units of work done and their total after each
 /// (see [`SeamFitter`]).
 pub fn fit_seams(
