@@ -378,7 +378,6 @@ fn blended(own: &Drawn, other: &Drawn, w: f64, i: usize, region: Region) -> f64 
 fn wholes(engine: &Engine, composite: &Composite, source: u32) -> Wholes {
     let mut recipe = composite.recipe.clone();
     recipe.gaussians = [source as usize; Group::COUNT];
-
     let whole = |recipe: &_| {
         let composite = engine.compose(recipe);
         let kept = seam_light::relights(&composite).then(|| {
@@ -716,9 +715,9 @@ impl SeamFitter {
     }
 
     /// `composite`'s Gaussians with those fitted (on a seam, or under moved
-    /// light) as fitted so far, and
-    /// what the fit did (the error after is over the views measured again
-    /// so far: complete once [`SeamFitter::finished`]).
+    /// light) as fitted so far, and what the fit did (the error after is
+    /// over the views measured again so far: complete once
+    /// [`SeamFitter::finished`]).
     pub fn result(&self, composite: &Composite) -> (GaussianSet, FitReport) {
         if self.idle() {
             return (composite.gaussians.clone(), FitReport::default());

@@ -33,8 +33,8 @@ pub(super) fn relights(composite: &Composite) -> bool {
 
 /// The mouth's inside and the teeth, where the per-pixel light stays the
 /// per-Gaussian one: a light fitted to a person's skin says nothing of
-/// surfaces facing into the mouth, and the mouth's inner shape moves with
-/// the lips' (measured: relit per pixel there, random-02's teeth lost 2 dB).
+/// surfaces facing into the mouth (relit per pixel there too, with every
+/// Gaussian fitted, random-02's teeth lost 2 dB).
 pub(super) fn inner(region: Region) -> bool {
     matches!(
         region,
@@ -193,6 +193,13 @@ pub(super) fn light_moved(engine: &Engine, composite: &Composite) -> Vec<bool> {
     let mut moved_by_source: Vec<Option<Vec<bool>>> = vec![None; engine.database().sources.len()];
     let mut out = vec![false; composite.gaussians.len()];
     for block in &composite.blocks {
+        // A source without a light is never relit. The mouth's inside is
+        // fitted too, though its own target keeps the per-Gaussian light
+        // ([`relit_target`]): its Gaussians reach the relit lips round it
+        // (left out, largest-shape lost 0.09 dB).
+        if engine.light(block.source).is_none() {
+            continue;
+        }
         let moved = moved_by_source[block.source].get_or_insert_with(|| {
             let there = vertex_exposures(engine.source_neutral(block.source), &model.triangles);
             model
@@ -206,13 +213,6 @@ pub(super) fn light_moved(engine: &Engine, composite: &Composite) -> Vec<bool> {
                 })
                 .collect()
         });
-        // A source without a light is never relit. The mouth's inside is
-        // fitted too, though its own target keeps the per-Gaussian light
-        // ([`relit_target`]): its Gaussians reach the relit lips round it
-        // (left out, largest-shape lost 0.09 dB).
-        if engine.light(block.source).is_none() {
-            continue;
-        }
         for (i, flag) in out.iter_mut().enumerate().take(block.end).skip(block.start) {
             let t = composite.gaussians.binding[i] as usize;
             *flag = moved.get(t).copied().unwrap_or(false);
