@@ -34,7 +34,8 @@ import subprocess
 import sys
 import tomllib
 
-RECIPES = pathlib.Path("recipes/bench")
+# The bench's recipes, wherever the script is run from.
+RECIPES = pathlib.Path(__file__).resolve().parents[2] / "recipes" / "bench"
 GROUPS = ("mouth", "eyes", "ears", "neck", "hair", "nose", "face")
 POST = """[post]
 smoothing = "off"
@@ -67,14 +68,36 @@ def toned_recipe(source, base, colour):
     return "\n".join(lines) + "\n" + POST.replace('"semantic"', f'"{colour}"')
 
 
+def fail(message):
+    """One line on standard error and exit 2, as visage does for bad input."""
+    print(f"toned-reference: {message}", file=sys.stderr)
+    sys.exit(2)
+
+
 def run(args, what):
-    done = subprocess.run(args, capture_output=True, text=True)
+    try:
+        done = subprocess.run(args, capture_output=True, text=True)
+    except OSError as error:
+        fail(f"cannot run {args[0]}: {error.strerror}")
     if done.returncode != 0:
-        sys.exit(f"toned-reference: {what} failed: {done.stderr.strip()[-300:]}")
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        fail(f"{what} failed: {last}")
     return done.stdout
 
 
+def read_json(path):
+    try:
+        return json.loads(path.read_text())
+    except OSError as error:
+        fail(f"cannot read {path}: {error.strerror}")
+    except json.JSONDecodeError as error:
+        fail(f"{path} is not JSON: {error}")
+
+
 def heads(options):
+    if not (options.cache / "ada" / "point_cloud.ply").is_file():
+        fail(f"{options.cache} holds no trained bench sources (make them with "
+             "`visage bench composites --size WxH`)")
     size = options.cache.name.split("-")[0]
     for source, base in pairs():
         folder = options.out / f"{source}-{base}"
@@ -91,8 +114,8 @@ def heads(options):
                        str(recipe), str(truth), "--seam-fit", "0", "--json"],
                       f"eval {source} on {base}")
             (folder / report).write_text(out)
-        toned = json.loads((folder / "toned.json").read_text())["quality"]["psnr_db"]
-        own = json.loads((folder / "own-tone.json").read_text())["quality"]["psnr_db"]
+        toned = read_json(folder / "toned.json")["quality"]["psnr_db"]
+        own = read_json(folder / "own-tone.json")["quality"]["psnr_db"]
         print(f"{source} in {base}'s tone: {toned:.2f} dB (in its own tone {own:.2f} dB)")
 
 
@@ -101,18 +124,21 @@ def squared(psnr_db, pixels):
 
 
 def combine(options):
-    run_json = json.loads(options.run.read_text())
+    run_json = read_json(options.run)
+    if "recipes" not in run_json:
+        fail(f"{options.run} is not the JSON of `visage bench composites`")
     bases = {p.stem: tomllib.loads(p.read_text())["base"] for p in RECIPES.glob("*.toml")}
-    print(f"{'recipe':24}{'PSNR':>8}{'ceiling':>9}{'toned':>8}   dB; ceiling and toned reference combined over the recipe's regions")
-    sums = [0.0, 0.0, 0.0]
+    rows = []
     for recipe in run_json["recipes"]:
-        base = bases[recipe["recipe"]]
+        base = bases.get(recipe["recipe"])
+        if base is None:
+            fail(f"{recipe['recipe']} is not one of {RECIPES}'s recipes")
         totals = [0.0, 0.0, 0.0, 0]
         for region in recipe["report"]["regions"]:
             source = region["source"]
             toned_region = None
             if source != base:
-                head = json.loads((options.heads / f"{source}-{base}" / "toned.json").read_text())
+                head = read_json(options.heads / f"{source}-{base}" / "toned.json")
                 toned_region = next((r["interior"]["psnr_db"] for r in head["regions"]
                                      if r["region"] == region["region"]), None)
             for zone, ceiling_key in (("band", "ceiling_band_psnr_db"),
@@ -129,12 +155,12 @@ def combine(options):
                 totals[1] += squared(ceiling, pixels)
                 totals[2] += squared(reference, pixels)
                 totals[3] += pixels
-        psnr = [-10 * math.log10(t / totals[3]) for t in totals[:3]]
-        sums = [s + p for s, p in zip(sums, psnr)]
-        print(f"{recipe['recipe']:24}{psnr[0]:8.2f}{psnr[1]:9.2f}{psnr[2]:8.2f}")
-    count = len(run_json["recipes"])
-    means = [s / count for s in sums]
-    print(f"{'mean':24}{means[0]:8.2f}{means[1]:9.2f}{means[2]:8.2f}")
+        rows.append((recipe["recipe"], [-10 * math.log10(t / totals[3]) for t in totals[:3]]))
+    means = [sum(psnr[k] for _, psnr in rows) / len(rows) for k in range(3)]
+    print(f"{'recipe':24}{'PSNR':>8}{'ceiling':>9}{'toned':>8}   dB; ceiling and toned reference "
+          "combined over the recipe's regions")
+    for name, psnr in rows + [("mean", means)]:
+        print(f"{name:24}{psnr[0]:8.2f}{psnr[1]:9.2f}{psnr[2]:8.2f}")
 
 
 def main():
