@@ -20,7 +20,9 @@ same combination of the plain ceiling is printed beside it as a check.
       # captures and evaluates each pair's toned head (and, with colour
       # off, the same head in its own tone), about 1 minute a pair at 256²
   deploy/bench/toned-reference.py combine RUN.json HEADS
-      # per recipe: PSNR, ceiling and toned reference
+      # per recipe: PSNR, ceiling, toned reference, and the same heads in
+      # their own tone (a control: what a head of the source's own shape
+      # under the base's motion costs before any transfer)
 
 RUN.json is `visage bench composites --pipeline ours --json` at the size
 of the cache (`target/composite-sources/256x256-c8-f4-i1500-interior` for
@@ -94,21 +96,33 @@ def read_json(path):
         fail(f"{path} is not JSON: {error}")
 
 
+def rig(cache):
+    """Size, cameras and timesteps of a bench cache named WxH-cN-fN-iN-…"""
+    parts = cache.name.split("-")
+    if (len(parts) < 3 or "x" not in parts[0] or not parts[1].startswith("c")
+            or not parts[2].startswith("f")):
+        fail(f"{cache} is not named as `visage bench composites` names its cache (WxH-cN-fN-…)")
+    return parts[0], parts[1][1:], parts[2][1:]
+
+
 def heads(options):
     if not (options.cache / "ada" / "point_cloud.ply").is_file():
         fail(f"{options.cache} holds no trained bench sources (make them with "
              "`visage bench composites --size WxH`)")
-    size = options.cache.name.split("-")[0]
+    size, cameras, frames = rig(options.cache)
     for source, base in pairs():
         folder = options.out / f"{source}-{base}"
-        folder.mkdir(parents=True, exist_ok=True)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            fail(f"cannot make {folder}: {error.strerror}")
         for colour, tone, report in (("semantic", "base", "toned.json"),
                                      ("off", "source", "own-tone.json")):
             recipe = folder / f"{colour}.toml"
             recipe.write_text(toned_recipe(source, base, colour))
             truth = folder / f"truth-{tone}"
             run([options.visage, "capture", "--recipe", str(recipe), "--tone", tone,
-                 "--seams", "hard", "--size", size, "--cameras", "8", "--frames", "4",
+                 "--seams", "hard", "--size", size, "--cameras", cameras, "--frames", frames,
                  "-o", str(truth)], f"capture {source} on {base}")
             out = run([options.visage, "eval", "--composite", "--db", str(options.cache),
                        str(recipe), str(truth), "--seam-fit", "0", "--json"],
@@ -123,44 +137,67 @@ def squared(psnr_db, pixels):
     return 10 ** (-psnr_db / 10) * pixels
 
 
+def head_regions(folder, report):
+    """Region name → interior PSNR of one toned head's report (a toned
+    head has no band: its interior is the whole region)."""
+    head = read_json(folder / report)
+    if not isinstance(head, dict) or "regions" not in head:
+        fail(f"{folder / report} is not the JSON of `visage eval --composite`")
+    return {r["region"]: (r.get("interior") or {}).get("psnr_db") for r in head["regions"]}
+
+
+def recipe_row(recipe, base, heads_folder):
+    """PSNR, ceiling, toned reference and own-tone control of one recipe,
+    each a squared error over the recipe's own band and interior pixels."""
+    totals = [0.0, 0.0, 0.0, 0.0, 0]
+    for region in recipe["report"]["regions"]:
+        name, source = region["region"], region["source"]
+        references = None
+        if source != base:
+            folder = heads_folder / f"{source}-{base}"
+            references = [head_regions(folder, report).get(name)
+                          for report in ("toned.json", "own-tone.json")]
+            if None in references:
+                fail(f"the toned head {source}-{base} shows no {name}: "
+                     "its reference would be guessed")
+        for zone, ceiling_key in (("band", "ceiling_band_psnr_db"),
+                                  ("interior", "ceiling_interior_psnr_db")):
+            figures = region[zone]
+            if not figures or not figures["pixels"] or figures["psnr_db"] is None:
+                continue
+            ceiling = next((region.get(k) for k in (ceiling_key, "ceiling_interior_psnr_db",
+                                                    "ceiling_band_psnr_db")
+                            if region.get(k) is not None), None)
+            if ceiling is None:
+                fail(f"{recipe['recipe']}'s {name} has no ceiling")
+            pixels = figures["pixels"]
+            toned, own = references or (ceiling, ceiling)
+            for k, psnr in enumerate((figures["psnr_db"], ceiling, toned, own)):
+                totals[k] += squared(psnr, pixels)
+            totals[4] += pixels
+    if not totals[4]:
+        fail(f"{recipe['recipe']} has no region with pixels")
+    return [-10 * math.log10(t / totals[4]) for t in totals[:4]]
+
+
 def combine(options):
     run_json = read_json(options.run)
-    if "recipes" not in run_json:
-        fail(f"{options.run} is not the JSON of `visage bench composites`")
+    if not isinstance(run_json, dict) or not run_json.get("recipes"):
+        fail(f"{options.run} is not the JSON of `visage bench composites` (no recipes)")
     bases = {p.stem: tomllib.loads(p.read_text())["base"] for p in RECIPES.glob("*.toml")}
     rows = []
     for recipe in run_json["recipes"]:
         base = bases.get(recipe["recipe"])
         if base is None:
             fail(f"{recipe['recipe']} is not one of {RECIPES}'s recipes")
-        totals = [0.0, 0.0, 0.0, 0]
-        for region in recipe["report"]["regions"]:
-            source = region["source"]
-            toned_region = None
-            if source != base:
-                head = read_json(options.heads / f"{source}-{base}" / "toned.json")
-                toned_region = next((r["interior"]["psnr_db"] for r in head["regions"]
-                                     if r["region"] == region["region"]), None)
-            for zone, ceiling_key in (("band", "ceiling_band_psnr_db"),
-                                      ("interior", "ceiling_interior_psnr_db")):
-                figures = region[zone]
-                if not figures or not figures["pixels"] or figures["psnr_db"] is None:
-                    continue
-                pixels = figures["pixels"]
-                ceiling = region.get(ceiling_key)
-                if ceiling is None:
-                    ceiling = region["ceiling_interior_psnr_db"] or region["ceiling_band_psnr_db"]
-                reference = toned_region if toned_region is not None else ceiling
-                totals[0] += squared(figures["psnr_db"], pixels)
-                totals[1] += squared(ceiling, pixels)
-                totals[2] += squared(reference, pixels)
-                totals[3] += pixels
-        rows.append((recipe["recipe"], [-10 * math.log10(t / totals[3]) for t in totals[:3]]))
-    means = [sum(psnr[k] for _, psnr in rows) / len(rows) for k in range(3)]
-    print(f"{'recipe':24}{'PSNR':>8}{'ceiling':>9}{'toned':>8}   dB; ceiling and toned reference "
-          "combined over the recipe's regions")
-    for name, psnr in rows + [("mean", means)]:
-        print(f"{name:24}{psnr[0]:8.2f}{psnr[1]:9.2f}{psnr[2]:8.2f}")
+        rows.append((recipe["recipe"], recipe_row(recipe, base, options.heads)))
+    means = [sum(row[k] for _, row in rows) / len(rows) for k in range(4)]
+    print(f"{'recipe':24}{'PSNR':>8}{'ceiling':>9}{'toned':>8}{'own tone':>10}")
+    for name, row in rows + [("mean", means)]:
+        print(f"{name:24}{row[0]:8.2f}{row[1]:9.2f}{row[2]:8.2f}{row[3]:10.2f}")
+    print("dB over each recipe's own pixels; toned: each swapped source's region as its toned "
+          "head shows it, the base's as its ceiling; own tone: the same heads with colour off "
+          "against their own tone's truth (what the heads cost before any transfer)")
 
 
 def main():
