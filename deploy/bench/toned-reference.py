@@ -26,7 +26,8 @@ same combination of the plain ceiling is printed beside it as a check.
 
 RUN.json is `visage bench composites --pipeline ours --json` at the size
 of the cache (`target/composite-sources/256x256-c8-f4-i1500-interior` for
-`--size 256x256`); `--visage` names the binary (target/release/visage).
+`--size 256x256`); `--visage` names the binary (the repository's
+target/release/visage by default). Python 3.11 or later (tomllib).
 """
 import argparse
 import json
@@ -36,8 +37,9 @@ import subprocess
 import sys
 import tomllib
 
-# The bench's recipes, wherever the script is run from.
-RECIPES = pathlib.Path(__file__).resolve().parents[2] / "recipes" / "bench"
+# The repository, and in it the bench's recipes, wherever the script is run from.
+REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
+RECIPES = REPOSITORY / "recipes" / "bench"
 GROUPS = ("mouth", "eyes", "ears", "neck", "hair", "nose", "face")
 POST = """[post]
 smoothing = "off"
@@ -206,7 +208,7 @@ def main():
     make = commands.add_parser("heads")
     make.add_argument("--cache", type=pathlib.Path, required=True)
     make.add_argument("--out", type=pathlib.Path, required=True)
-    make.add_argument("--visage", default="target/release/visage")
+    make.add_argument("--visage", default=str(REPOSITORY / "target" / "release" / "visage"))
     join = commands.add_parser("combine")
     join.add_argument("run", type=pathlib.Path)
     join.add_argument("heads", type=pathlib.Path)
