@@ -30,6 +30,7 @@ of the cache (`target/composite-sources/256x256-c8-f4-i1500-interior` for
 target/release/visage by default). Python 3.11 or later (tomllib).
 """
 import argparse
+import functools
 import json
 import math
 import pathlib
@@ -139,9 +140,11 @@ def squared(psnr_db, pixels):
     return 10 ** (-psnr_db / 10) * pixels
 
 
+@functools.cache
 def head_regions(folder, report):
     """Region name → interior PSNR of one toned head's report (a toned
-    head has no band: its interior is the whole region)."""
+    head has no band: its interior is the whole region); each report is
+    read once, however many regions and recipes ask."""
     head = read_json(folder / report)
     if not isinstance(head, dict) or "regions" not in head:
         fail(f"{folder / report} is not the JSON of `visage eval --composite`")
