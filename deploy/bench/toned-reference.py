@@ -19,10 +19,18 @@ same combination of the plain ceiling is printed beside it as a check.
   deploy/bench/toned-reference.py heads --cache DIR --out HEADS
       # captures and evaluates each pair's toned head (and, with colour
       # off, the same head in its own tone), about 1 minute a pair at 256²
+  deploy/bench/toned-reference.py trained --cache DIR --heads HEADS
+      # trains each pair's source on its toned head's truth (the base's
+      # tone) as the bench trains its sources, and measures it there: what
+      # the source reaches in that tone when trained in it, with no
+      # transfer at all; about 2 minutes a pair at 256², and a pair already
+      # trained is kept
   deploy/bench/toned-reference.py combine RUN.json HEADS
       # per recipe: PSNR, ceiling, toned reference, and the same heads in
       # their own tone (a control: what a head of the source's own shape
-      # under the base's motion costs before any transfer)
+      # under the base's motion costs before any transfer); with `trained`
+      # run, also the *toned ceiling*: each swapped region as its source
+      # trained in the base's tone shows it
 
 RUN.json is `visage bench composites --pipeline ours --json` at the size
 of the cache (`target/composite-sources/256x256-c8-f4-i1500-interior` for
@@ -34,6 +42,7 @@ import functools
 import json
 import math
 import pathlib
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -100,19 +109,24 @@ def read_json(path):
 
 
 def rig(cache):
-    """Size, cameras and timesteps of a bench cache named WxH-cN-fN-iN-…"""
+    """Size, cameras, timesteps and training iterations of a bench cache
+    named WxH-cN-fN-iN-…"""
     parts = cache.name.split("-")
-    if (len(parts) < 3 or "x" not in parts[0] or not parts[1].startswith("c")
-            or not parts[2].startswith("f")):
-        fail(f"{cache} is not named as `visage bench composites` names its cache (WxH-cN-fN-…)")
-    return parts[0], parts[1][1:], parts[2][1:]
+    if (len(parts) < 4 or "x" not in parts[0] or not parts[1].startswith("c")
+            or not parts[2].startswith("f") or not parts[3].startswith("i")):
+        fail(f"{cache} is not named as `visage bench composites` names its cache (WxH-cN-fN-iN-…)")
+    return parts[0], parts[1][1:], parts[2][1:], parts[3][1:]
+
+
+def check_cache(cache):
+    if not (cache / "ada" / "point_cloud.ply").is_file():
+        fail(f"{cache} holds no trained bench sources (make them with "
+             "`visage bench composites --size WxH`)")
 
 
 def heads(options):
-    if not (options.cache / "ada" / "point_cloud.ply").is_file():
-        fail(f"{options.cache} holds no trained bench sources (make them with "
-             "`visage bench composites --size WxH`)")
-    size, cameras, frames = rig(options.cache)
+    check_cache(options.cache)
+    size, cameras, frames, _ = rig(options.cache)
     for source, base in pairs():
         folder = options.out / f"{source}-{base}"
         try:
@@ -136,6 +150,45 @@ def heads(options):
         print(f"{source} in {base}'s tone: {toned:.2f} dB (in its own tone {own:.2f} dB)")
 
 
+def trained(options):
+    """Each pair's source trained on its toned head's truth, measured there."""
+    check_cache(options.cache)
+    iterations = rig(options.cache)[3]
+    people = sorted(p.name for p in options.cache.iterdir()
+                    if (p / "point_cloud.ply").is_file())
+    for source, base in pairs():
+        folder = options.heads / f"{source}-{base}"
+        truth, recipe = folder / "truth-base", folder / "off.toml"
+        if not (truth / "transforms_train.json").is_file() or not recipe.is_file():
+            fail(f"{folder} holds no toned head (run `heads --out {options.heads}` first)")
+        avatar, report = folder / "trained", folder / "trained.json"
+        # The old report goes first: a killed run leaves the pair unmeasured,
+        # and `combine` refuses the column rather than mix in an old figure.
+        report.unlink(missing_ok=True)
+        if not (avatar / "point_cloud.ply").is_file():
+            # Trained aside and moved into place, so a killed run leaves no
+            # half-trained avatar that a later run would take as finished.
+            partial = folder / "trained.partial"
+            shutil.rmtree(partial, ignore_errors=True)
+            run([options.visage, "train", str(truth), "-o", str(partial),
+                 "--iterations", iterations, "--seed", "1"], f"train {source} in {base}'s tone")
+            partial.rename(avatar)
+        # The bench's sources, with this source's place taken by the one
+        # trained in the base's tone.
+        database = folder / "trained-db"
+        database.mkdir(exist_ok=True)
+        for person in people:
+            link = database / person
+            link.unlink(missing_ok=True)
+            link.symlink_to((avatar if person == source else options.cache / person).resolve())
+        out = run([options.visage, "eval", "--composite", "--db", str(database), str(recipe),
+                   str(truth), "--seam-fit", "0", "--json"], f"eval {source} trained in {base}'s tone")
+        report.write_text(out)
+        psnr = read_json(report)["quality"]["psnr_db"]
+        toned = read_json(folder / "toned.json")["quality"]["psnr_db"]
+        print(f"{source} trained in {base}'s tone: {psnr:.2f} dB (transferred to it: {toned:.2f} dB)")
+
+
 def squared(psnr_db, pixels):
     return 10 ** (-psnr_db / 10) * pixels
 
@@ -151,17 +204,18 @@ def head_regions(folder, report):
     return {r["region"]: (r.get("interior") or {}).get("psnr_db") for r in head["regions"]}
 
 
-def recipe_row(recipe, base, heads_folder):
-    """PSNR, ceiling, toned reference and own-tone control of one recipe,
+def recipe_row(recipe, base, heads_folder, reports):
+    """PSNR, ceiling and, per head report of `reports`, its reference (the
+    toned reference, the own-tone control, the toned ceiling) of one recipe,
     each a squared error over the recipe's own band and interior pixels."""
-    totals = [0.0, 0.0, 0.0, 0.0, 0]
+    totals = [0.0] * (2 + len(reports))
+    pixels_in_all = 0
     for region in recipe["report"]["regions"]:
         name, source = region["region"], region["source"]
         references = None
         if source != base:
             folder = heads_folder / f"{source}-{base}"
-            references = [head_regions(folder, report).get(name)
-                          for report in ("toned.json", "own-tone.json")]
+            references = [head_regions(folder, report).get(name) for report in reports]
             if None in references:
                 fail(f"the toned head {source}-{base} shows no {name}: "
                      "its reference would be guessed")
@@ -176,13 +230,13 @@ def recipe_row(recipe, base, heads_folder):
             if ceiling is None:
                 fail(f"{recipe['recipe']}'s {name} has no ceiling")
             pixels = figures["pixels"]
-            toned, own = references or (ceiling, ceiling)
-            for k, psnr in enumerate((figures["psnr_db"], ceiling, toned, own)):
+            for k, psnr in enumerate([figures["psnr_db"], ceiling]
+                                     + (references or [ceiling] * len(reports))):
                 totals[k] += squared(psnr, pixels)
-            totals[4] += pixels
-    if not totals[4]:
+            pixels_in_all += pixels
+    if not pixels_in_all:
         fail(f"{recipe['recipe']} has no region with pixels")
-    return [-10 * math.log10(t / totals[4]) for t in totals[:4]]
+    return [-10 * math.log10(t / pixels_in_all) for t in totals]
 
 
 def combine(options):
@@ -190,19 +244,28 @@ def combine(options):
     if not isinstance(run_json, dict) or not run_json.get("recipes"):
         fail(f"{options.run} is not the JSON of `visage bench composites` (no recipes)")
     bases = {p.stem: tomllib.loads(p.read_text())["base"] for p in RECIPES.glob("*.toml")}
+    # The toned ceiling only where `trained` has measured every pair: a
+    # column over some of them would mix two kinds of figure.
+    measured = [(options.heads / f"{s}-{b}" / "trained.json").is_file() for s, b in pairs()]
+    if any(measured) and not all(measured):
+        fail(f"`trained` has measured only some pairs in {options.heads}: run it again to finish")
+    reports = ["toned.json", "own-tone.json"] + (["trained.json"] if all(measured) else [])
     rows = []
     for recipe in run_json["recipes"]:
         base = bases.get(recipe["recipe"])
         if base is None:
             fail(f"{recipe['recipe']} is not one of {RECIPES}'s recipes")
-        rows.append((recipe["recipe"], recipe_row(recipe, base, options.heads)))
-    means = [sum(row[k] for _, row in rows) / len(rows) for k in range(4)]
-    print(f"{'recipe':24}{'PSNR':>8}{'ceiling':>9}{'toned':>8}{'own tone':>10}")
+        rows.append((recipe["recipe"], recipe_row(recipe, base, options.heads, reports)))
+    means = [sum(row[k] for _, row in rows) / len(rows) for k in range(len(rows[0][1]))]
+    titles = ["PSNR", "ceiling", "toned", "own tone", "toned ceiling"][:len(means)]
+    print(f"{'recipe':24}" + "".join(f"{t:>{max(8, len(t) + 2)}}" for t in titles))
     for name, row in rows + [("mean", means)]:
-        print(f"{name:24}{row[0]:8.2f}{row[1]:9.2f}{row[2]:8.2f}{row[3]:10.2f}")
+        print(f"{name:24}" + "".join(f"{v:{max(8, len(t) + 2)}.2f}" for t, v in zip(titles, row)))
     print("dB over each recipe's own pixels; toned: each swapped source's region as its toned "
           "head shows it, the base's as its ceiling; own tone: the same heads with colour off "
-          "against their own tone's truth (what the heads cost before any transfer)")
+          "against their own tone's truth (what the heads cost before any transfer)"
+          + ("; toned ceiling: each swapped source's region as the source trained in the "
+             "base's tone shows it" if len(means) > 4 else ""))
 
 
 def main():
@@ -212,11 +275,15 @@ def main():
     make.add_argument("--cache", type=pathlib.Path, required=True)
     make.add_argument("--out", type=pathlib.Path, required=True)
     make.add_argument("--visage", default=str(REPOSITORY / "target" / "release" / "visage"))
+    train = commands.add_parser("trained")
+    train.add_argument("--cache", type=pathlib.Path, required=True)
+    train.add_argument("--heads", type=pathlib.Path, required=True)
+    train.add_argument("--visage", default=str(REPOSITORY / "target" / "release" / "visage"))
     join = commands.add_parser("combine")
     join.add_argument("run", type=pathlib.Path)
     join.add_argument("heads", type=pathlib.Path)
     options = parser.parse_args()
-    heads(options) if options.command == "heads" else combine(options)
+    {"heads": heads, "trained": trained, "combine": combine}[options.command](options)
 
 
 if __name__ == "__main__":
