@@ -41,6 +41,7 @@ import argparse
 import functools
 import json
 import math
+import os
 import pathlib
 import shutil
 import subprocess
@@ -99,6 +100,24 @@ def run(args, what):
     return done.stdout
 
 
+def write_atomically(path, text):
+    """Writes a report whole or not at all: a kill mid-write leaves no
+    truncated JSON that a later step would take as a finished figure."""
+    partial = path.with_name(path.name + ".partial")
+    try:
+        partial.write_text(text)
+        os.replace(partial, path)
+    except OSError as error:
+        fail(f"cannot write {path}: {error.strerror}")
+
+
+def forget_trained(folder):
+    """Removes what `trained` made of a pair, whose truth is about to change."""
+    for made in ("trained", "trained.partial", "trained-db"):
+        shutil.rmtree(folder / made, ignore_errors=True)
+    (folder / "trained.json").unlink(missing_ok=True)
+
+
 def read_json(path):
     try:
         return json.loads(path.read_text())
@@ -133,6 +152,7 @@ def heads(options):
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as error:
             fail(f"cannot make {folder}: {error.strerror}")
+        forget_trained(folder)
         for colour, tone, report in (("semantic", "base", "toned.json"),
                                      ("off", "source", "own-tone.json")):
             recipe = folder / f"{colour}.toml"
@@ -144,7 +164,7 @@ def heads(options):
             out = run([options.visage, "eval", "--composite", "--db", str(options.cache),
                        str(recipe), str(truth), "--seam-fit", "0", "--json"],
                       f"eval {source} on {base}")
-            (folder / report).write_text(out)
+            write_atomically(folder / report, out)
         toned = read_json(folder / "toned.json")["quality"]["psnr_db"]
         own = read_json(folder / "own-tone.json")["quality"]["psnr_db"]
         print(f"{source} in {base}'s tone: {toned:.2f} dB (in its own tone {own:.2f} dB)")
@@ -154,39 +174,57 @@ def trained(options):
     """Each pair's source trained on its toned head's truth, measured there."""
     check_cache(options.cache)
     iterations = rig(options.cache)[3]
-    people = sorted(p.name for p in options.cache.iterdir()
-                    if (p / "point_cloud.ply").is_file())
     for source, base in pairs():
         folder = options.heads / f"{source}-{base}"
         truth, recipe = folder / "truth-base", folder / "off.toml"
-        if not (truth / "transforms_train.json").is_file() or not recipe.is_file():
+        if not all(p.is_file() for p in (truth / "transforms_train.json", recipe,
+                                          folder / "toned.json")):
             fail(f"{folder} holds no toned head (run `heads --out {options.heads}` first)")
         avatar, report = folder / "trained", folder / "trained.json"
         # The old report goes first: a killed run leaves the pair unmeasured,
-        # and `combine` refuses the column rather than mix in an old figure.
+        # and `combine` leaves the column out rather than mix in an old figure.
         report.unlink(missing_ok=True)
-        if not (avatar / "point_cloud.ply").is_file():
+        if not finished(avatar, iterations):
             # Trained aside and moved into place, so a killed run leaves no
             # half-trained avatar that a later run would take as finished.
             partial = folder / "trained.partial"
             shutil.rmtree(partial, ignore_errors=True)
-            run([options.visage, "train", str(truth), "-o", str(partial),
-                 "--iterations", iterations, "--seed", "1"], f"train {source} in {base}'s tone")
-            partial.rename(avatar)
-        # The bench's sources, with this source's place taken by the one
-        # trained in the base's tone.
+            run([options.visage, "train", str(truth), "-o", str(partial), "--iterations",
+                 iterations, "--seed", "1", "--checkpoint-every", "0"],
+                f"train {source} in {base}'s tone")
+            shutil.rmtree(avatar, ignore_errors=True)
+            try:
+                partial.rename(avatar)
+            except OSError as error:
+                fail(f"cannot move {partial} to {avatar}: {error.strerror}")
+        # The two people the toned head shows, the source's place taken by
+        # the one trained in the base's tone.
         database = folder / "trained-db"
-        database.mkdir(exist_ok=True)
-        for person in people:
-            link = database / person
-            link.unlink(missing_ok=True)
-            link.symlink_to((avatar if person == source else options.cache / person).resolve())
+        try:
+            shutil.rmtree(database, ignore_errors=True)
+            database.mkdir()
+            (database / source).symlink_to(avatar.resolve())
+            (database / base).symlink_to((options.cache / base).resolve())
+        except OSError as error:
+            fail(f"cannot make {database}: {error.strerror}")
         out = run([options.visage, "eval", "--composite", "--db", str(database), str(recipe),
-                   str(truth), "--seam-fit", "0", "--json"], f"eval {source} trained in {base}'s tone")
-        report.write_text(out)
+                   str(truth), "--seam-fit", "0", "--json"],
+                  f"eval {source} trained in {base}'s tone")
+        write_atomically(report, out)
         psnr = read_json(report)["quality"]["psnr_db"]
         toned = read_json(folder / "toned.json")["quality"]["psnr_db"]
         print(f"{source} trained in {base}'s tone: {psnr:.2f} dB (transferred to it: {toned:.2f} dB)")
+
+
+def finished(avatar, iterations):
+    """Whether `avatar` is a whole one trained as `trained` trains (the
+    cache's iterations, seed 1): one trained otherwise is made again."""
+    try:
+        made = json.loads((avatar / "training.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        return False
+    return ((avatar / "point_cloud.ply").is_file()
+            and str(made.get("iterations")) == iterations and made.get("seed") == 1)
 
 
 def squared(psnr_db, pixels):
@@ -215,10 +253,10 @@ def recipe_row(recipe, base, heads_folder, reports):
         references = None
         if source != base:
             folder = heads_folder / f"{source}-{base}"
-            references = [head_regions(folder, report).get(name) for report in reports]
-            if None in references:
-                fail(f"the toned head {source}-{base} shows no {name}: "
-                     "its reference would be guessed")
+            for report in reports:
+                if head_regions(folder, report).get(name) is None:
+                    fail(f"{folder / report} shows no {name}: its reference would be guessed")
+            references = [head_regions(folder, report)[name] for report in reports]
         for zone, ceiling_key in (("band", "ceiling_band_psnr_db"),
                                   ("interior", "ceiling_interior_psnr_db")):
             figures = region[zone]
@@ -248,7 +286,8 @@ def combine(options):
     # column over some of them would mix two kinds of figure.
     measured = [(options.heads / f"{s}-{b}" / "trained.json").is_file() for s, b in pairs()]
     if any(measured) and not all(measured):
-        fail(f"`trained` has measured only some pairs in {options.heads}: run it again to finish")
+        print(f"toned-reference: toned ceiling left out: `trained` has measured "
+              f"{sum(measured)} of {len(measured)} pairs in {options.heads}", file=sys.stderr)
     reports = ["toned.json", "own-tone.json"] + (["trained.json"] if all(measured) else [])
     rows = []
     for recipe in run_json["recipes"]:
@@ -271,19 +310,22 @@ def combine(options):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
-    make = commands.add_parser("heads")
+    make = commands.add_parser("heads", help="capture and measure each pair's toned head")
     make.add_argument("--cache", type=pathlib.Path, required=True)
     make.add_argument("--out", type=pathlib.Path, required=True)
     make.add_argument("--visage", default=str(REPOSITORY / "target" / "release" / "visage"))
-    train = commands.add_parser("trained")
+    train = commands.add_parser("trained", help="train each pair's source in the base's tone")
     train.add_argument("--cache", type=pathlib.Path, required=True)
     train.add_argument("--heads", type=pathlib.Path, required=True)
     train.add_argument("--visage", default=str(REPOSITORY / "target" / "release" / "visage"))
-    join = commands.add_parser("combine")
+    join = commands.add_parser("combine", help="per recipe: PSNR beside its references")
     join.add_argument("run", type=pathlib.Path)
     join.add_argument("heads", type=pathlib.Path)
     options = parser.parse_args()
-    {"heads": heads, "trained": trained, "combine": combine}[options.command](options)
+    try:
+        {"heads": heads, "trained": trained, "combine": combine}[options.command](options)
+    except KeyboardInterrupt:
+        fail("interrupted (finished pairs are kept; run it again to go on)")
 
 
 if __name__ == "__main__":
