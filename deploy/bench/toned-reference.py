@@ -23,7 +23,7 @@ same combination of the plain ceiling is printed beside it as a check.
       # trains each pair's source on its toned head's truth (the base's
       # tone) as the bench trains its sources, and measures it there: what
       # the source reaches in that tone when trained in it, with no
-      # transfer at all; about 2 minutes a pair at 256², and a pair already
+      # transfer at all; about 1¾ minutes a pair at 256², and a pair already
       # trained is kept
   deploy/bench/toned-reference.py combine RUN.json HEADS
       # per recipe: PSNR, ceiling, toned reference, and the same heads in
