@@ -100,6 +100,12 @@ def run(args, what):
     return done.stdout
 
 
+def evaluate(visage, database, recipe, truth, what):
+    """`visage eval --composite` of a toned head without the seam fit, as JSON."""
+    return run([visage, "eval", "--composite", "--db", str(database), str(recipe),
+                str(truth), "--seam-fit", "0", "--json"], f"eval {what}")
+
+
 def write_atomically(path, text):
     """Writes a report whole or not at all: a kill mid-write leaves no
     truncated JSON that a later step would take as a finished figure."""
@@ -161,10 +167,8 @@ def heads(options):
             run([options.visage, "capture", "--recipe", str(recipe), "--tone", tone,
                  "--seams", "hard", "--size", size, "--cameras", cameras, "--frames", frames,
                  "-o", str(truth)], f"capture {source} on {base}")
-            out = run([options.visage, "eval", "--composite", "--db", str(options.cache),
-                       str(recipe), str(truth), "--seam-fit", "0", "--json"],
-                      f"eval {source} on {base}")
-            write_atomically(folder / report, out)
+            write_atomically(folder / report, evaluate(options.visage, options.cache, recipe,
+                                                       truth, f"{source} on {base}"))
         toned = read_json(folder / "toned.json")["quality"]["psnr_db"]
         own = read_json(folder / "own-tone.json")["quality"]["psnr_db"]
         print(f"{source} in {base}'s tone: {toned:.2f} dB (in its own tone {own:.2f} dB)")
@@ -189,6 +193,7 @@ def trained(options):
             # half-trained avatar that a later run would take as finished.
             partial = folder / "trained.partial"
             shutil.rmtree(partial, ignore_errors=True)
+            print(f"training {source} in {base}'s tone ({iterations} iterations)…", flush=True)
             run([options.visage, "train", str(truth), "-o", str(partial), "--iterations",
                  iterations, "--seed", "1", "--checkpoint-every", "0"],
                 f"train {source} in {base}'s tone")
@@ -207,10 +212,8 @@ def trained(options):
             (database / base).symlink_to((options.cache / base).resolve())
         except OSError as error:
             fail(f"cannot make {database}: {error.strerror}")
-        out = run([options.visage, "eval", "--composite", "--db", str(database), str(recipe),
-                   str(truth), "--seam-fit", "0", "--json"],
-                  f"eval {source} trained in {base}'s tone")
-        write_atomically(report, out)
+        write_atomically(report, evaluate(options.visage, database, recipe, truth,
+                                          f"{source} trained in {base}'s tone"))
         psnr = read_json(report)["quality"]["psnr_db"]
         toned = read_json(folder / "toned.json")["quality"]["psnr_db"]
         print(f"{source} trained in {base}'s tone: {psnr:.2f} dB (transferred to it: {toned:.2f} dB)")
@@ -253,10 +256,10 @@ def recipe_row(recipe, base, heads_folder, reports):
         references = None
         if source != base:
             folder = heads_folder / f"{source}-{base}"
-            for report in reports:
-                if head_regions(folder, report).get(name) is None:
+            references = [head_regions(folder, report).get(name) for report in reports]
+            for report, reference in zip(reports, references):
+                if reference is None:
                     fail(f"{folder / report} shows no {name}: its reference would be guessed")
-            references = [head_regions(folder, report)[name] for report in reports]
         for zone, ceiling_key in (("band", "ceiling_band_psnr_db"),
                                   ("interior", "ceiling_interior_psnr_db")):
             figures = region[zone]
