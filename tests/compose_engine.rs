@@ -1743,3 +1743,112 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
         );
     }
 }
+
+#[test]
+fn a_collar_edge_moves_its_skin_share_to_the_bases_tone_and_keeps_its_shirt() {
+    use visage::compose::recipe::Membership;
+    let linear = |c: f32| {
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let display = |c: f32| {
+        if c <= 0.003_130_8 {
+            c * 12.92
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        }
+    };
+    let to_linear = |rgb: Vec3| Vec3::from_array(rgb.to_array().map(linear));
+    let to_display = |lin: Vec3| Vec3::from_array(lin.to_array().map(display));
+    let fair = Vec3::new(0.90, 0.75, 0.65);
+    let dark = Vec3::new(0.45, 0.30, 0.21);
+    let teal = Vec3::new(0.16, 0.45, 0.42);
+    let edge = |skin: Vec3| to_display(0.5 * to_linear(skin) + 0.5 * to_linear(teal));
+    // Source 1's neck: every third Gaussian shirt, every third half skin
+    // and half shirt (the collar's edge), the rest skin; source 0 is fair.
+    #[derive(Clone, Copy, PartialEq, Debug)]
+    enum Kind {
+        Skin,
+        Edge,
+        Shirt,
+    }
+    let mut db = small_db();
+    let regions = db.model.triangle_regions.clone();
+    let kind = |set: &visage::avatar::gaussians::GaussianSet, i: usize| match (
+        regions[set.binding[i] as usize] == Region::Neck,
+        i % 3,
+    ) {
+        (false, _) | (true, 2) => Kind::Skin,
+        (true, 0) => Kind::Shirt,
+        _ => Kind::Edge,
+    };
+    for (f, skin) in [fair, dark].into_iter().enumerate() {
+        let set = &mut db.sources[f].gaussians;
+        let stride = set.sh_stride();
+        for i in 0..set.len() {
+            let rgb = match (f, kind(set, i)) {
+                (0, _) | (_, Kind::Skin) => skin,
+                (_, Kind::Shirt) => teal,
+                (_, Kind::Edge) => edge(skin),
+            };
+            let sh = &mut set.sh[i * stride..(i + 1) * stride];
+            sh.fill(0.0);
+            (0..3).for_each(|c| sh[c] = rgb_to_dc(rgb[c]));
+        }
+    }
+    let source = db.sources[1].gaussians.clone();
+    let e = Engine::new(db).unwrap();
+    let n = names(&e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups.insert("neck".into(), edit(&n[1], &[]));
+    r.post.colour = ColourCorrection::Semantic;
+    r.post.membership = Membership::Parent;
+    let c = e.compose(&resolve(&e, &r));
+    let mut seen: BTreeMap<&str, Vec<Vec3>> = BTreeMap::new();
+    let block = c
+        .blocks
+        .iter()
+        .find(|b| b.source == 1 && b.region == Region::Neck)
+        .expect("the neck's block");
+    // The region's own Gaussians were copied in the source's order.
+    let own: Vec<usize> = (0..source.len())
+        .filter(|&i| regions[source.binding[i] as usize] == Region::Neck)
+        .collect();
+    assert_eq!(own.len(), block.end - block.start);
+    for (k, &i) in own.iter().enumerate() {
+        let sh = c.gaussians.sh_of(block.start + k);
+        let rgb = Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]));
+        let name = match kind(&source, i) {
+            Kind::Skin => "skin",
+            Kind::Edge => "edge",
+            Kind::Shirt => "shirt",
+        };
+        seen.entry(name).or_default().push(rgb);
+    }
+    let mean = |v: &[Vec3]| v.iter().copied().sum::<Vec3>() / v.len() as f32;
+    let (skin, edge_now, shirt) = (
+        mean(&seen["skin"]),
+        mean(&seen["edge"]),
+        mean(&seen["shirt"]),
+    );
+    assert!((skin - fair).abs().max_element() < 0.03, "skin at {skin}");
+    assert!(
+        (shirt - teal).abs().max_element() < 1e-3,
+        "shirt at {shirt}"
+    );
+    // The edge's brightness becomes the fair skin's half beside the same
+    // shirt's — not the dark skin's half it was, which the skin likeness
+    // left unmoved. (Per channel the share also scales the shirt's part by
+    // the skin's ratio: method §7.7.)
+    let luma = |rgb: Vec3| to_linear(rgb).dot(Vec3::new(0.2126, 0.7152, 0.0722));
+    let ideal = to_display(0.5 * to_linear(fair) + 0.5 * to_linear(teal));
+    let before = edge(dark);
+    let error = (luma(edge_now) - luma(ideal)).abs();
+    assert!(
+        error < 0.2 * (luma(before) - luma(ideal)).abs(),
+        "edge at {edge_now}: ideal {ideal}, unmoved {before}"
+    );
+}

@@ -400,7 +400,26 @@ pub fn semantic_skin_gain_shared(
     to: &SkinStats,
     share: f32,
 ) -> Vec3 {
-    let whole = semantic_skin_gain(rgb, region, from, to);
+    shared_gain(rgb, semantic_skin_gain(rgb, region, from, to), share)
+}
+
+/// The whole skin transfer from `from` to `to` (whatever the colour's
+/// likeness) taken a share `share` (0 to 1) of the way in linear light,
+/// c + share·(c·ρ − c): the skin's share of the brightness of a colour
+/// mixing skin with clothing (`clothing`). A colour with no CIELAB value
+/// (NaN) is left as it is; a share that is not a number counts as the
+/// whole way.
+pub fn skin_gain_shared(rgb: Vec3, from: &SkinStats, to: &SkinStats, share: f32) -> Vec3 {
+    let lab = srgb_to_lab(rgb);
+    if !lab.is_finite() {
+        return Vec3::ONE;
+    }
+    shared_gain(rgb, transfer_gain(rgb, lab, 1.0, from, to), share)
+}
+
+/// The gain taking `rgb` a share of the way from itself to `rgb · whole` in
+/// linear light (the whole gain for a share that is not a number or ≥ 1).
+fn shared_gain(rgb: Vec3, whole: Vec3, share: f32) -> Vec3 {
     if share.is_nan() || share >= 1.0 || whole == Vec3::ONE {
         return whole;
     }

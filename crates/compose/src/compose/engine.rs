@@ -13,10 +13,11 @@ use super::base_skin::{
     Topology,
 };
 use super::blend::{Blender, SparseRhs};
+use super::clothing::{self, ClothingMean};
 use super::colour::{
     apply_gain, chromaticity, colour_weight, hair_colour, seen_colours, semantic_skin_gain_shared,
-    skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour, SkinStats,
-    SKIN_REFERENCE_REGIONS,
+    semantic_skin_likeness, skin_gain_shared, skin_stats, skin_transfer_gain, thesis_gain,
+    weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
 };
 use super::copying::{copy_own, relight_sh, CopyOwn, OpacityEdit, OwnBlock};
 use super::correction::{Correction, SharedGains};
@@ -590,6 +591,7 @@ impl Engine {
                 let regions = &self.db.model.triangle_regions;
                 let colours = &self.seen[source];
                 let brightens = dark_features::transfer_brightens(&from, &to);
+                let clothing = semantic.map(|m| self.clothing_of(source, m, &from));
                 let gains = (0..set.len())
                     .into_par_iter()
                     .map(|i| {
@@ -598,6 +600,13 @@ impl Engine {
                             Some(m) => {
                                 let t = self.tables.counted_triangles(m, source)[i];
                                 let region = regions[t as usize];
+                                let beside_clothing = clothing
+                                    .as_ref()
+                                    .and_then(|c| c[region.index()])
+                                    .and_then(|c| self.skin_share_beside(source, i, c));
+                                if let Some(share) = beside_clothing {
+                                    return skin_gain_shared(rgb, &from, &to, share);
+                                }
                                 let share =
                                     if brightens && dark_features::holds_dark_features(region) {
                                         self.skin_share_of_brightness(source, i)
@@ -613,6 +622,35 @@ impl Engine {
                 Arc::new(gains)
             });
         Some(gains.clone())
+    }
+
+    /// Per region (by [`Region::index`]), the mean linear colour of source
+    /// `f`'s clothing in it under membership `m`, judged skin or not by the
+    /// source's skin statistics `skin`; `None` in regions that hold no
+    /// clothing ([`clothing::holds_clothing`]) or show none.
+    fn clothing_of(&self, f: usize, m: Membership, skin: &SkinStats) -> Vec<Option<Vec3>> {
+        let mut means = vec![ClothingMean::default(); Region::COUNT];
+        let (counted, colours) = (self.tables.counted_triangles(m, f), &self.seen[f]);
+        let weights = self.colour_weights_of(f);
+        for (i, &t) in counted.iter().enumerate() {
+            let region = self.db.model.triangle_regions[t as usize];
+            if clothing::holds_clothing(region) {
+                let likeness = semantic_skin_likeness(colours[i], region, skin).unwrap_or(1.0);
+                means[region.index()].add(colours[i], likeness, weights[i]);
+            }
+        }
+        means.iter().map(ClothingMean::mean).collect()
+    }
+
+    /// The share of Gaussian `i` of source `f`'s brightness that is skin
+    /// where it mixes skin with clothing of mean linear colour `clothing`
+    /// (`clothing`), by the skin's colour the source's light shows there;
+    /// `None` where the source has no light or the colour is no such mix.
+    fn skin_share_beside(&self, f: usize, i: usize, clothing: Vec3) -> Option<f32> {
+        let skin = self.lights[f]
+            .as_ref()?
+            .brightness(self.gaussian_exposures[f][i]);
+        clothing::skin_share_beside_clothing(self.seen[f][i], skin, clothing)
     }
 
     /// The share of Gaussian `i` of source `f`'s brightness that is skin,

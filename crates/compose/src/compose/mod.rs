@@ -3,6 +3,7 @@
 
 pub mod base_skin;
 pub mod blend;
+pub mod clothing;
 pub mod colour;
 pub mod composition;
 pub mod copying;
