@@ -1614,6 +1614,46 @@ fn relighting_follows_the_turn_and_the_hollows_under_each_gaussian() {
     assert!(!e.update(&mut c, &next).gaussians);
 }
 
+/// sRGB's decoding of one display value to linear light, written out here
+/// apart from the code under test.
+fn linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// sRGB's encoding of one linear value for display ([`linear`]'s inverse).
+fn display(c: f32) -> f32 {
+    if c <= 0.003_130_8 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Sets Gaussian `i`'s colour to `rgb` in every view (DC only).
+fn paint_one(set: &mut visage::avatar::gaussians::GaussianSet, i: usize, rgb: Vec3) {
+    let stride = set.sh_stride();
+    let sh = &mut set.sh[i * stride..(i + 1) * stride];
+    sh.fill(0.0);
+    (0..3).for_each(|c| sh[c] = rgb_to_dc(rgb[c]));
+}
+
+/// The composite of source 0 with `group`'s Gaussians from source 1,
+/// corrected by `colour = "semantic"`, regions by parent triangle.
+fn with_group_of_source_1(db: Database, group: &str) -> visage::compose::engine::Composite {
+    use visage::compose::recipe::Membership;
+    let e = Engine::new(db).unwrap();
+    let n = names(&e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.groups.insert(group.into(), edit(&n[1], &[]));
+    r.post.colour = ColourCorrection::Semantic;
+    r.post.membership = Membership::Parent;
+    e.compose(&resolve(&e, &r))
+}
+
 /// A dark source's brow mixed into the skin Gaussians round its eyes, moved
 /// to a light base (method §7.7, `dark_features`): plain skin takes the
 /// base's tone in full, a half-brow Gaussian only its skin's share — near
@@ -1623,21 +1663,6 @@ fn relighting_follows_the_turn_and_the_hollows_under_each_gaussian() {
 /// whose hair is too light to tell from its skin by lightness.
 #[test]
 fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
-    use visage::compose::recipe::Membership;
-    let linear = |c: f32| {
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    let display = |c: f32| {
-        if c <= 0.003_130_8 {
-            c * 12.92
-        } else {
-            1.055 * c.powf(1.0 / 2.4) - 0.055
-        }
-    };
     let luma = |rgb: Vec3| 0.2126 * linear(rgb.x) + 0.7152 * linear(rgb.y) + 0.0722 * linear(rgb.z);
     let half_and_half = |skin: Vec3, brow: Vec3| {
         Vec3::from_array(std::array::from_fn(|c| {
@@ -1663,7 +1688,6 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
         };
         for (f, (skin, hair)) in [base, eyes_of].into_iter().enumerate() {
             let set = &mut db.sources[f].gaussians;
-            let stride = set.sh_stride();
             for i in 0..set.len() {
                 let rgb = if regions[set.binding[i] as usize] == Region::Hair {
                     hair
@@ -1672,19 +1696,11 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
                 } else {
                     skin
                 };
-                let sh = &mut set.sh[i * stride..(i + 1) * stride];
-                sh.fill(0.0);
-                (0..3).for_each(|c| sh[c] = rgb_to_dc(rgb[c]));
+                paint_one(set, i, rgb);
             }
         }
         let source = db.sources[1].gaussians.clone();
-        let e = Engine::new(db).unwrap();
-        let n = names(&e);
-        let mut r = Recipe::unedited(&n[0]);
-        r.groups.insert("eyes".into(), edit(&n[1], &[]));
-        r.post.colour = ColourCorrection::Semantic;
-        r.post.membership = Membership::Parent;
-        let c = e.compose(&resolve(&e, &r));
+        let c = with_group_of_source_1(db, "eyes");
         let (mut plain, mut mixed) = (Vec::new(), Vec::new());
         // The region's own Gaussians were copied in the source's order.
         for block in c.blocks.iter().filter(|b| b.source == 1 && eyes(b.region)) {
@@ -1744,23 +1760,12 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
     }
 }
 
+/// A dark source's neck on a fair base (method §7.7, `clothing`): plain
+/// skin takes the base's tone, the shirt stays as it is, and a Gaussian on
+/// the collar's edge, half skin and half shirt, comes out as bright as the
+/// base's skin beside that shirt — the skin likeness alone left it as it was.
 #[test]
 fn a_collar_edge_moves_its_skin_share_to_the_bases_tone_and_keeps_its_shirt() {
-    use visage::compose::recipe::Membership;
-    let linear = |c: f32| {
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    let display = |c: f32| {
-        if c <= 0.003_130_8 {
-            c * 12.92
-        } else {
-            1.055 * c.powf(1.0 / 2.4) - 0.055
-        }
-    };
     let to_linear = |rgb: Vec3| Vec3::from_array(rgb.to_array().map(linear));
     let to_display = |lin: Vec3| Vec3::from_array(lin.to_array().map(display));
     let fair = Vec3::new(0.90, 0.75, 0.65);
@@ -1787,26 +1792,17 @@ fn a_collar_edge_moves_its_skin_share_to_the_bases_tone_and_keeps_its_shirt() {
     };
     for (f, skin) in [fair, dark].into_iter().enumerate() {
         let set = &mut db.sources[f].gaussians;
-        let stride = set.sh_stride();
         for i in 0..set.len() {
             let rgb = match (f, kind(set, i)) {
                 (0, _) | (_, Kind::Skin) => skin,
                 (_, Kind::Shirt) => teal,
                 (_, Kind::Edge) => edge(skin),
             };
-            let sh = &mut set.sh[i * stride..(i + 1) * stride];
-            sh.fill(0.0);
-            (0..3).for_each(|c| sh[c] = rgb_to_dc(rgb[c]));
+            paint_one(set, i, rgb);
         }
     }
     let source = db.sources[1].gaussians.clone();
-    let e = Engine::new(db).unwrap();
-    let n = names(&e);
-    let mut r = Recipe::unedited(&n[0]);
-    r.groups.insert("neck".into(), edit(&n[1], &[]));
-    r.post.colour = ColourCorrection::Semantic;
-    r.post.membership = Membership::Parent;
-    let c = e.compose(&resolve(&e, &r));
+    let c = with_group_of_source_1(db, "neck");
     let mut seen: BTreeMap<&str, Vec<Vec3>> = BTreeMap::new();
     let block = c
         .blocks
