@@ -19,9 +19,12 @@
 //! The skin's chromaticity is read where the Gaussian sits, from the source's
 //! fitted light (`BakedLight::brightness`), since a coloured light tints
 //! shaded skin; the shirt's is the mean of the region's Gaussians that are
-//! surely not skin. A colour off that segment — a grey beard's stubble on
-//! the neck, a third material — is not a mix of the two and keeps the skin
-//! likeness's transfer.
+//! surely not skin, where they are a fair part of the region (a few stray
+//! ones, a shadow or a beard on a bare neck, are no clothing). A colour off
+//! the line through the two — a grey beard's stubble on the neck, a third
+//! material — is not a mix of them and keeps the skin likeness's
+//! transfer; one on the line past the skin's end (a flush, redder than the
+//! skin) counts as all skin.
 
 use glam::Vec3;
 
@@ -36,9 +39,9 @@ pub const NOT_SKIN: f32 = 0.05;
 /// colour's place between them to be read.
 pub const CLOTHING_APART: f32 = 0.08;
 
-/// How far off the segment from clothing to skin (chromaticity distance, in
-/// units of the segment's length) a colour may lie and still count as a
-/// mix of the two. Measured (method §7.7): 0.04, 0.15 and 0.3 moved
+/// How far off the line through clothing and skin (chromaticity distance,
+/// in units of their distance) a colour may lie and still count as a mix
+/// of the two. Measured (method §7.7): 0.04, 0.15 and 0.3 moved
 /// random-04's neck less, no bound lost 3.3 dB in its band.
 pub const ON_SEGMENT: f32 = 0.08;
 
@@ -49,12 +52,19 @@ pub fn holds_clothing(region: Region) -> bool {
     region == Region::Neck
 }
 
+/// The least share of a region's colour weight its Gaussians surely not
+/// skin must hold to be taken for clothing. Every built-in person's collar
+/// holds far more of the neck.
+pub const CLOTHING_SHARE: f32 = 0.1;
+
 /// Accumulates the mean linear colour of a region's clothing: the
 /// Gaussians surely not skin.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ClothingMean {
     sum: Vec3,
     weight: f32,
+    /// The weight of every Gaussian counted, skin or not.
+    total: f32,
 }
 
 impl ClothingMean {
@@ -62,31 +72,34 @@ impl ClothingMean {
     /// and mean-colour weight `weight`: only if it is surely not skin.
     pub fn add(&mut self, seen: Vec3, likeness: f32, weight: f32) {
         // Clamping would turn NaN into a colour: check first.
-        if !(seen.is_finite() && weight.is_finite()) {
+        if !(seen.is_finite() && weight.is_finite() && weight > 0.0) {
             return;
         }
-        if likeness < NOT_SKIN && weight > 0.0 {
+        self.total += weight;
+        if likeness < NOT_SKIN {
             self.sum += weight * srgb_to_linear(seen.clamp(Vec3::ZERO, Vec3::ONE));
             self.weight += weight;
         }
     }
 
-    /// The weighted mean linear colour, `None` where nothing was counted.
+    /// The weighted mean linear colour of what is surely not skin, `None`
+    /// where that is under [`CLOTHING_SHARE`] of the region's weight.
     /// Collar edges too little skin-like for the likeness count in it and
     /// pull it towards the skin; taking the purer half of the counted
     /// colours instead measured worse (method §7.7).
     pub fn mean(&self) -> Option<Vec3> {
-        (self.weight > 0.0).then(|| self.sum / self.weight)
+        (self.weight > 0.0 && self.weight >= CLOTHING_SHARE * self.total)
+            .then(|| self.sum / self.weight)
     }
 }
 
 /// The share of a colour's brightness that is skin, for display colour
 /// `seen` on a surface where the source's skin shows display colour `skin`
 /// and beside clothing of mean linear colour `clothing` (module doc): its
-/// chromaticity's place on the segment from the clothing's (0) to the
-/// skin's (1), clamped to [0, 1]. `None` where the two are too close in
+/// chromaticity's place on the line from the clothing's (0) to the skin's
+/// (1), clamped to [0, 1]. `None` where the two are too close in
 /// chromaticity to tell ([`CLOTHING_APART`]), where the colour lies off the
-/// segment ([`ON_SEGMENT`]), and for colours too dark or broken to have a
+/// line ([`ON_SEGMENT`]), and for colours too dark or broken to have a
 /// chromaticity.
 pub fn skin_share_beside_clothing(seen: Vec3, skin: Vec3, clothing: Vec3) -> Option<f32> {
     // Clamping would turn NaN and infinities into colours.
@@ -180,10 +193,29 @@ mod tests {
         assert_eq!(mean.mean(), None);
         mean.add(TEAL, 0.0, 3.0);
         mean.add(Vec3::ONE, 0.01, 1.0);
-        for (seen, weight) in [(Vec3::NAN, 1.0), (TEAL, f32::NAN), (TEAL, 0.0)] {
+        let bad = [f32::NAN, f32::INFINITY, 0.0, -1.0];
+        for (seen, weight) in [(Vec3::NAN, 1.0)].into_iter().chain(bad.map(|w| (TEAL, w))) {
             mean.add(seen, 0.0, weight);
         }
         let want = (3.0 * srgb_to_linear(TEAL) + Vec3::ONE) / 4.0;
         assert!((mean.mean().unwrap() - want).abs().max_element() < 1e-6);
+    }
+
+    #[test]
+    fn a_few_stray_colours_on_a_bare_neck_are_no_clothing() {
+        let mut neck = ClothingMean::default();
+        for _ in 0..95 {
+            neck.add(SKIN, 1.0, 1.0);
+        }
+        // A shadow and some stubble: 5 % of the neck.
+        for _ in 0..5 {
+            neck.add(SKIN * 0.2, 0.0, 1.0);
+        }
+        assert_eq!(neck.mean(), None);
+        // A collar over a tenth of it is.
+        for _ in 0..6 {
+            neck.add(TEAL, 0.0, 1.0);
+        }
+        assert!(neck.mean().is_some());
     }
 }

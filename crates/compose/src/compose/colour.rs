@@ -409,7 +409,7 @@ pub fn semantic_skin_gain_shared(
 /// mixing skin with clothing (`clothing`). A colour with no CIELAB value
 /// (NaN) is left as it is; a share that is not a number counts as the
 /// whole way.
-pub fn skin_gain_shared(rgb: Vec3, from: &SkinStats, to: &SkinStats, share: f32) -> Vec3 {
+pub fn whole_skin_gain_shared(rgb: Vec3, from: &SkinStats, to: &SkinStats, share: f32) -> Vec3 {
     let lab = srgb_to_lab(rgb);
     if !lab.is_finite() {
         return Vec3::ONE;

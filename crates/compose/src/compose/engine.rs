@@ -16,8 +16,8 @@ use super::blend::{Blender, SparseRhs};
 use super::clothing::{self, ClothingMean};
 use super::colour::{
     apply_gain, chromaticity, colour_weight, hair_colour, seen_colours, semantic_skin_gain_shared,
-    semantic_skin_likeness, skin_gain_shared, skin_stats, skin_transfer_gain, thesis_gain,
-    weighted_mean_colour, SkinStats, SKIN_REFERENCE_REGIONS,
+    semantic_skin_likeness, skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour,
+    whole_skin_gain_shared, SkinStats, SKIN_REFERENCE_REGIONS,
 };
 use super::copying::{copy_own, relight_sh, CopyOwn, OpacityEdit, OwnBlock};
 use super::correction::{Correction, SharedGains};
@@ -583,6 +583,9 @@ impl Engine {
         semantic: Option<Membership>,
     ) -> Option<SharedGains> {
         let (from, to) = (self.skin[source]?, self.skin[reference]?);
+        // Built before the lock: its first build runs on the thread pool,
+        // whose jobs must not wait on a lock this thread holds.
+        self.colour_weights_of(source);
         let mut cache = self.skin_gains.lock().unwrap_or_else(|e| e.into_inner());
         let gains = cache
             .entry((source, reference, semantic))
@@ -605,7 +608,7 @@ impl Engine {
                                     .and_then(|c| c[region.index()])
                                     .and_then(|c| self.skin_share_beside(source, i, c));
                                 if let Some(share) = beside_clothing {
-                                    return skin_gain_shared(rgb, &from, &to, share);
+                                    return whole_skin_gain_shared(rgb, &from, &to, share);
                                 }
                                 let share =
                                     if brightens && dark_features::holds_dark_features(region) {
@@ -644,7 +647,7 @@ impl Engine {
 
     /// The share of Gaussian `i` of source `f`'s brightness that is skin
     /// where it mixes skin with clothing of mean linear colour `clothing`
-    /// (`clothing`), by the skin's colour the source's light shows there;
+    /// (the `clothing` module), by the skin's colour the source's light shows there;
     /// `None` where the source has no light or the colour is no such mix.
     fn skin_share_beside(&self, f: usize, i: usize, clothing: Vec3) -> Option<f32> {
         let skin = self.lights[f]
