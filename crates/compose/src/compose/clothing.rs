@@ -43,7 +43,7 @@ pub const CLOTHING_APART: f32 = 0.08;
 /// in units of their distance) a colour may lie and still count as a mix
 /// of the two. Measured (method §7.7): 0.04, 0.15 and 0.3 moved
 /// random-04's neck less, no bound lost 3.3 dB in its band.
-pub const ON_SEGMENT: f32 = 0.08;
+pub const OFF_LINE: f32 = 0.08;
 
 /// The regions where the source's clothing meets its skin: the neck, whose
 /// lower edge the collar crosses. Not the boundary (the ring under it, all
@@ -99,7 +99,7 @@ impl ClothingMean {
 /// chromaticity's place on the line from the clothing's (0) to the skin's
 /// (1), clamped to [0, 1]. `None` where the two are too close in
 /// chromaticity to tell ([`CLOTHING_APART`]), where the colour lies off the
-/// line ([`ON_SEGMENT`]), and for colours too dark or broken to have a
+/// line ([`OFF_LINE`]), and for colours too dark or broken to have a
 /// chromaticity.
 pub fn skin_share_beside_clothing(seen: Vec3, skin: Vec3, clothing: Vec3) -> Option<f32> {
     // Clamping would turn NaN and infinities into colours.
@@ -117,7 +117,7 @@ pub fn skin_share_beside_clothing(seen: Vec3, skin: Vec3, clothing: Vec3) -> Opt
     }
     let along = (colour - clothing).dot(axis) / (apart * apart);
     let off = (colour - clothing - along * axis).length();
-    (off <= ON_SEGMENT * apart).then(|| along.clamp(0.0, 1.0))
+    (off <= OFF_LINE * apart).then(|| along.clamp(0.0, 1.0))
 }
 
 #[cfg(test)]
@@ -167,7 +167,7 @@ mod tests {
     #[test]
     fn a_third_material_close_colours_and_black_are_not_read() {
         let teal = srgb_to_linear(TEAL);
-        // Grey stubble lies off the segment from teal to brown skin.
+        // Grey stubble lies off the line through teal and brown skin.
         assert_eq!(
             skin_share_beside_clothing(Vec3::splat(0.39), SKIN, teal),
             None

@@ -647,8 +647,9 @@ impl Engine {
 
     /// The share of Gaussian `i` of source `f`'s brightness that is skin
     /// where it mixes skin with clothing of mean linear colour `clothing`
-    /// (the `clothing` module), by the skin's colour the source's light shows there;
-    /// `None` where the source has no light or the colour is no such mix.
+    /// (the `clothing` module), by the skin's colour the source's light
+    /// shows there; `None` where the source has no light or the colour is
+    /// no such mix.
     fn skin_share_beside(&self, f: usize, i: usize, clothing: Vec3) -> Option<f32> {
         let skin = self.lights[f]
             .as_ref()?
