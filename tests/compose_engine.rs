@@ -1669,7 +1669,6 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
             display(0.5 * linear(skin[c]) + 0.5 * linear(brow[c]))
         }))
     };
-    let eyes = |r: Region| matches!(r, Region::LeftEyeRegion | Region::RightEyeRegion);
     let fair = Vec3::new(0.90, 0.75, 0.65);
     let dark = Vec3::new(0.45, 0.30, 0.21);
     let brown = Vec3::new(0.12, 0.07, 0.04);
@@ -1684,7 +1683,7 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
         let mut db = small_db();
         let regions = db.model.triangle_regions.clone();
         let mixed_at = |set: &visage::avatar::gaussians::GaussianSet, i: usize| {
-            eyes(regions[set.binding[i] as usize]) && i % 2 == 0
+            eyes_region(regions[set.binding[i] as usize]) && i % 2 == 0
         };
         for (f, (skin, hair)) in [base, eyes_of].into_iter().enumerate() {
             let set = &mut db.sources[f].gaussians;
@@ -1703,7 +1702,11 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
         let c = with_group_of_source_1(db, "eyes");
         let (mut plain, mut mixed) = (Vec::new(), Vec::new());
         // The region's own Gaussians were copied in the source's order.
-        for block in c.blocks.iter().filter(|b| b.source == 1 && eyes(b.region)) {
+        for block in c
+            .blocks
+            .iter()
+            .filter(|b| b.source == 1 && eyes_region(b.region))
+        {
             let own: Vec<usize> = (0..source.len())
                 .filter(|&i| regions[source.binding[i] as usize] == block.region)
                 .collect();
@@ -1758,6 +1761,80 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
             "mix at {mixed}, the whole transfer {want}"
         );
     }
+}
+
+/// Round the eyes a lighter base's skin stays off the triangles beside a
+/// dark source's features (method §7.11): painted over the source's lashes
+/// and brows it pales them, whatever the base's shape weight. Onto a darker
+/// base its skin takes over there by that weight, as elsewhere: a dark skin
+/// errs little beside a feature and replaces the lid skin a light source
+/// would leave light.
+#[test]
+fn a_lighter_bases_skin_stays_off_what_lies_beside_a_dark_sources_lashes() {
+    let fair = Vec3::new(0.90, 0.75, 0.65);
+    let dark = Vec3::new(0.45, 0.30, 0.21);
+    let lash_black = Vec3::splat(0.03);
+    // How many of the base's Gaussians show on the eye regions' triangles
+    // beside the source's lashes, with base 0 in skin `base` and source 1's
+    // eyes (at half the base's shape) in skin `source`, lashes on every
+    // fourth of its eye-region triangles.
+    let base_beside_lashes = |base: Vec3, source: Vec3| -> usize {
+        let mut db = small_db();
+        let regions = db.model.triangle_regions.clone();
+        let eyes = |t: u32| eyes_region(regions[t as usize]);
+        let lash = |t: u32| eyes(t) && t % 4 == 0;
+        for (f, skin) in [base, source].into_iter().enumerate() {
+            let set = &mut db.sources[f].gaussians;
+            for i in 0..set.len() {
+                let rgb = if f == 1 && lash(set.binding[i]) {
+                    lash_black
+                } else {
+                    skin
+                };
+                paint_one(set, i, rgb);
+            }
+        }
+        let e = Engine::new(db).unwrap();
+        let n = names(&e);
+        let mut r = Recipe::unedited(&n[0]);
+        let half = [(n[0].as_str(), 0.5), (n[1].as_str(), 0.5)];
+        r.groups.insert("eyes".into(), edit(&n[1], &half));
+        r.post = PostProcess::BEST;
+        let c = e.compose(&resolve(&e, &r));
+        let model = &e.database().model;
+        let lash_corner: Vec<bool> = (0..model.vertex_count())
+            .map(|v| {
+                model
+                    .triangles
+                    .iter()
+                    .enumerate()
+                    .any(|(t, tri)| lash(t as u32) && tri.contains(&(v as u32)))
+            })
+            .collect();
+        let beside = |t: u32| {
+            eyes(t)
+                && model.triangles[t as usize]
+                    .iter()
+                    .any(|&v| lash_corner[v as usize])
+        };
+        c.blocks
+            .iter()
+            .filter(|b| b.source == 0 && eyes_region(b.region))
+            .map(|b| {
+                (b.start..b.end)
+                    .filter(|&i| beside(c.gaussians.binding[i]))
+                    .count()
+            })
+            .sum()
+    };
+    assert_eq!(base_beside_lashes(fair, dark), 0);
+    let darker = base_beside_lashes(dark, fair);
+    assert!(darker > 20, "{darker} of a darker base's Gaussians");
+}
+
+/// Whether `region` is the skin round an eye.
+fn eyes_region(region: Region) -> bool {
+    matches!(region, Region::LeftEyeRegion | Region::RightEyeRegion)
 }
 
 /// A dark source's neck on a fair base (method §7.7, `clothing`): plain

@@ -9,6 +9,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::colour::{semantic_skin_likeness, SkinStats};
+use super::dark_features::holds_dark_features;
 use super::recipe::ResolvedRecipe;
 use super::selection::Csr;
 use crate::avatar::binding::triangle_frame;
@@ -122,16 +123,20 @@ pub struct Topology<'a> {
 /// from the skin of the source the triangle's region shows — how well the
 /// base's Gaussians fit the composite's surface there (the larger of the
 /// base's share of the group's shape and the fit its `misfit` gives, see
-/// [`BASE_FIT`]; the fit counts nowhere beside a feature) times how surely
-/// both show skin there; 0 where the region shows the base. `skin_of(s)` is
-/// source s's [`triangle_skin`]; `misfit` is [`similarity_misfit`] from the
-/// base's neutral to the composite's, None to judge by the shape weight
-/// alone.
+/// [`BASE_FIT`]; the fit counts nowhere beside a feature, nor the shape
+/// weight beside one round the eyes where the base's skin is lighter)
+/// times how surely both show skin there; 0 where the region shows the
+/// base. `skin_of(s)` is source s's [`triangle_skin`]; `misfit` is
+/// [`similarity_misfit`] from the base's neutral to the composite's, None
+/// to judge by the shape weight alone; `brightens(s)` says whether the skin
+/// transfer from source s to the base brightens
+/// ([`transfer_brightens`](super::dark_features::transfer_brightens)).
 pub fn base_skin_confidence<'a>(
     recipe: &ResolvedRecipe,
     regions: &[Region],
     skin_of: impl Fn(usize) -> &'a [f32],
     misfit: Option<(&[f32], Topology)>,
+    brightens: impl Fn(usize) -> bool,
 ) -> Vec<f32> {
     let base = skin_of(recipe.base);
     // How surely both sides show skin on triangle t.
@@ -143,12 +148,22 @@ pub fn base_skin_confidence<'a>(
     (0..regions.len())
         .map(|t| {
             let group = regions[t].group().index();
-            if recipe.gaussians[group] == recipe.base {
+            let source = recipe.gaussians[group];
+            if source == recipe.base {
                 return 0.0;
             }
-            let shape = recipe.shape[group].get(recipe.base).copied().unwrap_or(0.0) as f32;
-            let fit = match (misfit, &beside_feature) {
-                (Some((m, _)), Some(beside)) if !beside[t] => m
+            let beside = beside_feature.as_ref().is_some_and(|b| b[t]);
+            // A lighter base's skin beside a dark source's brows and lashes
+            // paints over them; a darker one's errs little there, and takes
+            // over the lid skin a light source would leave light.
+            let light_beside_dark = beside && holds_dark_features(regions[t]) && brightens(source);
+            let shape = if light_beside_dark {
+                0.0
+            } else {
+                recipe.shape[group].get(recipe.base).copied().unwrap_or(0.0) as f32
+            };
+            let fit = match misfit {
+                Some((m, _)) if !beside => m
                     .get(t)
                     .map_or(0.0, |&m| smoothstep(BASE_FIT.0, BASE_FIT.1, m)),
                 _ => 0.0,
@@ -280,9 +295,15 @@ mod tests {
     /// A recipe on base 0 whose nose shows source 1, every group's shape
     /// weighted by `shape`.
     fn nose_from_source_one(shape: Vec<f64>) -> ResolvedRecipe {
+        from_source_one(Group::Nose, shape)
+    }
+
+    /// A recipe on base 0 whose `group` shows source 1, every group's shape
+    /// weighted by `shape`.
+    fn from_source_one(group: Group, shape: Vec<f64>) -> ResolvedRecipe {
         ResolvedRecipe {
             base: 0,
-            gaussians: std::array::from_fn(|g| usize::from(g == Group::Nose.index())),
+            gaussians: std::array::from_fn(|g| usize::from(g == group.index())),
             shape: std::array::from_fn(|_| shape.clone()),
             post: Default::default(),
             motion: None,
@@ -316,7 +337,7 @@ mod tests {
             (vec![0.0, 1.0, 0.0], [0.0; 4]),
         ] {
             recipe.shape[nose] = weights;
-            let c = base_skin_confidence(&recipe, &regions, skin_of, None);
+            let c = base_skin_confidence(&recipe, &regions, skin_of, None, |_| false);
             for (got, want) in c.iter().zip(expected) {
                 assert!((got - want).abs() < 1e-6, "{c:?} against {expected:?}");
             }
@@ -443,7 +464,13 @@ mod tests {
         let mut misfit = vec![0.0f32; triangles.len()];
         misfit[2] = BASE_FIT.0 + 0.01; // an ear's bend: the source keeps it
         misfit[3] = 0.5 * (BASE_FIT.0 + BASE_FIT.1);
-        let c = base_skin_confidence(&recipe, &regions, skin_of, Some((&misfit, topology)));
+        let c = base_skin_confidence(
+            &recipe,
+            &regions,
+            skin_of,
+            Some((&misfit, topology)),
+            |_| false,
+        );
         assert_eq!(c[0], 1.0, "fits: the base's skin in full at shape weight 0");
         assert_eq!(c[2], 0.0, "too far from the base's shape");
         assert!((c[3] - 0.5).abs() < 1e-6, "half way: {}", c[3]);
@@ -452,7 +479,45 @@ mod tests {
         assert_eq!(c[16], 0.0);
         assert_eq!(c[11], 0.0);
         // Judged by the shape weight alone, the base takes nothing.
-        let c = base_skin_confidence(&recipe, &regions, skin_of, None);
+        let c = base_skin_confidence(&recipe, &regions, skin_of, None, |_| false);
         assert!(c.iter().all(|&c| c == 0.0));
+    }
+
+    #[test]
+    fn a_lighter_bases_skin_stays_off_a_dark_sources_brows_whatever_its_shape_weight() {
+        let grid = grid();
+        let (triangles, topology) = (&grid.triangles, grid.topology());
+        // The base's shape weight is ½; the misfit is too large for the fit.
+        let misfit = vec![1.0f32; triangles.len()];
+        // The source shows a feature (a brow) on the last triangle only.
+        let mut source_skin = vec![1.0f32; triangles.len()];
+        source_skin[17] = 0.0;
+        let base_skin = vec![1.0f32; triangles.len()];
+        let skin_of = |s: usize| -> &[f32] {
+            if s == 0 {
+                &base_skin
+            } else {
+                &source_skin
+            }
+        };
+        let confidence = |group: Group, region: Region, brightens: bool| {
+            let recipe = from_source_one(group, vec![0.5, 0.5]);
+            let regions = vec![region; triangles.len()];
+            base_skin_confidence(&recipe, &regions, skin_of, Some((&misfit, topology)), |s| {
+                s == 1 && brightens
+            })
+        };
+        // Round the eyes, onto a lighter base: nothing beside the brow.
+        let c = confidence(Group::Eyes, Region::LeftEyeRegion, true);
+        assert_eq!((c[17], c[16], c[11]), (0.0, 0.0, 0.0), "{c:?}");
+        assert_eq!(c[0], 0.5, "away from the brow the shape weight counts");
+        // Onto a darker base, and on a nose, the shape weight counts beside it.
+        for (group, region, brightens) in [
+            (Group::Eyes, Region::RightEyeRegion, false),
+            (Group::Nose, Region::Nose, true),
+        ] {
+            let c = confidence(group, region, brightens);
+            assert_eq!((c[17], c[16], c[11], c[0]), (0.0, 0.5, 0.5, 0.5), "{c:?}");
+        }
     }
 }

@@ -657,6 +657,16 @@ impl Engine {
         clothing::skin_share_beside_clothing(self.seen[f][i], skin, clothing)
     }
 
+    /// Whether the skin transfer from source `from` to source `to` brightens
+    /// (`dark_features::transfer_brightens`); false where either has no
+    /// skin statistics.
+    fn transfer_brightens(&self, from: usize, to: usize) -> bool {
+        match (&self.skin[from], &self.skin[to]) {
+            (Some(from), Some(to)) => dark_features::transfer_brightens(from, to),
+            _ => false,
+        }
+    }
+
     /// The share of Gaussian `i` of source `f`'s brightness that is skin,
     /// where a brow or lash of the source's hair's brightness may be mixed
     /// in (`dark_features`); one where the source has no hair or no light.
@@ -746,6 +756,7 @@ impl Engine {
                 &self.db.model.triangle_regions,
                 |s| self.triangle_skin_of(s, membership),
                 Some((&composite.base_misfit, topology)),
+                |s| self.transfer_brightens(s, recipe.base),
             ),
         });
         // Per region, the source's Gaussians counted for it; under `skin =
