@@ -1663,6 +1663,7 @@ fn with_group_of_source_1(db: Database, group: &str) -> visage::compose::engine:
 /// whose hair is too light to tell from its skin by lightness.
 #[test]
 fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
+    use visage::compose::dark_features::holds_dark_features;
     let luma = |rgb: Vec3| 0.2126 * linear(rgb.x) + 0.7152 * linear(rgb.y) + 0.0722 * linear(rgb.z);
     let half_and_half = |skin: Vec3, brow: Vec3| {
         Vec3::from_array(std::array::from_fn(|c| {
@@ -1683,7 +1684,7 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
         let mut db = small_db();
         let regions = db.model.triangle_regions.clone();
         let mixed_at = |set: &visage::avatar::gaussians::GaussianSet, i: usize| {
-            eyes_region(regions[set.binding[i] as usize]) && i % 2 == 0
+            holds_dark_features(regions[set.binding[i] as usize]) && i % 2 == 0
         };
         for (f, (skin, hair)) in [base, eyes_of].into_iter().enumerate() {
             let set = &mut db.sources[f].gaussians;
@@ -1705,7 +1706,7 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
         for block in c
             .blocks
             .iter()
-            .filter(|b| b.source == 1 && eyes_region(b.region))
+            .filter(|b| b.source == 1 && holds_dark_features(b.region))
         {
             let own: Vec<usize> = (0..source.len())
                 .filter(|&i| regions[source.binding[i] as usize] == block.region)
@@ -1764,30 +1765,49 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
 }
 
 /// Round the eyes a lighter base's skin stays off the triangles beside a
-/// dark source's features (method §7.11): painted over the source's lashes
-/// and brows it pales them, whatever the base's shape weight. Onto a darker
+/// dark source's features (method §7.11): painted over the source's brows
+/// and lashes it pales them, whatever the base's shape weight. Onto a darker
 /// base its skin takes over there by that weight, as elsewhere: a dark skin
 /// errs little beside a feature and replaces the lid skin a light source
 /// would leave light.
 #[test]
-fn a_lighter_bases_skin_stays_off_what_lies_beside_a_dark_sources_lashes() {
+fn a_lighter_bases_skin_stays_off_what_lies_beside_a_dark_sources_brows() {
+    use visage::compose::dark_features::holds_dark_features;
+    use visage::compose::recipe::Membership;
     let fair = Vec3::new(0.90, 0.75, 0.65);
     let dark = Vec3::new(0.45, 0.30, 0.21);
-    let lash_black = Vec3::splat(0.03);
+    let brow_black = Vec3::splat(0.03);
     // How many of the base's Gaussians show on the eye regions' triangles
-    // beside the source's lashes, with base 0 in skin `base` and source 1's
-    // eyes (at half the base's shape) in skin `source`, lashes on every
-    // fourth of its eye-region triangles.
-    let base_beside_lashes = |base: Vec3, source: Vec3| -> usize {
+    // (beside the source's brows, away from them), with base 0 in skin
+    // `base` and source 1's eyes (at half the base's shape) in skin
+    // `source`, a near-black brow on the top fifth of its eye regions.
+    let base_shown = |base: Vec3, source: Vec3| -> (usize, usize) {
         let mut db = small_db();
         let regions = db.model.triangle_regions.clone();
-        let eyes = |t: u32| eyes_region(regions[t as usize]);
-        let lash = |t: u32| eyes(t) && t % 4 == 0;
+        let eyes = |t: u32| holds_dark_features(regions[t as usize]);
+        let height = |t: u32| {
+            let corners = db.model.triangles[t as usize];
+            corners
+                .iter()
+                .map(|&v| db.model.template[v as usize].y)
+                .sum::<f32>()
+                / 3.0
+        };
+        let mut heights: Vec<f32> = (0..regions.len() as u32)
+            .filter(|&t| eyes(t))
+            .map(height)
+            .collect();
+        heights.sort_by(f32::total_cmp);
+        let brow_from = heights[heights.len() * 4 / 5];
+        let brows: Vec<bool> = (0..regions.len() as u32)
+            .map(|t| eyes(t) && height(t) >= brow_from)
+            .collect();
+        let brow = |t: u32| brows[t as usize];
         for (f, skin) in [base, source].into_iter().enumerate() {
             let set = &mut db.sources[f].gaussians;
             for i in 0..set.len() {
-                let rgb = if f == 1 && lash(set.binding[i]) {
-                    lash_black
+                let rgb = if f == 1 && brow(set.binding[i]) {
+                    brow_black
                 } else {
                     skin
                 };
@@ -1799,42 +1819,45 @@ fn a_lighter_bases_skin_stays_off_what_lies_beside_a_dark_sources_lashes() {
         let mut r = Recipe::unedited(&n[0]);
         let half = [(n[0].as_str(), 0.5), (n[1].as_str(), 0.5)];
         r.groups.insert("eyes".into(), edit(&n[1], &half));
-        r.post = PostProcess::BEST;
+        // Counted by parent, a Gaussian's triangle is the one it is bound to.
+        r.post = PostProcess {
+            membership: Membership::Parent,
+            ..PostProcess::BEST
+        };
         let c = e.compose(&resolve(&e, &r));
         let model = &e.database().model;
-        let lash_corner: Vec<bool> = (0..model.vertex_count())
-            .map(|v| {
-                model
-                    .triangles
-                    .iter()
-                    .enumerate()
-                    .any(|(t, tri)| lash(t as u32) && tri.contains(&(v as u32)))
-            })
-            .collect();
+        let mut brow_corner = vec![false; model.vertex_count()];
+        for (t, corners) in model.triangles.iter().enumerate() {
+            if brow(t as u32) {
+                corners.iter().for_each(|&v| brow_corner[v as usize] = true);
+            }
+        }
         let beside = |t: u32| {
-            eyes(t)
-                && model.triangles[t as usize]
-                    .iter()
-                    .any(|&v| lash_corner[v as usize])
+            model.triangles[t as usize]
+                .iter()
+                .any(|&v| brow_corner[v as usize])
         };
-        c.blocks
+        let (mut near, mut away) = (0, 0);
+        for b in c
+            .blocks
             .iter()
-            .filter(|b| b.source == 0 && eyes_region(b.region))
-            .map(|b| {
-                (b.start..b.end)
-                    .filter(|&i| beside(c.gaussians.binding[i]))
-                    .count()
-            })
-            .sum()
+            .filter(|b| b.source == 0 && holds_dark_features(b.region))
+        {
+            for i in b.start..b.end {
+                if beside(c.gaussians.binding[i]) {
+                    near += 1;
+                } else {
+                    away += 1;
+                }
+            }
+        }
+        (near, away)
     };
-    assert_eq!(base_beside_lashes(fair, dark), 0);
-    let darker = base_beside_lashes(dark, fair);
-    assert!(darker > 20, "{darker} of a darker base's Gaussians");
-}
-
-/// Whether `region` is the skin round an eye.
-fn eyes_region(region: Region) -> bool {
-    matches!(region, Region::LeftEyeRegion | Region::RightEyeRegion)
+    let (near, away) = base_shown(fair, dark);
+    assert_eq!(near, 0, "a lighter base's skin beside the brows");
+    assert!(away > 20, "{away}: the base's skin away from them");
+    let (near, _) = base_shown(dark, fair);
+    assert!(near > 20, "{near} of a darker base's Gaussians beside them");
 }
 
 /// A dark source's neck on a fair base (method §7.7, `clothing`): plain

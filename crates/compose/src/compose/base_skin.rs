@@ -152,10 +152,15 @@ pub fn base_skin_confidence<'a>(
             if source == recipe.base {
                 return 0.0;
             }
-            let beside = beside_feature.as_ref().is_some_and(|b| b[t]);
-            // A lighter base's skin beside a dark source's brows and lashes
-            // paints over them; a darker one's errs little there, and takes
-            // over the lid skin a light source would leave light.
+            // A triangle past the topology's counts as beside a feature: the
+            // cautious reading, the source keeps its own there.
+            let beside = beside_feature
+                .as_ref()
+                .is_some_and(|b| b.get(t).copied().unwrap_or(true));
+            // Beside a feature (either side's) round the eyes, a lighter
+            // base's skin paints over the source's brows and lashes; a
+            // darker one's errs little there, and takes over the lid skin a
+            // light source would leave light.
             let light_beside_dark = beside && holds_dark_features(regions[t]) && brightens(source);
             let shape = if light_beside_dark {
                 0.0
@@ -178,7 +183,8 @@ pub fn base_skin_confidence<'a>(
 /// edge, a beard's, a lip's. The fitted part of the base's skin stays off
 /// those: the base's skin Gaussians there were trained beside the base's own
 /// features, not the source's (every-group's neck lost 3.2 dB to a light line
-/// along cleo's collar without this).
+/// along cleo's collar without this); round the eyes, under a brightening
+/// transfer, the shape-weighted part does too.
 fn beside_feature(topology: Topology, triangles: usize, both: impl Fn(usize) -> f32) -> Vec<bool> {
     let feature: Vec<bool> = (0..triangles).map(|t| both(t) < BOTH_SKIN.0).collect();
     topology

@@ -41,7 +41,9 @@ fn luminance(display: Vec3) -> f32 {
 }
 
 /// The regions whose skin Gaussians mix with the source's brows and lashes
-/// (the hair's colour or darker): the skin round the eyes.
+/// (the hair's colour or darker): the skin round the eyes. Also where a
+/// lighter base's skin stays off what lies beside a feature
+/// (`base_skin::base_skin_confidence`, method §7.11).
 pub fn holds_dark_features(region: Region) -> bool {
     matches!(region, Region::LeftEyeRegion | Region::RightEyeRegion)
 }
@@ -50,7 +52,9 @@ pub fn holds_dark_features(region: Region) -> bool {
 /// tone is lighter): only then does scaling a dark feature with the skin
 /// pale it. Darkening a mix of skin and a darker feature by the skin's ratio
 /// errs by the feature's share times its own brightness, small beside the
-/// error of leaving a light skin's share light on a dark base.
+/// error of leaving a light skin's share light on a dark base. The same
+/// asymmetry decides where the base's skin may cover a source's features
+/// round the eyes (`base_skin::base_skin_confidence`, method §7.11).
 pub fn transfer_brightens(from: &SkinStats, to: &SkinStats) -> bool {
     luminance(lab_to_srgb(to.tone)) > luminance(lab_to_srgb(from.tone))
 }
