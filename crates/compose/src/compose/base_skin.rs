@@ -450,6 +450,33 @@ mod tests {
             .all(|&m| m == f32::INFINITY));
     }
 
+    /// Per triangle, how much of what each side shows is skin: all of the
+    /// base's (source 0), all of source 1's but on the last triangle, where
+    /// it shows a feature.
+    struct FeatureOnLast {
+        base: Vec<f32>,
+        source: Vec<f32>,
+    }
+
+    impl FeatureOnLast {
+        fn new(triangles: usize) -> Self {
+            let mut source = vec![1.0f32; triangles];
+            source[triangles - 1] = 0.0;
+            FeatureOnLast {
+                base: vec![1.0f32; triangles],
+                source,
+            }
+        }
+
+        fn of(&self, s: usize) -> &[f32] {
+            if s == 0 {
+                &self.base
+            } else {
+                &self.source
+            }
+        }
+    }
+
     #[test]
     fn the_base_takes_over_where_its_gaussians_fit_but_not_beside_a_feature() {
         let grid = grid();
@@ -457,16 +484,8 @@ mod tests {
         let recipe = nose_from_source_one(vec![0.0, 1.0]);
         let regions = vec![Region::Nose; triangles.len()];
         // The source shows a feature (a beard) on the last triangle only.
-        let mut source_skin = vec![1.0f32; triangles.len()];
-        source_skin[17] = 0.0;
-        let base_skin = vec![1.0f32; triangles.len()];
-        let skin_of = |s: usize| -> &[f32] {
-            if s == 0 {
-                &base_skin
-            } else {
-                &source_skin
-            }
-        };
+        let skins = FeatureOnLast::new(triangles.len());
+        let skin_of = |s: usize| skins.of(s);
         let mut misfit = vec![0.0f32; triangles.len()];
         misfit[2] = BASE_FIT.0 + 0.01; // an ear's bend: the source keeps it
         misfit[3] = 0.5 * (BASE_FIT.0 + BASE_FIT.1);
@@ -496,16 +515,8 @@ mod tests {
         // The base's shape weight is ½; the misfit is too large for the fit.
         let misfit = vec![1.0f32; triangles.len()];
         // The source shows a feature (a brow) on the last triangle only.
-        let mut source_skin = vec![1.0f32; triangles.len()];
-        source_skin[17] = 0.0;
-        let base_skin = vec![1.0f32; triangles.len()];
-        let skin_of = |s: usize| -> &[f32] {
-            if s == 0 {
-                &base_skin
-            } else {
-                &source_skin
-            }
-        };
+        let skins = FeatureOnLast::new(triangles.len());
+        let skin_of = |s: usize| skins.of(s);
         let confidence = |group: Group, region: Region, brightens: bool| {
             let recipe = from_source_one(group, vec![0.5, 0.5]);
             let regions = vec![region; triangles.len()];
