@@ -298,12 +298,6 @@ mod tests {
         assert_eq!(t, [0.75, 0.0, 0.0]);
     }
 
-    /// A recipe on base 0 whose nose shows source 1, every group's shape
-    /// weighted by `shape`.
-    fn nose_from_source_one(shape: Vec<f64>) -> ResolvedRecipe {
-        from_source_one(Group::Nose, shape)
-    }
-
     /// A recipe on base 0 whose `group` shows source 1, every group's shape
     /// weighted by `shape`.
     fn from_source_one(group: Group, shape: Vec<f64>) -> ResolvedRecipe {
@@ -323,7 +317,7 @@ mod tests {
     #[test]
     fn the_base_takes_over_by_its_shape_weight_where_both_show_skin() {
         let nose = Group::Nose.index();
-        let mut recipe = nose_from_source_one(vec![1.0, 0.0, 0.0]);
+        let mut recipe = from_source_one(Group::Nose, vec![1.0, 0.0, 0.0]);
         let regions = [Region::Nose, Region::Nose, Region::Skin, Region::Nose];
         let skin_of = |s: usize| -> &'static [f32] {
             match s {
@@ -481,7 +475,7 @@ mod tests {
     fn the_base_takes_over_where_its_gaussians_fit_but_not_beside_a_feature() {
         let grid = grid();
         let (triangles, topology) = (&grid.triangles, grid.topology());
-        let recipe = nose_from_source_one(vec![0.0, 1.0]);
+        let recipe = from_source_one(Group::Nose, vec![0.0, 1.0]);
         let regions = vec![Region::Nose; triangles.len()];
         // The source shows a feature (a beard) on the last triangle only.
         let skins = FeatureOnLast::new(triangles.len());
