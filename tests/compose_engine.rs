@@ -1654,6 +1654,37 @@ fn with_group_of_source_1(db: Database, group: &str) -> visage::compose::engine:
     e.compose(&resolve(&e, &r))
 }
 
+/// Source 1's Gaussians of `region` in composite `c`, each as its index in
+/// `source` (source 1's set, regions by parent triangle `regions`) and its
+/// composite colour (DC): the region's block holds them in the source's
+/// order.
+fn own_colours(
+    c: &visage::compose::engine::Composite,
+    source: &visage::avatar::gaussians::GaussianSet,
+    regions: &[Region],
+    region: Region,
+) -> Vec<(usize, Vec3)> {
+    let block = c
+        .blocks
+        .iter()
+        .find(|b| b.source == 1 && b.region == region)
+        .unwrap_or_else(|| panic!("no block of source 1's {region:?}"));
+    let own: Vec<usize> = (0..source.len())
+        .filter(|&i| regions[source.binding[i] as usize] == region)
+        .collect();
+    assert_eq!(own.len(), block.end - block.start);
+    own.into_iter()
+        .enumerate()
+        .map(|(k, i)| {
+            let sh = c.gaussians.sh_of(block.start + k);
+            (
+                i,
+                Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2])),
+            )
+        })
+        .collect()
+}
+
 /// A dark source's brow mixed into the skin Gaussians round its eyes, moved
 /// to a light base (method §7.7, `dark_features`): plain skin takes the
 /// base's tone in full, a half-brow Gaussian only its skin's share — near
@@ -1702,19 +1733,8 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
         let source = db.sources[1].gaussians.clone();
         let c = with_group_of_source_1(db, "eyes");
         let (mut plain, mut mixed) = (Vec::new(), Vec::new());
-        // The region's own Gaussians were copied in the source's order.
-        for block in c
-            .blocks
-            .iter()
-            .filter(|b| b.source == 1 && holds_dark_features(b.region))
-        {
-            let own: Vec<usize> = (0..source.len())
-                .filter(|&i| regions[source.binding[i] as usize] == block.region)
-                .collect();
-            assert_eq!(own.len(), block.end - block.start);
-            for (k, &i) in own.iter().enumerate() {
-                let sh = c.gaussians.sh_of(block.start + k);
-                let rgb = Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]));
+        for region in [Region::LeftEyeRegion, Region::RightEyeRegion] {
+            for (i, rgb) in own_colours(&c, &source, &regions, region) {
                 if mixed_at(&source, i) {
                     &mut mixed
                 } else {
@@ -1904,19 +1924,7 @@ fn a_collar_edge_moves_its_skin_share_to_the_bases_tone_and_keeps_its_shirt() {
     let source = db.sources[1].gaussians.clone();
     let c = with_group_of_source_1(db, "neck");
     let mut seen: BTreeMap<&str, Vec<Vec3>> = BTreeMap::new();
-    let block = c
-        .blocks
-        .iter()
-        .find(|b| b.source == 1 && b.region == Region::Neck)
-        .expect("the neck's block");
-    // The region's own Gaussians were copied in the source's order.
-    let own: Vec<usize> = (0..source.len())
-        .filter(|&i| regions[source.binding[i] as usize] == Region::Neck)
-        .collect();
-    assert_eq!(own.len(), block.end - block.start);
-    for (k, &i) in own.iter().enumerate() {
-        let sh = c.gaussians.sh_of(block.start + k);
-        let rgb = Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]));
+    for (i, rgb) in own_colours(&c, &source, &regions, Region::Neck) {
         let name = match kind(&source, i) {
             Kind::Skin => "skin",
             Kind::Edge => "edge",
@@ -1949,5 +1957,69 @@ fn a_collar_edge_moves_its_skin_share_to_the_bases_tone_and_keeps_its_shirt() {
     assert!(
         error < 0.3 * (luma(before) - luma(ideal)).abs(),
         "edge at {edge_now}: ideal {ideal}, unmoved {before}"
+    );
+}
+
+/// A dark source's hairline region (the remainder) on a fair base (method
+/// §7.7, `dark_features::shares_by_brightness`): plain skin takes the base's
+/// tone, shade — the source's skin darkened to 0.55 of its display values
+/// (0.31 of its brightness in linear light), too dark for the strict
+/// likeness — takes the transfer by its skin share of brightness (0.8 of
+/// the way), and the source's hair there, of the skin's own chromaticity,
+/// keeps its colour. Before, the shade stayed near its dark tone.
+#[test]
+fn shade_on_a_dark_sources_hairline_takes_a_lighter_bases_tone_and_its_hair_stays() {
+    let to_linear = |rgb: Vec3| Vec3::from_array(rgb.to_array().map(linear));
+    let luma = |rgb: Vec3| to_linear(rgb).dot(Vec3::new(0.2126, 0.7152, 0.0722));
+    let fair = Vec3::new(0.90, 0.75, 0.65);
+    let dark = Vec3::new(0.45, 0.30, 0.21);
+    let brown = Vec3::new(0.12, 0.07, 0.04);
+    let shade = dark * 0.55;
+    // Source 1's remainder: every third Gaussian shade, every third hair, the
+    // rest skin; its hair region is brown, source 0 fair with brown hair.
+    let mut db = small_db();
+    let regions = db.model.triangle_regions.clone();
+    let colour_of = |f: usize, region: Region, i: usize| match (f, region, i % 3) {
+        (_, Region::Hair, _) => brown,
+        (0, _, _) => fair,
+        (_, Region::Remainder, 0) => shade,
+        (_, Region::Remainder, 1) => brown,
+        _ => dark,
+    };
+    for f in 0..2 {
+        let set = &mut db.sources[f].gaussians;
+        for i in 0..set.len() {
+            let rgb = colour_of(f, regions[set.binding[i] as usize], i);
+            paint_one(set, i, rgb);
+        }
+    }
+    let source = db.sources[1].gaussians.clone();
+    let c = with_group_of_source_1(db, "hair");
+    let mut seen: [Vec<f32>; 3] = Default::default();
+    for (i, rgb) in own_colours(&c, &source, &regions, Region::Remainder) {
+        seen[i % 3].push(luma(rgb));
+    }
+    assert!(seen.iter().all(|v| v.len() > 20), "too few Gaussians");
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+    let (shaded, hair, skin) = (mean(&seen[0]), mean(&seen[1]), mean(&seen[2]));
+    assert!(
+        (skin - luma(fair)).abs() < 0.03 * luma(fair),
+        "skin at {skin}"
+    );
+    assert!(
+        (hair - luma(brown)).abs() < 0.02 * luma(brown),
+        "hair at {hair}, was {}",
+        luma(brown)
+    );
+    // The skin's share of the shade's brightness (r against hair at h
+    // of the skin's): (r − h) / ((1 − h)·r) of the way to the whole transfer.
+    let (r, h) = (luma(shade) / luma(dark), luma(brown) / luma(dark));
+    let share = (r - h) / ((1.0 - h) * r);
+    let whole = r * luma(fair);
+    let want = r * luma(dark) + share * (whole - r * luma(dark));
+    assert!(
+        (shaded - want).abs() < 0.05 * want,
+        "shade at {shaded}: its share moved gives {want}, the whole transfer {whole}, unmoved {}",
+        r * luma(dark)
     );
 }

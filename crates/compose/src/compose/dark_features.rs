@@ -19,6 +19,7 @@ use glam::Vec3;
 
 use super::colour::{lab_to_srgb, srgb_to_linear, SkinStats};
 use super::shading::{BakedLight, Exposure};
+use crate::model::geometry::smoothstep;
 use crate::model::regions::Region;
 
 /// Features at most this bright relative to the skin (linear luminance) are
@@ -46,6 +47,46 @@ fn luminance(display: Vec3) -> f32 {
 /// (`base_skin::base_skin_confidence`, method §7.11).
 pub fn holds_dark_features(region: Region) -> bool {
     matches!(region, Region::LeftEyeRegion | Region::RightEyeRegion)
+}
+
+/// The hairline's region (the remainder: temples, sideburns, the sides of
+/// the head round the ears), where under a brightening transfer a Gaussian
+/// takes the *whole* transfer by its skin share of brightness rather than
+/// the strict likeness's partial one (method §7.7, session 44). Shade there
+/// — behind and under the ears, beneath the hair — is darker skin of the
+/// skin's own chromaticity, too far in lightness for the strict likeness,
+/// which kept part of a dark source's tone under a light base's; relative to
+/// the fitted light it reads as skin, while the source's hair keeps its own
+/// colour (a share of zero).
+pub fn shares_by_brightness(region: Region) -> bool {
+    region == Region::Remainder
+}
+
+/// How far a colour of [`shares_by_brightness`]'s regions moves under a
+/// brightening transfer: its skin share of brightness `share`
+/// ([`skin_share_of_brightness`]), but none for a colour the likeness
+/// (`likeness`, 0 to 1) reads as no skin at all — lighter strands of the
+/// source's hair read part skin by brightness alone and would be paled.
+/// The likeness fades the share in from 0 to [`SKIN_AT_ALL`]; values that
+/// are not numbers give no move.
+pub fn hairline_share(likeness: f32, share: f32) -> f32 {
+    let moved = share * smoothstep(0.0, SKIN_AT_ALL, likeness);
+    if moved.is_nan() {
+        0.0
+    } else {
+        moved.clamp(0.0, 1.0)
+    }
+}
+
+/// The likeness over which [`hairline_share`] counts a colour as skin at
+/// all (0.01 as a hard cut measured the same).
+pub const SKIN_AT_ALL: f32 = 0.1;
+
+/// Whether `feature`, a feature's brightness relative to the skin, is dark
+/// enough for [`skin_share_of_brightness`] to tell it from skin
+/// ([`DARK_FEATURE`]).
+pub fn is_tellable(feature: f32) -> bool {
+    (0.0..DARK_FEATURE).contains(&feature)
 }
 
 /// Whether the transfer from `from` to `to` brightens the skin (the base's
@@ -87,8 +128,7 @@ pub fn relative_brightness(light: &BakedLight, at: Exposure, seen: Vec3) -> Opti
 /// ([`DARK_FEATURE`]), where the colour is at least as bright as skin, and
 /// for values that are not numbers.
 pub fn skin_share_of_brightness(r: f32, feature: f32) -> f32 {
-    let tellable = (0.0..DARK_FEATURE).contains(&feature);
-    if !tellable || r.is_nan() || r >= 1.0 {
+    if !is_tellable(feature) || r.is_nan() || r >= 1.0 {
         return 1.0;
     }
     ((r - feature) / ((1.0 - feature) * r.max(f32::MIN_POSITIVE))).clamp(0.0, 1.0)
@@ -162,6 +202,43 @@ mod tests {
             (got - (before + after) * 0.5).abs().max_element() < 1e-4,
             "{got}"
         );
+    }
+
+    #[test]
+    fn the_hairline_moves_by_brightness_what_the_likeness_calls_skin_at_all() {
+        assert!(shares_by_brightness(Region::Remainder));
+        for region in [
+            Region::Hair,
+            Region::Skin,
+            Region::Neck,
+            Region::LeftEyeRegion,
+        ] {
+            assert!(!shares_by_brightness(region), "{region:?}");
+        }
+        // Any likeness past SKIN_AT_ALL: the brightness decides, in full.
+        for likeness in [SKIN_AT_ALL, 0.5, 1.0] {
+            assert_eq!(hairline_share(likeness, 0.7), 0.7);
+        }
+        // None at all: the source's hair keeps its colour, whatever its
+        // brightness says (a lighter strand reads part skin by it).
+        assert_eq!(hairline_share(0.0, 0.7), 0.0);
+        // Faded in between, never past the share.
+        let half = hairline_share(0.5 * SKIN_AT_ALL, 0.7);
+        assert!(half > 0.0 && half < 0.7, "{half}");
+        for (likeness, share) in [(f32::NAN, 0.7), (1.0, f32::NAN), (-1.0, 0.7)] {
+            assert_eq!(hairline_share(likeness, share), 0.0, "{likeness} {share}");
+        }
+        assert_eq!(hairline_share(1.0, 3.0), 1.0);
+    }
+
+    #[test]
+    fn only_dark_features_are_tellable() {
+        for h in [0.0, 0.2, 0.49] {
+            assert!(is_tellable(h), "{h}");
+        }
+        for h in [DARK_FEATURE, 0.8, -0.1, f32::NAN, f32::INFINITY] {
+            assert!(!is_tellable(h), "{h}");
+        }
     }
 
     #[test]

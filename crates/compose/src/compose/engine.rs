@@ -610,6 +610,14 @@ impl Engine {
                                 if let Some(share) = beside_clothing {
                                     return whole_skin_gain_shared(rgb, &from, &to, share);
                                 }
+                                if brightens && dark_features::shares_by_brightness(region) {
+                                    if let Some(share) = self.tellable_skin_share(source, i) {
+                                        let likeness = semantic_skin_likeness(rgb, region, &from)
+                                            .unwrap_or(0.0);
+                                        let share = dark_features::hairline_share(likeness, share);
+                                        return whole_skin_gain_shared(rgb, &from, &to, share);
+                                    }
+                                }
                                 let share =
                                     if brightens && dark_features::holds_dark_features(region) {
                                         self.skin_share_of_brightness(source, i)
@@ -669,15 +677,21 @@ impl Engine {
 
     /// The share of Gaussian `i` of source `f`'s brightness that is skin,
     /// where a brow or lash of the source's hair's brightness may be mixed
-    /// in (`dark_features`); one where the source has no hair or no light.
+    /// in (`dark_features`); one where that cannot be told
+    /// ([`Engine::tellable_skin_share`]).
     fn skin_share_of_brightness(&self, f: usize, i: usize) -> f32 {
-        let (Some(feature), Some(light)) = (self.hair_brightness[f], self.lights[f].as_ref())
-        else {
-            return 1.0;
-        };
+        self.tellable_skin_share(f, i).unwrap_or(1.0)
+    }
+
+    /// [`Engine::skin_share_of_brightness`] where it can be told: `None`
+    /// where the source has no hair, hair too light to tell from its skin
+    /// (`dark_features::is_tellable`), no light, or a light that predicts
+    /// black at the Gaussian's place.
+    fn tellable_skin_share(&self, f: usize, i: usize) -> Option<f32> {
+        let feature = self.hair_brightness[f].filter(|&h| dark_features::is_tellable(h))?;
         let at = self.gaussian_exposures[f][i];
-        dark_features::relative_brightness(light, at, self.seen[f][i])
-            .map_or(1.0, |r| dark_features::skin_share_of_brightness(r, feature))
+        let r = dark_features::relative_brightness(self.lights[f].as_ref()?, at, self.seen[f][i])?;
+        Some(dark_features::skin_share_of_brightness(r, feature))
     }
 
     /// The colour correction of Gaussians of source `f` bound in `region`.
