@@ -1614,6 +1614,26 @@ fn relighting_follows_the_turn_and_the_hollows_under_each_gaussian() {
     assert!(!e.update(&mut c, &next).gaussians);
 }
 
+/// A fair skin and a dark one (display sRGB): the tones the colour
+/// transfer tests move between.
+const FAIR: Vec3 = Vec3::new(0.90, 0.75, 0.65);
+const DARK: Vec3 = Vec3::new(0.45, 0.30, 0.21);
+
+/// [`linear`] on each channel of a display colour.
+fn to_linear(rgb: Vec3) -> Vec3 {
+    Vec3::from_array(rgb.to_array().map(linear))
+}
+
+/// [`display`] on each channel of a linear colour.
+fn to_display(lin: Vec3) -> Vec3 {
+    Vec3::from_array(lin.to_array().map(display))
+}
+
+/// The linear luminance (Rec. 709) of a display colour.
+fn luma(rgb: Vec3) -> f32 {
+    to_linear(rgb).dot(Vec3::new(0.2126, 0.7152, 0.0722))
+}
+
 /// sRGB's decoding of one display value to linear light, written out here
 /// apart from the code under test.
 fn linear(c: f32) -> f32 {
@@ -1695,14 +1715,12 @@ fn own_colours(
 #[test]
 fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
     use visage::compose::dark_features::holds_dark_features;
-    let luma = |rgb: Vec3| 0.2126 * linear(rgb.x) + 0.7152 * linear(rgb.y) + 0.0722 * linear(rgb.z);
     let half_and_half = |skin: Vec3, brow: Vec3| {
         Vec3::from_array(std::array::from_fn(|c| {
             display(0.5 * linear(skin[c]) + 0.5 * linear(brow[c]))
         }))
     };
-    let fair = Vec3::new(0.90, 0.75, 0.65);
-    let dark = Vec3::new(0.45, 0.30, 0.21);
+    let (fair, dark) = (FAIR, DARK);
     let brown = Vec3::new(0.12, 0.07, 0.04);
     // A hair half as dark again as the skin in display terms (over half its
     // brightness in linear light): too light to be told by lightness.
@@ -1794,8 +1812,7 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
 fn a_lighter_bases_skin_stays_off_what_lies_beside_a_dark_sources_brows() {
     use visage::compose::dark_features::holds_dark_features;
     use visage::compose::recipe::Membership;
-    let fair = Vec3::new(0.90, 0.75, 0.65);
-    let dark = Vec3::new(0.45, 0.30, 0.21);
+    let (fair, dark) = (FAIR, DARK);
     let brow_black = Vec3::splat(0.03);
     // How many of the base's Gaussians show on the eye regions' triangles
     // (beside the source's brows, away from them), with base 0 in skin
@@ -1886,10 +1903,7 @@ fn a_lighter_bases_skin_stays_off_what_lies_beside_a_dark_sources_brows() {
 /// base's skin beside that shirt — the skin likeness alone left it as it was.
 #[test]
 fn a_collar_edge_moves_its_skin_share_to_the_bases_tone_and_keeps_its_shirt() {
-    let to_linear = |rgb: Vec3| Vec3::from_array(rgb.to_array().map(linear));
-    let to_display = |lin: Vec3| Vec3::from_array(lin.to_array().map(display));
-    let fair = Vec3::new(0.90, 0.75, 0.65);
-    let dark = Vec3::new(0.45, 0.30, 0.21);
+    let (fair, dark) = (FAIR, DARK);
     let teal = Vec3::new(0.16, 0.45, 0.42);
     let edge = |skin: Vec3| to_display(0.5 * to_linear(skin) + 0.5 * to_linear(teal));
     // Source 1's neck: every third Gaussian shirt, every third half skin
@@ -1950,7 +1964,6 @@ fn a_collar_edge_moves_its_skin_share_to_the_bases_tone_and_keeps_its_shirt() {
     // edges, not skin-like enough for the likeness, count in the clothing's
     // mean and lower the share it reads (a pure teal mean reads 0.26 of the
     // unmoved error by hand, this one 0.16).
-    let luma = |rgb: Vec3| to_linear(rgb).dot(Vec3::new(0.2126, 0.7152, 0.0722));
     let ideal = to_display(0.5 * to_linear(fair) + 0.5 * to_linear(teal));
     let before = edge(dark);
     let error = (luma(edge_now) - luma(ideal)).abs();
@@ -1969,10 +1982,7 @@ fn a_collar_edge_moves_its_skin_share_to_the_bases_tone_and_keeps_its_shirt() {
 /// keeps its colour. Before, the shade stayed near its dark tone.
 #[test]
 fn shade_on_a_dark_sources_hairline_takes_a_lighter_bases_tone_and_its_hair_stays() {
-    let to_linear = |rgb: Vec3| Vec3::from_array(rgb.to_array().map(linear));
-    let luma = |rgb: Vec3| to_linear(rgb).dot(Vec3::new(0.2126, 0.7152, 0.0722));
-    let fair = Vec3::new(0.90, 0.75, 0.65);
-    let dark = Vec3::new(0.45, 0.30, 0.21);
+    let (fair, dark) = (FAIR, DARK);
     let brown = Vec3::new(0.12, 0.07, 0.04);
     let shade = dark * 0.55;
     // Source 1's remainder: every third Gaussian shade, every third hair, the
@@ -2021,5 +2031,94 @@ fn shade_on_a_dark_sources_hairline_takes_a_lighter_bases_tone_and_its_hair_stay
         (shaded - want).abs() < 0.05 * want,
         "shade at {shaded}: its share moved gives {want}, the whole transfer {whole}, unmoved {}",
         r * luma(dark)
+    );
+}
+
+/// Stubble on a dark-haired source's neck keeps its Gaussians where the
+/// base's skin takes over (method §7.11, `dark_features::holds_stubble`):
+/// with the neck in the base's shape, plain skin gives way to the base's,
+/// but a Gaussian half skin and half black stubble (in linear light) is
+/// skin by only half its area, so its triangle counts as the source's
+/// feature and it keeps its opacity — the lenient likeness alone read it
+/// as skin and let the base's clean skin cover it. A source whose hair is
+/// too light to tell from its skin by brightness keeps the likeness's
+/// reading.
+#[test]
+fn stubble_on_a_swapped_neck_keeps_its_gaussians_under_the_bases_skin() {
+    use visage::compose::recipe::Membership;
+    let (fair, dark) = (FAIR, DARK);
+    let black = Vec3::splat(0.03);
+    let stubble = to_display(0.5 * to_linear(dark) + 0.5 * to_linear(black));
+    // The opacity source 1's plain and stubbled neck Gaussians (every third,
+    // all at α = 0.9) keep in the composite, as a mean share of each kind's
+    // (ln(1 − α') / ln(1 − α) summed over those shown, over how many the
+    // source has), with its hair `hair`. Those whose share is negligible are
+    // left out of the composite; the two kinds are told by their colour.
+    let shares = |hair: Vec3| -> (f32, f32) {
+        let mut db = small_db();
+        let regions = db.model.triangle_regions.clone();
+        let on_neck = |set: &visage::avatar::gaussians::GaussianSet, i: usize| {
+            regions[set.binding[i] as usize] == Region::Neck
+        };
+        for f in 0..2 {
+            let set = &mut db.sources[f].gaussians;
+            for i in 0..set.len() {
+                let rgb = match (f, regions[set.binding[i] as usize]) {
+                    (_, Region::Hair) => [Vec3::new(0.35, 0.2, 0.1), hair][f],
+                    (0, _) => fair,
+                    (_, Region::Neck) if i % 3 == 0 => stubble,
+                    _ => dark,
+                };
+                paint_one(set, i, rgb);
+                set.opacity_logit[i] = (0.9f32 / 0.1).ln();
+            }
+        }
+        let source = &db.sources[1].gaussians;
+        let count = |stubbled: bool| {
+            (0..source.len())
+                .filter(|&i| on_neck(source, i) && (i % 3 == 0) == stubbled)
+                .count() as f32
+        };
+        let (plain_count, mixed_count) = (count(false), count(true));
+        let e = Engine::new(db).unwrap();
+        let n = names(&e);
+        let mut r = Recipe::unedited(&n[0]);
+        r.groups
+            .insert("neck".into(), edit(&n[1], &[(n[0].as_str(), 1.0)]));
+        r.post = PostProcess {
+            membership: Membership::Parent,
+            ..PostProcess::BEST
+        };
+        let c = e.compose(&resolve(&e, &r));
+        let block = c
+            .blocks
+            .iter()
+            .find(|b| b.source == 1 && b.region == Region::Neck)
+            .expect("source 1's neck");
+        let (mut plain, mut mixed) = (0.0, 0.0);
+        for k in block.start..block.end {
+            let sh = c.gaussians.sh_of(k);
+            let rgb = Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]));
+            let alpha = sigmoid(c.gaussians.opacity_logit[k]);
+            let share = (1.0 - alpha).ln() / 0.1f32.ln();
+            // Plain skin comes out at the fair tone, the half-stubble near
+            // half of it.
+            if luma(rgb) > 0.75 * luma(fair) {
+                plain += share;
+            } else {
+                mixed += share;
+            }
+        }
+        (plain / plain_count, mixed / mixed_count)
+    };
+    let (plain, mixed) = shares(black);
+    assert!(plain < 0.3, "plain skin keeps {plain} of its opacity");
+    assert!(mixed > 0.8, "half-stubble keeps {mixed} of its opacity");
+    // Hair a little darker than the skin: no stubble can be told by it.
+    let (plain, mixed) = shares(dark * 0.85);
+    assert!(plain < 0.3, "plain skin keeps {plain} of its opacity");
+    assert!(
+        mixed < 0.3,
+        "half-stubble keeps {mixed} of its opacity with light hair"
     );
 }

@@ -9,7 +9,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::colour::{semantic_skin_likeness, SkinStats};
-use super::dark_features::holds_dark_features;
+use super::dark_features::{holds_dark_features, holds_stubble};
 use super::recipe::ResolvedRecipe;
 use super::selection::Csr;
 use crate::avatar::binding::triangle_frame;
@@ -66,12 +66,17 @@ impl SkinShare<'_> {
 /// Per Gaussian: how surely it is skin, by its source's skin statistics
 /// `stats` and the region of the triangle it counts for (`counted`, indexing
 /// `regions`), from its colour as the cameras saw it (method §7.7); all 0
-/// for a source without skin statistics.
+/// for a source without skin statistics. On the regions that hold stubble
+/// (`dark_features::holds_stubble`) it is at most the share of the
+/// Gaussian that is skin by its brightness, `area_share(i)`
+/// (`dark_features::skin_share_of_area`) where that can be told (method
+/// §7.11): the lenient likeness reads skin mixed with dark stubble as skin.
 pub fn skin_likeness(
     colours: &[Vec3],
     counted: &[u32],
     regions: &[Region],
     stats: Option<&SkinStats>,
+    area_share: impl Fn(usize) -> Option<f32> + Sync,
 ) -> Vec<f32> {
     let Some(stats) = stats else {
         return vec![0.0; colours.len()];
@@ -79,11 +84,16 @@ pub fn skin_likeness(
     colours
         .par_iter()
         .zip(counted)
-        .map(|(&rgb, &t)| {
-            let region = regions.get(t as usize).copied();
-            region
-                .and_then(|r| semantic_skin_likeness(rgb, r, stats))
-                .unwrap_or(0.0)
+        .enumerate()
+        .map(|(i, (&rgb, &t))| {
+            let Some(region) = regions.get(t as usize).copied() else {
+                return 0.0;
+            };
+            let likeness = semantic_skin_likeness(rgb, region, stats).unwrap_or(0.0);
+            match area_share(i) {
+                Some(share) if holds_stubble(region) => likeness.min(share),
+                _ => likeness,
+            }
         })
         .collect()
 }
@@ -280,13 +290,31 @@ mod tests {
         let colours = [skin, Vec3::new(0.5, 0.1, 0.12), Vec3::ZERO, Vec3::NAN, skin];
         let regions = [Region::Nose, Region::Lips];
         let counted = [0, 1, 0, 0, 7];
-        let k = skin_likeness(&colours, &counted, &regions, Some(&stats(skin)));
+        let k = skin_likeness(&colours, &counted, &regions, Some(&stats(skin)), |_| None);
         assert_eq!(k[0], 1.0);
         assert_eq!(k[1], 0.0, "lips are no skin");
         assert_eq!(k[2], 0.0, "black is no skin");
         assert_eq!(k[3], 0.0, "NaN is no skin");
         assert_eq!(k[4], 0.0, "a triangle past the model is no skin");
-        assert_eq!(skin_likeness(&colours, &counted, &regions, None), [0.0; 5]);
+        assert_eq!(
+            skin_likeness(&colours, &counted, &regions, None, |_| None),
+            [0.0; 5]
+        );
+    }
+
+    #[test]
+    fn on_the_neck_likeness_is_at_most_the_skins_share_of_the_area() {
+        let skin = Vec3::new(0.8, 0.6, 0.5);
+        let colours = [skin; 4];
+        let regions = [Region::Neck, Region::Nose];
+        let counted = [0, 0, 1, 0];
+        // Gaussian 1 is a half-stubble mix by its brightness, 3 cannot be
+        // told; the nose is no stubble's place.
+        let area = |i: usize| [Some(1.0), Some(0.5), Some(0.5), None][i];
+        let k = skin_likeness(&colours, &counted, &regions, Some(&stats(skin)), area);
+        assert_eq!(k, [1.0, 0.5, 1.0, 1.0]);
+        let plain = skin_likeness(&colours, &counted, &regions, Some(&stats(skin)), |_| None);
+        assert_eq!(plain, [1.0; 4]);
     }
 
     #[test]

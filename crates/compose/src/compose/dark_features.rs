@@ -49,6 +49,18 @@ pub fn holds_dark_features(region: Region) -> bool {
     matches!(region, Region::LeftEyeRegion | Region::RightEyeRegion)
 }
 
+/// The regions where a source's stubble — its hair's colour or darker —
+/// mixes into its skin Gaussians: the neck (a beard grows over its front
+/// below the jaw). There a Gaussian is skin at most by its skin share of
+/// area ([`skin_share_of_area`]) when the base's skin may take over
+/// (`base_skin::skin_likeness`, method §7.11, session 44): the lenient
+/// likeness reads skin mixed with black stubble as skin, and a lighter
+/// base's clean skin then covered jomo's stubble on random-03's neck. The face's skin measured no change
+/// (in the bench's recipes the face is mostly the base's own).
+pub fn holds_stubble(region: Region) -> bool {
+    region == Region::Neck
+}
+
 /// The hairline's region (the remainder: temples, sideburns, the sides of
 /// the head round the ears), where under a brightening transfer a Gaussian
 /// takes the *whole* transfer by its skin share of brightness rather than
@@ -134,6 +146,21 @@ pub fn skin_share_of_brightness(r: f32, feature: f32) -> f32 {
     ((r - feature) / ((1.0 - feature) * r.max(f32::MIN_POSITIVE))).clamp(0.0, 1.0)
 }
 
+/// The share of a colour's *area* that is skin, for a colour at brightness
+/// `r` relative to the skin mixing skin with a feature of relative
+/// brightness `feature`: (r − h) / (1 − h) in [0, 1], the 1 − k of the
+/// module doc. It says how much of a Gaussian the base's skin may stand in
+/// for (`base_skin::skin_likeness`); [`skin_share_of_brightness`] says how
+/// far its colour moves. One where the feature is not dark enough to tell,
+/// where the colour is at least as bright as skin, and for values that are
+/// not numbers.
+pub fn skin_share_of_area(r: f32, feature: f32) -> f32 {
+    if !is_tellable(feature) || r.is_nan() || r >= 1.0 {
+        return 1.0;
+    }
+    ((r - feature) / (1.0 - feature)).clamp(0.0, 1.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -206,6 +233,8 @@ mod tests {
 
     #[test]
     fn the_hairline_moves_by_brightness_what_the_likeness_calls_skin_at_all() {
+        assert!(holds_stubble(Region::Neck));
+        assert!(!holds_stubble(Region::Skin) && !holds_stubble(Region::Remainder));
         assert!(shares_by_brightness(Region::Remainder));
         for region in [
             Region::Hair,
@@ -229,6 +258,27 @@ mod tests {
             assert_eq!(hairline_share(likeness, share), 0.0, "{likeness} {share}");
         }
         assert_eq!(hairline_share(1.0, 3.0), 1.0);
+    }
+
+    #[test]
+    fn the_area_share_is_the_skins_part_of_the_mix() {
+        // Three quarters skin, a quarter brow at a fifth of the skin's
+        // brightness.
+        let (h, k) = (0.2, 0.25);
+        let r = (1.0 - k) + k * h;
+        assert!((skin_share_of_area(r, h) - (1.0 - k)).abs() < 1e-6);
+        // A black feature: the brightness is the skin's area.
+        assert!((skin_share_of_area(0.4, 0.0) - 0.4).abs() < 1e-6);
+        assert_eq!(skin_share_of_area(1.0, h), 1.0);
+        assert_eq!(skin_share_of_area(1.3, h), 1.0);
+        assert_eq!(skin_share_of_area(h, h), 0.0);
+        assert_eq!(skin_share_of_area(0.0, h), 0.0);
+        // Untellable features and broken values: all skin, as the
+        // likeness alone reads it.
+        for h in [DARK_FEATURE, 0.9, f32::NAN, -0.2] {
+            assert_eq!(skin_share_of_area(0.4, h), 1.0, "{h}");
+        }
+        assert_eq!(skin_share_of_area(f32::NAN, 0.2), 1.0);
     }
 
     #[test]

@@ -683,15 +683,23 @@ impl Engine {
         self.tellable_skin_share(f, i).unwrap_or(1.0)
     }
 
-    /// [`Engine::skin_share_of_brightness`] where it can be told: `None`
-    /// where the source has no hair, hair too light to tell from its skin
-    /// (`dark_features::is_tellable`), no light, or a light that predicts
-    /// black at the Gaussian's place.
+    /// [`Engine::skin_share_of_brightness`] where it can be told
+    /// ([`Engine::brightness_against_hair`]).
     fn tellable_skin_share(&self, f: usize, i: usize) -> Option<f32> {
+        self.brightness_against_hair(f, i)
+            .map(|(r, h)| dark_features::skin_share_of_brightness(r, h))
+    }
+
+    /// Gaussian `i` of source `f`'s brightness relative to the skin where it
+    /// sits, by the source's light, and its hair's relative to its skin
+    /// tone (`dark_features`); `None` where the source has no hair, hair too
+    /// light to tell from its skin (`dark_features::is_tellable`), no light,
+    /// or a light that predicts black at the Gaussian's place.
+    fn brightness_against_hair(&self, f: usize, i: usize) -> Option<(f32, f32)> {
         let feature = self.hair_brightness[f].filter(|&h| dark_features::is_tellable(h))?;
         let at = self.gaussian_exposures[f][i];
         let r = dark_features::relative_brightness(self.lights[f].as_ref()?, at, self.seen[f][i])?;
-        Some(dark_features::skin_share_of_brightness(r, feature))
+        Some((r, feature))
     }
 
     /// The colour correction of Gaussians of source `f` bound in `region`.
@@ -944,6 +952,10 @@ impl Engine {
                 self.tables.counted_triangles(membership, source),
                 &self.db.model.triangle_regions,
                 self.skin[source].as_ref(),
+                |i| {
+                    self.brightness_against_hair(source, i)
+                        .map(|(r, h)| dark_features::skin_share_of_area(r, h))
+                },
             )
         })
     }
