@@ -1674,34 +1674,41 @@ fn with_group_of_source_1(db: Database, group: &str) -> visage::compose::engine:
     e.compose(&resolve(&e, &r))
 }
 
+/// Source 1's block of `region`'s own Gaussians in composite `c`.
+fn block_of_source_1(
+    c: &visage::compose::engine::Composite,
+    region: Region,
+) -> visage::compose::engine::Block {
+    *c.blocks
+        .iter()
+        .find(|b| b.source == 1 && b.region == region)
+        .unwrap_or_else(|| panic!("no block of source 1's {region:?}"))
+}
+
+/// The display colour (DC) of Gaussian `k` of composite `c`.
+fn dc_colour(c: &visage::compose::engine::Composite, k: usize) -> Vec3 {
+    let sh = c.gaussians.sh_of(k);
+    Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]))
+}
+
 /// Source 1's Gaussians of `region` in composite `c`, each as its index in
 /// `source` (source 1's set, regions by parent triangle `regions`) and its
 /// composite colour (DC): the region's block holds them in the source's
-/// order.
+/// order, all of them where no share leaves any out.
 fn own_colours(
     c: &visage::compose::engine::Composite,
     source: &visage::avatar::gaussians::GaussianSet,
     regions: &[Region],
     region: Region,
 ) -> Vec<(usize, Vec3)> {
-    let block = c
-        .blocks
-        .iter()
-        .find(|b| b.source == 1 && b.region == region)
-        .unwrap_or_else(|| panic!("no block of source 1's {region:?}"));
+    let block = block_of_source_1(c, region);
     let own: Vec<usize> = (0..source.len())
         .filter(|&i| regions[source.binding[i] as usize] == region)
         .collect();
     assert_eq!(own.len(), block.end - block.start);
     own.into_iter()
-        .enumerate()
-        .map(|(k, i)| {
-            let sh = c.gaussians.sh_of(block.start + k);
-            (
-                i,
-                Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2])),
-            )
-        })
+        .zip(block.start..block.end)
+        .map(|(i, k)| (i, dc_colour(c, k)))
         .collect()
 }
 
@@ -1974,53 +1981,65 @@ fn a_collar_edge_moves_its_skin_share_to_the_bases_tone_and_keeps_its_shirt() {
 }
 
 /// A dark source's hairline region (the remainder) on a fair base (method
-/// §7.7, `dark_features::shares_by_brightness`): plain skin takes the base's
+/// §7.7, `dark_features::moved_by_brightness_share`): plain skin takes the base's
 /// tone, shade — the source's skin darkened to 0.55 of its display values
 /// (0.31 of its brightness in linear light), too dark for the strict
 /// likeness — takes the transfer by its skin share of brightness (0.8 of
 /// the way), and the source's hair there, of the skin's own chromaticity,
-/// keeps its colour. Before, the shade stayed near its dark tone.
+/// keeps its colour, as does a lighter strand the likeness calls no skin.
+/// Before, the shade stayed near its dark tone; it still does for a source
+/// whose hair is too light to tell by brightness.
 #[test]
 fn shade_on_a_dark_sources_hairline_takes_a_lighter_bases_tone_and_its_hair_stays() {
     let (fair, dark) = (FAIR, DARK);
     let brown = Vec3::new(0.12, 0.07, 0.04);
+    // A strand lighter than the hair, of no skin's colour: part skin by its
+    // brightness alone, none by the likeness.
+    let strand = Vec3::new(0.15, 0.14, 0.13);
     let shade = dark * 0.55;
-    // Source 1's remainder: every third Gaussian shade, every third hair, the
-    // rest skin; its hair region is brown, source 0 fair with brown hair.
-    let mut db = small_db();
-    let regions = db.model.triangle_regions.clone();
-    let colour_of = |f: usize, region: Region, i: usize| match (f, region, i % 3) {
-        (_, Region::Hair, _) => brown,
-        (0, _, _) => fair,
-        (_, Region::Remainder, 0) => shade,
-        (_, Region::Remainder, 1) => brown,
-        _ => dark,
-    };
-    for f in 0..2 {
-        let set = &mut db.sources[f].gaussians;
-        for i in 0..set.len() {
-            let rgb = colour_of(f, regions[set.binding[i] as usize], i);
-            paint_one(set, i, rgb);
+    // Source 1's remainder, by index mod 4: shade, its hair's colour, a
+    // lighter strand, skin; its hair region wears `hair`, source 0 is fair
+    // with brown hair. The mean linear luminance of each kind comes back.
+    let composed = |hair: Vec3| -> [f32; 4] {
+        let mut db = small_db();
+        let regions = db.model.triangle_regions.clone();
+        let colour_of = |f: usize, region: Region, i: usize| match (f, region, i % 4) {
+            (0, Region::Hair, _) => brown,
+            (_, Region::Hair, _) => hair,
+            (0, _, _) => fair,
+            (_, Region::Remainder, 0) => shade,
+            (_, Region::Remainder, 1) => hair,
+            (_, Region::Remainder, 2) => strand,
+            _ => dark,
+        };
+        for f in 0..2 {
+            let set = &mut db.sources[f].gaussians;
+            for i in 0..set.len() {
+                let rgb = colour_of(f, regions[set.binding[i] as usize], i);
+                paint_one(set, i, rgb);
+            }
         }
-    }
-    let source = db.sources[1].gaussians.clone();
-    let c = with_group_of_source_1(db, "hair");
-    let mut seen: [Vec<f32>; 3] = Default::default();
-    for (i, rgb) in own_colours(&c, &source, &regions, Region::Remainder) {
-        seen[i % 3].push(luma(rgb));
-    }
-    assert!(seen.iter().all(|v| v.len() > 20), "too few Gaussians");
-    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
-    let (shaded, hair, skin) = (mean(&seen[0]), mean(&seen[1]), mean(&seen[2]));
+        let source = db.sources[1].gaussians.clone();
+        let c = with_group_of_source_1(db, "hair");
+        let mut seen: [Vec<f32>; 4] = Default::default();
+        for (i, rgb) in own_colours(&c, &source, &regions, Region::Remainder) {
+            seen[i % 4].push(luma(rgb));
+        }
+        assert!(seen.iter().all(|v| v.len() > 20), "too few Gaussians");
+        seen.map(|v| v.iter().sum::<f32>() / v.len() as f32)
+    };
+    let [shaded, hair, lighter, skin] = composed(brown);
     assert!(
         (skin - luma(fair)).abs() < 0.03 * luma(fair),
         "skin at {skin}"
     );
-    assert!(
-        (hair - luma(brown)).abs() < 0.02 * luma(brown),
-        "hair at {hair}, was {}",
-        luma(brown)
-    );
+    for (kind, now, was) in [("hair", hair, brown), ("strand", lighter, strand)] {
+        assert!(
+            (now - luma(was)).abs() < 0.02 * luma(was),
+            "{kind} at {now}, was {}",
+            luma(was)
+        );
+    }
     // The skin's share of the shade's brightness (r against hair at h
     // of the skin's): (r − h) / ((1 − h)·r) of the way to the whole transfer.
     let (r, h) = (luma(shade) / luma(dark), luma(brown) / luma(dark));
@@ -2031,6 +2050,13 @@ fn shade_on_a_dark_sources_hairline_takes_a_lighter_bases_tone_and_its_hair_stay
         (shaded - want).abs() < 0.05 * want,
         "shade at {shaded}: its share moved gives {want}, the whole transfer {whole}, unmoved {}",
         r * luma(dark)
+    );
+    // Hair too light to tell from the skin by brightness: the likeness
+    // alone, which leaves this shade near its dark tone.
+    let [shaded, ..] = composed(dark * 0.85);
+    assert!(
+        shaded < 0.5 * want,
+        "shade at {shaded} with light hair, the share would give {want}"
     );
 }
 
@@ -2090,15 +2116,10 @@ fn stubble_on_a_swapped_neck_keeps_its_gaussians_under_the_bases_skin() {
             ..PostProcess::BEST
         };
         let c = e.compose(&resolve(&e, &r));
-        let block = c
-            .blocks
-            .iter()
-            .find(|b| b.source == 1 && b.region == Region::Neck)
-            .expect("source 1's neck");
+        let block = block_of_source_1(&c, Region::Neck);
         let (mut plain, mut mixed) = (0.0, 0.0);
         for k in block.start..block.end {
-            let sh = c.gaussians.sh_of(k);
-            let rgb = Vec3::new(dc_to_rgb(sh[0]), dc_to_rgb(sh[1]), dc_to_rgb(sh[2]));
+            let rgb = dc_colour(&c, k);
             let alpha = sigmoid(c.gaussians.opacity_logit[k]);
             let share = (1.0 - alpha).ln() / 0.1f32.ln();
             // Plain skin comes out at the fair tone, the half-stubble near

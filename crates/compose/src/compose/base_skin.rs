@@ -90,10 +90,10 @@ pub fn skin_likeness(
                 return 0.0;
             };
             let likeness = semantic_skin_likeness(rgb, region, stats).unwrap_or(0.0);
-            match area_share(i) {
-                Some(share) if holds_stubble(region) => likeness.min(share),
-                _ => likeness,
+            if !holds_stubble(region) {
+                return likeness;
             }
+            area_share(i).map_or(likeness, |share| likeness.min(share))
         })
         .collect()
 }

@@ -1,5 +1,9 @@
-//! Dark features mixed into skin Gaussians under a brightening skin transfer
-//! (docs/method.md §7.7, its last bullet).
+//! Dark features — brows, lashes, hair, stubble — mixed into skin Gaussians
+//! (docs/method.md §7.7's last bullets and §7.11): how much of a Gaussian's
+//! colour and of its area is skin, by its brightness against the source's
+//! fitted light and the brightness of its hair. A brightening transfer moves
+//! only the skin's share round the eyes and on the hairline; the base's skin
+//! stands in only for the skin's area on the neck.
 //!
 //! A trained Gaussian on a brow's edge shows part skin, part brow. The skin
 //! transfer scales its colour by the ratio of the two skins' tones, which
@@ -55,8 +59,11 @@ pub fn holds_dark_features(region: Region) -> bool {
 /// area ([`skin_share_of_area`]) when the base's skin may take over
 /// (`base_skin::skin_likeness`, method §7.11, session 44): the lenient
 /// likeness reads skin mixed with black stubble as skin, and a lighter
-/// base's clean skin then covered jomo's stubble on random-03's neck. The face's skin measured no change
-/// (in the bench's recipes the face is mostly the base's own).
+/// base's clean skin then covered jomo's stubble on random-03's neck. It
+/// caps the base's own neck Gaussians too (the likeness is per source), so
+/// shade under a base's jaw darker than its light predicts also reads part
+/// feature there. A cap by the brightness share on the face, nose, ears and
+/// eye regions measured no gain.
 pub fn holds_stubble(region: Region) -> bool {
     region == Region::Neck
 }
@@ -64,17 +71,18 @@ pub fn holds_stubble(region: Region) -> bool {
 /// The hairline's region (the remainder: temples, sideburns, the sides of
 /// the head round the ears), where under a brightening transfer a Gaussian
 /// takes the *whole* transfer by its skin share of brightness rather than
-/// the strict likeness's partial one (method §7.7, session 44). Shade there
+/// the partial one of the region's likeness (the strict one or the
+/// hairline's side, method §7.7, session 44). Shade there
 /// — behind and under the ears, beneath the hair — is darker skin of the
 /// skin's own chromaticity, too far in lightness for the strict likeness,
 /// which kept part of a dark source's tone under a light base's; relative to
 /// the fitted light it reads as skin, while the source's hair keeps its own
 /// colour (a share of zero).
-pub fn shares_by_brightness(region: Region) -> bool {
+pub fn moved_by_brightness_share(region: Region) -> bool {
     region == Region::Remainder
 }
 
-/// How far a colour of [`shares_by_brightness`]'s regions moves under a
+/// How far a colour of [`moved_by_brightness_share`]'s regions moves under a
 /// brightening transfer: its skin share of brightness `share`
 /// ([`skin_share_of_brightness`]), but none for a colour the likeness
 /// (`likeness`, 0 to 1) reads as no skin at all — lighter strands of the
@@ -140,10 +148,13 @@ pub fn relative_brightness(light: &BakedLight, at: Exposure, seen: Vec3) -> Opti
 /// ([`DARK_FEATURE`]), where the colour is at least as bright as skin, and
 /// for values that are not numbers.
 pub fn skin_share_of_brightness(r: f32, feature: f32) -> f32 {
-    if !is_tellable(feature) || r.is_nan() || r >= 1.0 {
+    // The skin's area over the colour's brightness (module doc); whole
+    // where the area share is (nothing to tell, or as bright as skin).
+    let area = skin_share_of_area(r, feature);
+    if area >= 1.0 {
         return 1.0;
     }
-    ((r - feature) / ((1.0 - feature) * r.max(f32::MIN_POSITIVE))).clamp(0.0, 1.0)
+    (area / r.max(f32::MIN_POSITIVE)).min(1.0)
 }
 
 /// The share of a colour's *area* that is skin, for a colour at brightness
@@ -233,16 +244,14 @@ mod tests {
 
     #[test]
     fn the_hairline_moves_by_brightness_what_the_likeness_calls_skin_at_all() {
-        assert!(holds_stubble(Region::Neck));
-        assert!(!holds_stubble(Region::Skin) && !holds_stubble(Region::Remainder));
-        assert!(shares_by_brightness(Region::Remainder));
+        assert!(moved_by_brightness_share(Region::Remainder));
         for region in [
             Region::Hair,
             Region::Skin,
             Region::Neck,
             Region::LeftEyeRegion,
         ] {
-            assert!(!shares_by_brightness(region), "{region:?}");
+            assert!(!moved_by_brightness_share(region), "{region:?}");
         }
         // Any likeness past SKIN_AT_ALL: the brightness decides, in full.
         for likeness in [SKIN_AT_ALL, 0.5, 1.0] {
@@ -279,6 +288,14 @@ mod tests {
             assert_eq!(skin_share_of_area(0.4, h), 1.0, "{h}");
         }
         assert_eq!(skin_share_of_area(f32::NAN, 0.2), 1.0);
+    }
+
+    #[test]
+    fn stubble_is_read_on_the_neck_alone() {
+        assert!(holds_stubble(Region::Neck));
+        for region in [Region::Skin, Region::Remainder, Region::Boundary] {
+            assert!(!holds_stubble(region), "{region:?}");
+        }
     }
 
     #[test]

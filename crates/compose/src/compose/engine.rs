@@ -610,7 +610,7 @@ impl Engine {
                                 if let Some(share) = beside_clothing {
                                     return whole_skin_gain_shared(rgb, &from, &to, share);
                                 }
-                                if brightens && dark_features::shares_by_brightness(region) {
+                                if brightens && dark_features::moved_by_brightness_share(region) {
                                     if let Some(share) = self.tellable_skin_share(source, i) {
                                         let likeness = semantic_skin_likeness(rgb, region, &from)
                                             .unwrap_or(0.0);
