@@ -1712,6 +1712,58 @@ fn own_colours(
         .collect()
 }
 
+/// Paints sources 0 and 1 of the small database with their `looks` (skin,
+/// hair): hair Gaussians the hair, the eye-region Gaussians `mixed_at(f, i)`
+/// picks `mix(skin, hair)`, the rest the skin; composes source 1's eyes on
+/// source 0 (`with_group_of_source_1`) and returns the mean linear luminance
+/// of source 1's plain and mixed eye-region Gaussians there.
+fn eyes_of_source_1(
+    looks: [(Vec3, Vec3); 2],
+    mixed_at: impl Fn(usize, usize) -> bool,
+    mix: impl Fn(Vec3, Vec3) -> Vec3,
+) -> (f32, f32) {
+    use visage::compose::dark_features::holds_dark_features;
+    let mut db = small_db();
+    let regions = db.model.triangle_regions.clone();
+    let eyes = |set: &visage::avatar::gaussians::GaussianSet, i: usize| {
+        holds_dark_features(regions[set.binding[i] as usize])
+    };
+    for (f, (skin, hair)) in looks.into_iter().enumerate() {
+        let set = &mut db.sources[f].gaussians;
+        for i in 0..set.len() {
+            let rgb = if regions[set.binding[i] as usize] == Region::Hair {
+                hair
+            } else if eyes(set, i) && mixed_at(f, i) {
+                mix(skin, hair)
+            } else {
+                skin
+            };
+            paint_one(set, i, rgb);
+        }
+    }
+    let source = db.sources[1].gaussians.clone();
+    let c = with_group_of_source_1(db, "eyes");
+    let (mut plain, mut mixed) = (Vec::new(), Vec::new());
+    for region in [Region::LeftEyeRegion, Region::RightEyeRegion] {
+        for (i, rgb) in own_colours(&c, &source, &regions, region) {
+            if mixed_at(1, i) {
+                &mut mixed
+            } else {
+                &mut plain
+            }
+            .push(luma(rgb));
+        }
+    }
+    assert!(
+        plain.len() > 20 && mixed.len() > 20,
+        "{} plain, {} mixed",
+        plain.len(),
+        mixed.len()
+    );
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+    (mean(&plain), mean(&mixed))
+}
+
 /// A dark source's brow mixed into the skin Gaussians round its eyes, moved
 /// to a light base (method §7.7, `dark_features`): plain skin takes the
 /// base's tone in full, a half-brow Gaussian only its skin's share — near
@@ -1721,7 +1773,6 @@ fn own_colours(
 /// whose hair is too light to tell from its skin by lightness.
 #[test]
 fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
-    use visage::compose::dark_features::holds_dark_features;
     let half_and_half = |skin: Vec3, brow: Vec3| {
         Vec3::from_array(std::array::from_fn(|c| {
             display(0.5 * linear(skin[c]) + 0.5 * linear(brow[c]))
@@ -1737,45 +1788,7 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
     // Returns the mean linear luminance of source 1's plain and mixed eye
     // Gaussians in the composite.
     let composed = |base: (Vec3, Vec3), eyes_of: (Vec3, Vec3)| -> (f32, f32) {
-        let mut db = small_db();
-        let regions = db.model.triangle_regions.clone();
-        let mixed_at = |set: &visage::avatar::gaussians::GaussianSet, i: usize| {
-            holds_dark_features(regions[set.binding[i] as usize]) && i % 2 == 0
-        };
-        for (f, (skin, hair)) in [base, eyes_of].into_iter().enumerate() {
-            let set = &mut db.sources[f].gaussians;
-            for i in 0..set.len() {
-                let rgb = if regions[set.binding[i] as usize] == Region::Hair {
-                    hair
-                } else if mixed_at(set, i) {
-                    half_and_half(skin, hair)
-                } else {
-                    skin
-                };
-                paint_one(set, i, rgb);
-            }
-        }
-        let source = db.sources[1].gaussians.clone();
-        let c = with_group_of_source_1(db, "eyes");
-        let (mut plain, mut mixed) = (Vec::new(), Vec::new());
-        for region in [Region::LeftEyeRegion, Region::RightEyeRegion] {
-            for (i, rgb) in own_colours(&c, &source, &regions, region) {
-                if mixed_at(&source, i) {
-                    &mut mixed
-                } else {
-                    &mut plain
-                }
-                .push(luma(rgb));
-            }
-        }
-        assert!(
-            plain.len() > 20 && mixed.len() > 20,
-            "{} plain, {} mixed",
-            plain.len(),
-            mixed.len()
-        );
-        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
-        (mean(&plain), mean(&mixed))
+        eyes_of_source_1([base, eyes_of], |_, i| i % 2 == 0, half_and_half)
     };
     // Dark skin with a brown brow onto a fair base.
     let (plain, mixed) = composed((fair, brown), (dark, brown));
@@ -1807,6 +1820,37 @@ fn a_brow_mixed_into_eye_skin_keeps_its_share_under_a_brightening_transfer() {
             "mix at {mixed}, the whole transfer {want}"
         );
     }
+}
+
+/// A light source's brow onto a darker base (method §7.7,
+/// `dark_features::darkening_gain`): a Gaussian a tenth skin and nine
+/// tenths dark brow (in linear light) is no skin to the likeness, which
+/// left it as it was — its tenth of light skin stayed light on the dark
+/// base and the brow came out pale. Its skin share of brightness moves only
+/// that tenth, near the dark skin's tenth plus the same brow; plain lid
+/// skin still takes the base's tone.
+#[test]
+fn a_light_sources_brow_darkens_only_its_skin_share_on_a_darker_base() {
+    let (fair, dark) = (FAIR, DARK);
+    let brow = Vec3::new(0.12, 0.10, 0.09);
+    let mixed = |skin: Vec3| to_display(0.1 * to_linear(skin) + 0.9 * to_linear(brow));
+    // Source 0 is the dark base with brown hair; source 1 gives the eyes,
+    // fair with hair of the brow's colour, its even eye-region Gaussians
+    // brows mixed with a little skin.
+    let (plain, brows) = eyes_of_source_1(
+        [(dark, Vec3::new(0.12, 0.07, 0.04)), (fair, brow)],
+        |f, i| f == 1 && i % 2 == 0,
+        |skin, _| mixed(skin),
+    );
+    assert!(
+        (plain - luma(dark)).abs() < 0.03 * luma(dark),
+        "plain lid skin at {plain}"
+    );
+    let (ideal, unmoved) = (luma(mixed(dark)), luma(mixed(fair)));
+    assert!(
+        (brows - ideal).abs() < 0.35 * (unmoved - ideal),
+        "brow at {brows}: its skin's share moved gives {ideal}, unmoved {unmoved}"
+    );
 }
 
 /// Round the eyes a lighter base's skin stays off the triangles beside a

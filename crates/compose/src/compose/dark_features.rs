@@ -2,7 +2,8 @@
 //! (docs/method.md §7.7's last bullets and §7.11): how much of a Gaussian's
 //! colour and of its area is skin, by its brightness against the source's
 //! fitted light and the brightness of its hair. A brightening transfer moves
-//! only the skin's share round the eyes and on the hairline; the base's skin
+//! only the skin's share round the eyes and on the hairline, a darkening one
+//! round the eyes where the likeness calls a colour no skin; the base's skin
 //! stands in only for the skin's area on the neck.
 //!
 //! A trained Gaussian on a brow's edge shows part skin, part brow. The skin
@@ -66,6 +67,26 @@ pub fn holds_dark_features(region: Region) -> bool {
 /// eye regions measured no gain.
 pub fn holds_stubble(region: Region) -> bool {
     region == Region::Neck
+}
+
+/// The gain of a colour round the eyes under a *darkening* transfer (a
+/// lighter source onto a darker base; method §7.7, session 44): the
+/// likeness's own gain `by_likeness` where the likeness calls the colour
+/// skin, the whole transfer taken the colour's skin share of brightness
+/// (`by_share`) where it calls it a feature, mixed by the likeness
+/// `likeness` (0 to 1; NaN counts as 0) in between. A light source's brow
+/// is a mix of its light skin and its hair: the likeness calls it no skin
+/// and leaves it as it was, so the light skin in it stayed light on the
+/// dark base (pale brows); its share of brightness moves only that skin.
+/// Plain lid skin keeps the likeness's transfer, since its shade — darker
+/// than the source's light predicts — would read as part feature.
+pub fn darkening_gain(likeness: f32, by_likeness: Vec3, by_share: Vec3) -> Vec3 {
+    let k = if likeness.is_nan() {
+        0.0
+    } else {
+        likeness.clamp(0.0, 1.0)
+    };
+    by_share.lerp(by_likeness, k)
 }
 
 /// The hairline's region (the remainder: temples, sideburns, the sides of
@@ -288,6 +309,18 @@ mod tests {
             assert_eq!(skin_share_of_area(0.4, h), 1.0, "{h}");
         }
         assert_eq!(skin_share_of_area(f32::NAN, 0.2), 1.0);
+    }
+
+    #[test]
+    fn a_darkening_transfer_moves_by_the_likeness_where_it_calls_skin_and_by_the_share_elsewhere() {
+        let (by_likeness, by_share) = (Vec3::new(0.4, 0.3, 0.2), Vec3::new(0.8, 0.7, 0.6));
+        assert_eq!(darkening_gain(1.0, by_likeness, by_share), by_likeness);
+        assert_eq!(darkening_gain(0.0, by_likeness, by_share), by_share);
+        let half = darkening_gain(0.5, by_likeness, by_share);
+        assert!((half - Vec3::new(0.6, 0.5, 0.4)).abs().max_element() < 1e-6);
+        assert_eq!(darkening_gain(f32::NAN, by_likeness, by_share), by_share);
+        assert_eq!(darkening_gain(2.0, by_likeness, by_share), by_likeness);
+        assert_eq!(darkening_gain(-1.0, by_likeness, by_share), by_share);
     }
 
     #[test]

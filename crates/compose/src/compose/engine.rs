@@ -618,6 +618,17 @@ impl Engine {
                                         return whole_skin_gain_shared(rgb, &from, &to, share);
                                     }
                                 }
+                                if !brightens && dark_features::holds_dark_features(region) {
+                                    if let Some(share) = self.tellable_skin_share(source, i) {
+                                        let likeness = semantic_skin_likeness(rgb, region, &from)
+                                            .unwrap_or(0.0);
+                                        return dark_features::darkening_gain(
+                                            likeness,
+                                            semantic_skin_gain_shared(rgb, region, &from, &to, 1.0),
+                                            whole_skin_gain_shared(rgb, &from, &to, share),
+                                        );
+                                    }
+                                }
                                 let share =
                                     if brightens && dark_features::holds_dark_features(region) {
                                         self.skin_share_of_brightness(source, i)
