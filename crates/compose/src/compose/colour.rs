@@ -245,18 +245,50 @@ pub fn skin_stats(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Optio
 /// to weigh (an empty region). Its [`chromaticity`] tells a hairline's skin
 /// from hair, its brightness a brow from skin (`dark_features`).
 pub fn hair_colour(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Option<Vec3> {
+    opacity_weighted_mean(set, colours, indices, |rgb| {
+        Some(srgb_to_linear(rgb.clamp(Vec3::ZERO, Vec3::ONE)))
+    })
+}
+
+/// The opacity-weighted mean chromaticity *in display values* (each
+/// colour over the sum of its channels) of the Gaussians `indices` of a
+/// set (a source's hair region): the direction a Gaussian round the eyes is
+/// unmixed along (`dark_features::skin_shares_by_colour`). A mean of
+/// directions rather than of colours, so the hair's brightest strands and
+/// the skin they let through weigh no more than the rest (session 45: ada's
+/// brows on nuru read 0.01 dB worse from the mean colour). `None` where
+/// nothing is left to weigh.
+pub fn hair_display_chromaticity(
+    set: &GaussianSet,
+    colours: &[Vec3],
+    indices: &[u32],
+) -> Option<Vec3> {
+    opacity_weighted_mean(set, colours, indices, |rgb| {
+        chromaticity(rgb.clamp(Vec3::ZERO, Vec3::ONE))
+    })
+}
+
+/// The opacity-weighted mean of `value` over the Gaussians `indices` of a
+/// set, each of display colour `colours[i]`; colours that are broken or
+/// have no value are left out.
+fn opacity_weighted_mean(
+    set: &GaussianSet,
+    colours: &[Vec3],
+    indices: &[u32],
+    value: impl Fn(Vec3) -> Option<Vec3>,
+) -> Option<Vec3> {
     let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
     for &i in indices {
         let i = i as usize;
         let (Some(&rgb), Some(&logit)) = (colours.get(i), set.opacity_logit.get(i)) else {
             continue;
         };
-        let (linear, a) = (
-            srgb_to_linear(rgb.clamp(Vec3::ZERO, Vec3::ONE)),
-            sigmoid(logit),
-        );
-        if rgb.is_finite() && linear.is_finite() && a.is_finite() {
-            sum += a * linear;
+        let a = sigmoid(logit);
+        let Some(v) = value(rgb).filter(|v| rgb.is_finite() && v.is_finite()) else {
+            continue;
+        };
+        if a.is_finite() {
+            sum += a * v;
             total += a;
         }
     }
@@ -415,6 +447,19 @@ pub fn whole_skin_gain_shared(rgb: Vec3, from: &SkinStats, to: &SkinStats, share
         return Vec3::ONE;
     }
     shared_gain(rgb, transfer_gain(rgb, lab, 1.0, from, to), share)
+}
+
+/// The gain `whole` taken, per channel, the share `shares` (0 to 1) of the
+/// way in display values, 1 + s·(whole − 1): the skin's part of a colour
+/// that mixes skin with a feature in display values moves, the feature's
+/// stays (`dark_features::skin_shares_by_colour`). Shares that are not
+/// numbers count as the whole way.
+pub fn gain_by_channel_share(whole: Vec3, shares: Vec3) -> Vec3 {
+    let shares = Vec3::select(shares.is_nan_mask(), Vec3::ONE, shares);
+    (Vec3::ONE + shares.clamp(Vec3::ZERO, Vec3::ONE) * (whole - Vec3::ONE)).clamp(
+        Vec3::splat(TRANSFER_GAIN_RANGE.0),
+        Vec3::splat(TRANSFER_GAIN_RANGE.1),
+    )
 }
 
 /// The gain taking `rgb` a share of the way from itself to `rgb · whole` in
@@ -1036,5 +1081,42 @@ mod tests {
         assert_eq!(g, Vec3::ONE);
         let g = semantic_skin_gain(Vec3::INFINITY, Region::Skin, &skin, &black);
         assert!(g.is_finite());
+    }
+
+    #[test]
+    fn a_gain_taken_by_channel_moves_each_channel_its_share() {
+        let whole = Vec3::new(0.4, 0.3, 0.2);
+        let near = |a: Vec3, b: Vec3| (a - b).abs().max_element() < 1e-6;
+        assert!(near(gain_by_channel_share(whole, Vec3::ONE), whole));
+        assert_eq!(gain_by_channel_share(whole, Vec3::ZERO), Vec3::ONE);
+        let got = gain_by_channel_share(whole, Vec3::new(0.5, 0.0, 1.0));
+        assert!(near(got, Vec3::new(0.7, 1.0, 0.2)), "{got}");
+        // A share that is not a number is the whole way; out of range, clamped.
+        let nan = gain_by_channel_share(whole, Vec3::new(f32::NAN, 2.0, -1.0));
+        assert!(near(nan, Vec3::new(0.4, 0.3, 1.0)), "{nan}");
+        // The gain stays in the transfer's range.
+        let huge = gain_by_channel_share(Vec3::splat(1e6), Vec3::ONE);
+        assert_eq!(huge, Vec3::splat(TRANSFER_GAIN_RANGE.1));
+    }
+
+    #[test]
+    fn the_hairs_display_chromaticity_weighs_each_gaussian_by_opacity_alone() {
+        let mut set = GaussianSet::with_degree(0);
+        for _ in 0..3 {
+            set.binding.push(0);
+            set.position.push(Vec3::ZERO);
+            set.rotation.push(glam::Quat::IDENTITY);
+            set.log_scale.push(Vec3::ZERO);
+            set.opacity_logit.push(0.0);
+            set.sh.extend([0.0; 3]);
+        }
+        // A bright strand weighs no more than a dark one of the same hue.
+        let auburn = Vec3::new(0.45, 0.20, 0.10);
+        let colours = [auburn, auburn * 0.2, Vec3::NAN];
+        let got = hair_display_chromaticity(&set, &colours, &[0, 1, 2]).unwrap();
+        let want = auburn / (auburn.x + auburn.y + auburn.z);
+        assert!((got - want).abs().max_element() < 1e-5, "{got} {want}");
+        assert_eq!(hair_display_chromaticity(&set, &colours, &[]), None);
+        assert_eq!(hair_display_chromaticity(&set, &colours, &[2]), None);
     }
 }

@@ -19,6 +19,11 @@
 //! t of the way. A black feature (h = 0) gives t = 1 — scaling a mix of skin
 //! and black by the skin's ratio is exact — and a colour as bright as skin
 //! gives t = 1 too; a colour as dark as the feature gives t = 0.
+//!
+//! Where the hair differs from the skin in hue, a darkening transfer round
+//! the eyes reads the share per channel instead, by unmixing the colour into
+//! the two in display values ([`skin_shares_by_colour`]): a light skin is
+//! most of a brow's green and blue but little of its red.
 
 use glam::Vec3;
 
@@ -151,6 +156,54 @@ pub fn hair_brightness(hair: Vec3, skin: &SkinStats) -> Option<f32> {
     let ratio = linear_luminance(hair) / tone;
     (tone > 1e-4 && ratio.is_finite()).then_some(ratio)
 }
+
+/// Per channel, the share of a Gaussian's display colour `colour` that is
+/// skin, read by unmixing it into the skin's display colour at its place
+/// `skin` (the source's fitted light there) and its hair's `hair`: the
+/// least-squares colour ≈ a·skin + b·hair, and the share a·skin over
+/// a·skin + b·hair channel by channel (method §7.7, session 45). A
+/// Gaussian's colour is a mix of what it covers in *display* values, the
+/// space its training and the rasteriser blend in, and a light source's
+/// brow on its own head is half its skin in the green and blue but a
+/// quarter in the red; one share of brightness for all three left ada's
+/// brows pale pink on nuru where the truth has them auburn. Zero where the
+/// colour lies past the hair from the skin (a ≤ 0), one where it lies past
+/// the skin from the hair (b < 0: skin lit brighter, or a white); `None`
+/// where skin and hair point too nearly the same way to tell apart
+/// ([`UNMIX_MIN_SINE2`]) or a value is broken.
+pub fn skin_shares_by_colour(colour: Vec3, skin: Vec3, hair: Vec3) -> Option<Vec3> {
+    let (ss, sh, hh) = (skin.dot(skin), skin.dot(hair), hair.dot(hair));
+    let det = ss * hh - sh * sh;
+    // det / (|skin|²·|hair|²) is the squared sine of their angle; NaN fails.
+    let apart = det > UNMIX_MIN_SINE2 * ss * hh;
+    if !apart || !colour.is_finite() {
+        return None;
+    }
+    let (sc, hc) = (skin.dot(colour), hair.dot(colour));
+    let a = (hh * sc - sh * hc) / det;
+    let b = (ss * hc - sh * sc) / det;
+    if a <= 0.0 {
+        return Some(Vec3::ZERO);
+    }
+    if b < 0.0 {
+        return Some(Vec3::ONE);
+    }
+    let (of_skin, fitted) = (skin * a, skin * a + hair * b);
+    Some(Vec3::from_array(std::array::from_fn(|ch| {
+        if fitted[ch] > 0.0 {
+            (of_skin[ch] / fitted[ch]).clamp(0.0, 1.0)
+        } else {
+            1.0
+        }
+    })))
+}
+
+/// The least squared sine of the angle between a skin's and a hair's
+/// display colours for [`skin_shares_by_colour`] to unmix a colour into
+/// them (about 8°): nearer, the two shares trade places with noise (kemi's
+/// brown hair lies 0.044 from her skin in chromaticity; ada's auburn, 0.1
+/// in squared sine, is well apart).
+pub const UNMIX_MIN_SINE2: f32 = 0.02;
 
 /// How bright a Gaussian of display colour `seen` is relative to the
 /// source's skin where it sits (`at`), by the source's fitted light: 1 for
@@ -403,5 +456,69 @@ mod tests {
         let black = BakedLight::new([[0.0; 4]; 3], Vec3::ZERO);
         assert_eq!(relative_brightness(&black, up, skin), None);
         assert_eq!(relative_brightness(&light, up, Vec3::NAN), None);
+    }
+
+    #[test]
+    fn a_display_mix_of_skin_and_hair_unmixes_into_each_channels_skin_share() {
+        let (skin, hair) = (Vec3::new(0.77, 0.67, 0.60), Vec3::new(0.45, 0.20, 0.10));
+        // A quarter skin, three quarters hair: the skin's share of each
+        // channel, most of the green and blue, a third of the red.
+        let mix = 0.25 * skin + 0.75 * hair;
+        let shares = skin_shares_by_colour(mix, skin, hair).unwrap();
+        let want = 0.25 * skin / mix;
+        assert!(
+            (shares - want).abs().max_element() < 1e-4,
+            "{shares} {want}"
+        );
+        assert!(shares.y > shares.x + 0.1 && shares.z > shares.y, "{shares}");
+        // Moving each channel by its share gives the same mix with another
+        // skin, whatever the light: the colours may come at any brightness.
+        let dark = Vec3::new(0.26, 0.17, 0.12);
+        let moved = mix + shares * (mix * (dark / skin) - mix);
+        let ideal = 0.25 * dark + 0.75 * hair;
+        assert!(
+            (moved - ideal).abs().max_element() < 1e-4,
+            "{moved} {ideal}"
+        );
+        let lit = skin_shares_by_colour(mix, skin * 0.5, hair * 3.0).unwrap();
+        assert!((lit - want).abs().max_element() < 1e-4, "{lit}");
+        // Skin in shade is all skin; hair, and darker hair, none of it.
+        assert_eq!(
+            skin_shares_by_colour(skin * 0.4, skin, hair),
+            Some(Vec3::ONE)
+        );
+        for c in [hair, hair * 0.3] {
+            let s = skin_shares_by_colour(c, skin, hair).unwrap();
+            assert!(s.max_element() < 1e-4, "{c}: {s}");
+        }
+        // Past the skin from the hair (a white) counts as skin; past the hair
+        // from the skin (a redder colour) as none.
+        assert_eq!(
+            skin_shares_by_colour(Vec3::splat(0.9), skin, hair),
+            Some(Vec3::ONE)
+        );
+        assert_eq!(
+            skin_shares_by_colour(Vec3::new(0.5, 0.1, 0.02), skin, hair),
+            Some(Vec3::ZERO)
+        );
+    }
+
+    #[test]
+    fn hair_too_like_the_skin_or_broken_values_unmix_nothing() {
+        let skin = Vec3::new(0.53, 0.36, 0.25);
+        // Brown hair a darker version of the skin: nothing to tell them by.
+        let brown = skin * 0.4 + Vec3::new(0.0, 0.005, 0.0);
+        assert_eq!(skin_shares_by_colour(skin * 0.7, skin, brown), None);
+        assert_eq!(skin_shares_by_colour(skin, skin, skin), None);
+        let hair = Vec3::new(0.1, 0.08, 0.08);
+        assert_eq!(skin_shares_by_colour(Vec3::NAN, skin, hair), None);
+        assert_eq!(skin_shares_by_colour(skin, Vec3::NAN, hair), None);
+        assert_eq!(skin_shares_by_colour(skin, skin, Vec3::ZERO), None);
+        assert_eq!(skin_shares_by_colour(skin, Vec3::ZERO, hair), None);
+        // Huge and tiny colours unmix alike.
+        let mix = 0.5 * skin + 0.5 * hair;
+        let at = |k: f32| skin_shares_by_colour(mix * k, skin * k, hair * k).unwrap();
+        assert!((at(1e6) - at(1.0)).abs().max_element() < 1e-3);
+        assert!((at(1e-6) - at(1.0)).abs().max_element() < 1e-3);
     }
 }

@@ -15,9 +15,10 @@ use super::base_skin::{
 use super::blend::{Blender, SparseRhs};
 use super::clothing::{self, ClothingMean};
 use super::colour::{
-    apply_gain, chromaticity, colour_weight, hair_colour, seen_colours, semantic_skin_gain_shared,
-    semantic_skin_likeness, skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour,
-    whole_skin_gain_shared, SkinStats, SKIN_REFERENCE_REGIONS,
+    apply_gain, chromaticity, colour_weight, gain_by_channel_share, hair_colour,
+    hair_display_chromaticity, seen_colours, semantic_skin_gain_shared, semantic_skin_likeness,
+    skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour, whole_skin_gain_shared,
+    SkinStats, SKIN_REFERENCE_REGIONS,
 };
 use super::copying::{copy_own, relight_sh, CopyOwn, OpacityEdit, OwnBlock};
 use super::correction::{Correction, SharedGains};
@@ -63,6 +64,10 @@ pub struct Engine {
     /// darkest brows and lashes its eye regions' skin Gaussians may mix with
     /// (`dark_features`, method §7.7).
     hair_brightness: Vec<Option<f32>>,
+    /// Per source, its hair's mean chromaticity in display values
+    /// (`colour::hair_display_chromaticity`): what a Gaussian round the eyes
+    /// is unmixed against (`dark_features::skin_shares_by_colour`).
+    hair_display: Vec<Option<Vec3>>,
     /// `[source]` → the exposure where each Gaussian sits on its parent
     /// triangle of the source's neutral mesh.
     gaussian_exposures: Vec<Vec<Exposure>>,
@@ -270,6 +275,12 @@ impl Engine {
         let hair_brightness: Vec<Option<f32>> = (0..db.sources.len())
             .map(|f| dark_features::hair_brightness(hair[f]?, skin[f].as_ref()?))
             .collect();
+        let hair_display: Vec<Option<Vec3>> = (0..db.sources.len())
+            .map(|f| {
+                let indices = tables.region(Membership::Parent, f, Region::Hair);
+                hair_display_chromaticity(&db.sources[f].gaussians, &seen[f], indices)
+            })
+            .collect();
         let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
             .into_par_iter()
             .map(|f| {
@@ -304,6 +315,7 @@ impl Engine {
             seen,
             lights,
             hair_brightness,
+            hair_display,
             gaussian_exposures,
             skin_gains: Mutex::new(HashMap::new()),
             vertex_triangles,
@@ -622,10 +634,17 @@ impl Engine {
                                     if let Some(share) = self.tellable_skin_share(source, i) {
                                         let likeness = semantic_skin_likeness(rgb, region, &from)
                                             .unwrap_or(0.0);
+                                        let by_share = match self.skin_shares_by_colour(source, i) {
+                                            Some(shares) => gain_by_channel_share(
+                                                whole_skin_gain_shared(rgb, &from, &to, 1.0),
+                                                shares,
+                                            ),
+                                            None => whole_skin_gain_shared(rgb, &from, &to, share),
+                                        };
                                         return dark_features::darkening_gain(
                                             likeness,
                                             semantic_skin_gain_shared(rgb, region, &from, &to, 1.0),
-                                            whole_skin_gain_shared(rgb, &from, &to, share),
+                                            by_share,
                                         );
                                     }
                                 }
@@ -692,6 +711,20 @@ impl Engine {
     /// ([`Engine::tellable_skin_share`]).
     fn skin_share_of_brightness(&self, f: usize, i: usize) -> f32 {
         self.tellable_skin_share(f, i).unwrap_or(1.0)
+    }
+
+    /// Per channel, the share of Gaussian `i` of source `f`'s colour that is
+    /// skin, unmixed into the skin its light predicts there and its hair
+    /// (`dark_features::skin_shares_by_colour`); `None` where the source has
+    /// no hair or light, or its hair and skin are too alike to unmix.
+    fn skin_shares_by_colour(&self, f: usize, i: usize) -> Option<Vec3> {
+        let hair = self.hair_display[f]?;
+        let skin = self.lights[f]
+            .as_ref()?
+            .brightness(self.gaussian_exposures[f][i])
+            .clamp(Vec3::ZERO, Vec3::ONE);
+        let colour = self.seen[f][i].clamp(Vec3::ZERO, Vec3::ONE);
+        dark_features::skin_shares_by_colour(colour, skin, hair)
     }
 
     /// [`Engine::skin_share_of_brightness`] where it can be told
