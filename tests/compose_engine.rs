@@ -1861,8 +1861,8 @@ fn a_light_sources_brow_darkens_only_its_skin_share_on_a_darker_base() {
 /// Gaussian mixes what it covers — holds most of its green and blue from the
 /// skin but little of its red. Unmixed into the two colours, each channel
 /// moves by its own skin share: near the same mix with the dark skin. One
-/// share of brightness for all three channels (session 44) left it pale
-/// pink.
+/// share of brightness for all three channels (session 44) moved too
+/// little of the green and blue and left it a paler, less red brown.
 #[test]
 fn an_auburn_brow_keeps_its_hue_on_a_darker_base() {
     let (fair, dark) = (FAIR, DARK);
@@ -1886,7 +1886,7 @@ fn an_auburn_brow_keeps_its_hue_on_a_darker_base() {
     }
     let redness = |c: Vec3| c.x / c.y;
     assert!(
-        (redness(brows) - redness(ideal)).abs() < 0.1 * redness(ideal),
+        (redness(brows) - redness(ideal)).abs() < 0.05 * redness(ideal),
         "the brow's red over green {} against the mix's {}",
         redness(brows),
         redness(ideal)

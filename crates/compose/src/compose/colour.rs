@@ -255,9 +255,9 @@ pub fn hair_colour(set: &GaussianSet, colours: &[Vec3], indices: &[u32]) -> Opti
 /// set (a source's hair region): the direction a Gaussian round the eyes is
 /// unmixed along (`dark_features::skin_shares_by_colour`). A mean of
 /// directions rather than of colours, so the hair's brightest strands and
-/// the skin they let through weigh no more than the rest (session 45: ada's
-/// brows on nuru read 0.01 dB worse from the mean colour). `None` where
-/// nothing is left to weigh.
+/// the skin they let through weigh no more than the rest (session 45:
+/// dark-base-light-eyes read 0.013 dB worse without the seam fit from the
+/// mean colour). `None` where nothing is left to weigh.
 pub fn hair_display_chromaticity(
     set: &GaussianSet,
     colours: &[Vec3],
@@ -297,6 +297,8 @@ fn opacity_weighted_mean(
 
 /// A linear colour over the sum of its channels: what shading (a common
 /// factor) leaves alone. `None` for colours too dark or broken to have one.
+/// Also taken of display colours ([`hair_display_chromaticity`]), where it
+/// is only a direction: a common factor there is not shading.
 pub fn chromaticity(linear: Vec3) -> Option<Vec3> {
     let sum = linear.x + linear.y + linear.z;
     (sum > CHROMATICITY_FLOOR && linear.is_finite()).then(|| linear / sum)
@@ -913,7 +915,7 @@ mod tests {
             // The white in the lid's shade, at the skin's lightness with
             // under half its chroma, is no skin either (it was 0.43); nor
             // is a trained white blurred with its lid to 0.55 of the
-            // skin's chroma (it was 0.85 before session 45).
+            // skin's chroma (about 0.45 before session 45).
             for share in [0.45, 0.55] {
                 let shaded = srgb_to_lab(light) * Vec3::new(1.0, share, share);
                 let white = semantic_skin_likeness(lab_to_srgb(shaded), region, &stats(light));
@@ -1102,21 +1104,34 @@ mod tests {
     #[test]
     fn the_hairs_display_chromaticity_weighs_each_gaussian_by_opacity_alone() {
         let mut set = GaussianSet::with_degree(0);
-        for _ in 0..3 {
+        // Opacities 0.5, 0.75, 0.5 and 0.5.
+        for logit in [0.0, 3f32.ln(), 0.0, 0.0] {
             set.binding.push(0);
             set.position.push(Vec3::ZERO);
             set.rotation.push(glam::Quat::IDENTITY);
             set.log_scale.push(Vec3::ZERO);
-            set.opacity_logit.push(0.0);
+            set.opacity_logit.push(logit);
             set.sh.extend([0.0; 3]);
         }
-        // A bright strand weighs no more than a dark one of the same hue.
-        let auburn = Vec3::new(0.45, 0.20, 0.10);
-        let colours = [auburn, auburn * 0.2, Vec3::NAN];
-        let got = hair_display_chromaticity(&set, &colours, &[0, 1, 2]).unwrap();
-        let want = auburn / (auburn.x + auburn.y + auburn.z);
+        let direction = |c: Vec3| c / (c.x + c.y + c.z);
+        // A bright strand weighs no more than a dark one of the same hue; a
+        // broken colour is left out.
+        let (auburn, grey) = (Vec3::new(0.45, 0.20, 0.10), Vec3::splat(0.3));
+        let colours = [auburn, grey, auburn * 0.2, Vec3::NAN];
+        let got = hair_display_chromaticity(&set, &colours, &[0, 2, 3]).unwrap();
+        assert!(
+            (got - direction(auburn)).abs().max_element() < 1e-5,
+            "{got}"
+        );
+        // Each Gaussian weighs by its opacity: 0.5 auburn, 0.75 grey.
+        let got = hair_display_chromaticity(&set, &colours, &[0, 1]).unwrap();
+        let want = (0.5 * direction(auburn) + 0.75 * direction(grey)) / 1.25;
+        assert!((got - want).abs().max_element() < 1e-5, "{got} {want}");
+        // The linear mean weighs the same way.
+        let got = hair_colour(&set, &colours, &[0, 1]).unwrap();
+        let want = (0.5 * srgb_to_linear(auburn) + 0.75 * srgb_to_linear(grey)) / 1.25;
         assert!((got - want).abs().max_element() < 1e-5, "{got} {want}");
         assert_eq!(hair_display_chromaticity(&set, &colours, &[]), None);
-        assert_eq!(hair_display_chromaticity(&set, &colours, &[2]), None);
+        assert_eq!(hair_display_chromaticity(&set, &colours, &[3]), None);
     }
 }

@@ -1,7 +1,8 @@
 //! Dark features — brows, lashes, hair, stubble — mixed into skin Gaussians
 //! (docs/method.md §7.7's last bullets and §7.11): how much of a Gaussian's
 //! colour and of its area is skin, by its brightness against the source's
-//! fitted light and the brightness of its hair. A brightening transfer moves
+//! fitted light and the brightness of its hair, or, where the hair's hue
+//! tells it from the skin, by the colour itself. A brightening transfer moves
 //! only the skin's share round the eyes and on the hairline, a darkening one
 //! round the eyes where the likeness calls a colour no skin; the base's skin
 //! stands in only for the skin's area on the neck.
@@ -10,7 +11,7 @@
 //! transfer scales its colour by the ratio of the two skins' tones, which
 //! from a dark source to a light base is 2-3 per channel in display terms:
 //! the brow's share of the colour is scaled with the skin's and the brow
-//! comes out pale. In linear light a colour c mixing the source's skin S
+//! comes out pale. Modelled in linear light, a colour c mixing the source's skin S
 //! (a share 1 − k) with a feature F (a share k) should become
 //! c + (1 − k)(S' − S) for the base's skin S': only the skin's share moves.
 //! With r = c / S and h = F / S (brightnesses relative to the skin at the
@@ -20,10 +21,12 @@
 //! and black by the skin's ratio is exact — and a colour as bright as skin
 //! gives t = 1 too; a colour as dark as the feature gives t = 0.
 //!
-//! Where the hair differs from the skin in hue, a darkening transfer round
-//! the eyes reads the share per channel instead, by unmixing the colour into
-//! the two in display values ([`skin_shares_by_colour`]): a light skin is
-//! most of a brow's green and blue but little of its red.
+//! Where the hair differs from the skin in hue ([`hue_tells_apart`]), a
+//! darkening transfer round the eyes reads the share per channel instead,
+//! by unmixing the colour into the two ([`skin_shares_by_colour`]) in
+//! display values — the space a trained Gaussian's colour mixes what it
+//! covers in, which the linear model above does not follow: a light skin
+//! is most of a brow's green and blue but a third of its red.
 
 use glam::Vec3;
 
@@ -77,8 +80,9 @@ pub fn holds_stubble(region: Region) -> bool {
 /// The gain of a colour round the eyes under a *darkening* transfer (a
 /// lighter source onto a darker base; method §7.7, session 44): the
 /// likeness's own gain `by_likeness` where the likeness calls the colour
-/// skin, the whole transfer taken the colour's skin share of brightness
-/// (`by_share`) where it calls it a feature, mixed by the likeness
+/// skin, the whole transfer taken the colour's skin share (`by_share`: of
+/// brightness, or per channel by [`skin_shares_by_colour`] since session
+/// 45) where it calls it a feature, mixed by the likeness
 /// `likeness` (0 to 1; NaN counts as 0) in between. A light source's brow
 /// is a mix of its light skin and its hair: the likeness calls it no skin
 /// and leaves it as it was, so the light skin in it stayed light on the
@@ -164,19 +168,21 @@ pub fn hair_brightness(hair: Vec3, skin: &SkinStats) -> Option<f32> {
 /// a·skin + b·hair channel by channel (method §7.7, session 45). A
 /// Gaussian's colour is a mix of what it covers in *display* values, the
 /// space its training and the rasteriser blend in, and a light source's
-/// brow on its own head is half its skin in the green and blue but a
-/// quarter in the red; one share of brightness for all three left ada's
-/// brows pale pink on nuru where the truth has them auburn. Zero where the
+/// brow on its own head is a quarter its skin: most of its green and blue
+/// but a third of its red. One share of brightness for all three left
+/// ada's brows pale on nuru where the truth has them auburn. Zero where the
 /// colour lies past the hair from the skin (a ≤ 0), one where it lies past
-/// the skin from the hair (b < 0: skin lit brighter, or a white); `None`
-/// where skin and hair point too nearly the same way to tell apart
-/// ([`UNMIX_MIN_SINE2`]) or a value is broken.
+/// the skin from the hair (b < 0: skin lit brighter, a white, or a black
+/// lash mixed into skin — scaling a mix of skin and black by the skin's
+/// ratio is exact); `None` where skin and hair point the same way (whether
+/// they are far enough apart to unmix is [`hue_tells_apart`]'s, once per
+/// source) or a value is broken.
 pub fn skin_shares_by_colour(colour: Vec3, skin: Vec3, hair: Vec3) -> Option<Vec3> {
     let (ss, sh, hh) = (skin.dot(skin), skin.dot(hair), hair.dot(hair));
     let det = ss * hh - sh * sh;
     // det / (|skin|²·|hair|²) is the squared sine of their angle; NaN fails.
-    let apart = det > UNMIX_MIN_SINE2 * ss * hh;
-    if !apart || !colour.is_finite() {
+    let solvable = det > 1e-6 * ss * hh;
+    if !solvable || !colour.is_finite() {
         return None;
     }
     let (sc, hc) = (skin.dot(colour), hair.dot(colour));
@@ -198,11 +204,24 @@ pub fn skin_shares_by_colour(colour: Vec3, skin: Vec3, hair: Vec3) -> Option<Vec
     })))
 }
 
+/// Whether a source's skin and hair differ enough in hue, as display
+/// colours (its skin tone and its hair's mean display chromaticity), for
+/// [`skin_shares_by_colour`] to unmix its colours into them: the squared
+/// sine of their angle at least [`UNMIX_MIN_SINE2`]. Decided once per
+/// source, so that its Gaussians, whose skin the light predicts each in
+/// its own shade, do not flip between two rules. False for broken values.
+pub fn hue_tells_apart(skin: Vec3, hair: Vec3) -> bool {
+    let (ss, sh, hh) = (skin.dot(skin), skin.dot(hair), hair.dot(hair));
+    // NaN fails.
+    ss * hh - sh * sh >= UNMIX_MIN_SINE2 * ss * hh && ss * hh > 0.0
+}
+
 /// The least squared sine of the angle between a skin's and a hair's
-/// display colours for [`skin_shares_by_colour`] to unmix a colour into
-/// them (about 8°): nearer, the two shares trade places with noise (kemi's
-/// brown hair lies 0.044 from her skin in chromaticity; ada's auburn, 0.1
-/// in squared sine, is well apart).
+/// display colours for [`hue_tells_apart`] (about 8°): nearer, the two
+/// shares trade places with noise. Ada's auburn hair lies at 0.096 from
+/// her skin tone (display (0.46, 0.25, 0.16) against about (0.77, 0.67,
+/// 0.60)); kemi's brown hair lies 0.044 from her skin in linear
+/// chromaticity (method §7.7), far nearer.
 pub const UNMIX_MIN_SINE2: f32 = 0.02;
 
 /// How bright a Gaussian of display colour `seen` is relative to the
@@ -508,7 +527,10 @@ mod tests {
         let skin = Vec3::new(0.53, 0.36, 0.25);
         // Brown hair a darker version of the skin: nothing to tell them by.
         let brown = skin * 0.4 + Vec3::new(0.0, 0.005, 0.0);
-        assert_eq!(skin_shares_by_colour(skin * 0.7, skin, brown), None);
+        assert!(!hue_tells_apart(skin, brown));
+        assert!(hue_tells_apart(skin, Vec3::new(0.45, 0.20, 0.10)));
+        assert!(!hue_tells_apart(skin, Vec3::NAN));
+        assert!(!hue_tells_apart(Vec3::ZERO, brown));
         assert_eq!(skin_shares_by_colour(skin, skin, skin), None);
         let hair = Vec3::new(0.1, 0.08, 0.08);
         assert_eq!(skin_shares_by_colour(Vec3::NAN, skin, hair), None);

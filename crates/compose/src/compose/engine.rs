@@ -16,9 +16,9 @@ use super::blend::{Blender, SparseRhs};
 use super::clothing::{self, ClothingMean};
 use super::colour::{
     apply_gain, chromaticity, colour_weight, gain_by_channel_share, hair_colour,
-    hair_display_chromaticity, seen_colours, semantic_skin_gain_shared, semantic_skin_likeness,
-    skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour, whole_skin_gain_shared,
-    SkinStats, SKIN_REFERENCE_REGIONS,
+    hair_display_chromaticity, lab_to_srgb, seen_colours, semantic_skin_gain_shared,
+    semantic_skin_likeness, skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour,
+    whole_skin_gain_shared, SkinStats, SKIN_REFERENCE_REGIONS,
 };
 use super::copying::{copy_own, relight_sh, CopyOwn, OpacityEdit, OwnBlock};
 use super::correction::{Correction, SharedGains};
@@ -66,8 +66,10 @@ pub struct Engine {
     hair_brightness: Vec<Option<f32>>,
     /// Per source, its hair's mean chromaticity in display values
     /// (`colour::hair_display_chromaticity`): what a Gaussian round the eyes
-    /// is unmixed against (`dark_features::skin_shares_by_colour`).
-    hair_display: Vec<Option<Vec3>>,
+    /// is unmixed against (`dark_features::skin_shares_by_colour`); `None`
+    /// where the hair's hue does not tell it from the skin tone
+    /// (`dark_features::hue_tells_apart`).
+    hair_display_chromaticity: Vec<Option<Vec3>>,
     /// `[source]` → the exposure where each Gaussian sits on its parent
     /// triangle of the source's neutral mesh.
     gaussian_exposures: Vec<Vec<Exposure>>,
@@ -259,12 +261,19 @@ impl Engine {
             .iter()
             .map(|source| seen_colours(&source.gaussians))
             .collect();
-        let hair: Vec<Option<Vec3>> = (0..db.sources.len())
-            .map(|f| {
-                let indices = tables.region(Membership::Parent, f, Region::Hair);
-                hair_colour(&db.sources[f].gaussians, &seen[f], indices)
-            })
-            .collect();
+        let (hair, hair_chromaticity): (Vec<Option<Vec3>>, Vec<Option<Vec3>>) =
+            (0..db.sources.len())
+                .map(|f| {
+                    let (set, indices) = (
+                        &db.sources[f].gaussians,
+                        tables.region(Membership::Parent, f, Region::Hair),
+                    );
+                    (
+                        hair_colour(set, &seen[f], indices),
+                        hair_display_chromaticity(set, &seen[f], indices),
+                    )
+                })
+                .unzip();
         let skin: Vec<Option<SkinStats>> = (0..db.sources.len())
             .into_par_iter()
             .map(|f| {
@@ -275,10 +284,12 @@ impl Engine {
         let hair_brightness: Vec<Option<f32>> = (0..db.sources.len())
             .map(|f| dark_features::hair_brightness(hair[f]?, skin[f].as_ref()?))
             .collect();
-        let hair_display: Vec<Option<Vec3>> = (0..db.sources.len())
-            .map(|f| {
-                let indices = tables.region(Membership::Parent, f, Region::Hair);
-                hair_display_chromaticity(&db.sources[f].gaussians, &seen[f], indices)
+        let hair_display_chromaticity: Vec<Option<Vec3>> = hair_chromaticity
+            .iter()
+            .zip(&skin)
+            .map(|(&hair, skin)| {
+                let tone = lab_to_srgb(skin.as_ref()?.tone);
+                hair.filter(|&h| dark_features::hue_tells_apart(tone, h))
             })
             .collect();
         let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
@@ -315,7 +326,7 @@ impl Engine {
             seen,
             lights,
             hair_brightness,
-            hair_display,
+            hair_display_chromaticity,
             gaussian_exposures,
             skin_gains: Mutex::new(HashMap::new()),
             vertex_triangles,
@@ -634,7 +645,11 @@ impl Engine {
                                     if let Some(share) = self.tellable_skin_share(source, i) {
                                         let likeness = semantic_skin_likeness(rgb, region, &from)
                                             .unwrap_or(0.0);
-                                        let by_share = match self.skin_shares_by_colour(source, i) {
+                                        let by_share = match self.skin_shares_in_colour(source, i) {
+                                            // The mixed colour's own transfer
+                                            // measured better than that of
+                                            // the skin the light predicts
+                                            // (method §7.7, session 45).
                                             Some(shares) => gain_by_channel_share(
                                                 whole_skin_gain_shared(rgb, &from, &to, 1.0),
                                                 shares,
@@ -716,9 +731,9 @@ impl Engine {
     /// Per channel, the share of Gaussian `i` of source `f`'s colour that is
     /// skin, unmixed into the skin its light predicts there and its hair
     /// (`dark_features::skin_shares_by_colour`); `None` where the source has
-    /// no hair or light, or its hair and skin are too alike to unmix.
-    fn skin_shares_by_colour(&self, f: usize, i: usize) -> Option<Vec3> {
-        let hair = self.hair_display[f]?;
+    /// no hair or light, or its hair's hue does not tell it from its skin.
+    fn skin_shares_in_colour(&self, f: usize, i: usize) -> Option<Vec3> {
+        let hair = self.hair_display_chromaticity[f]?;
         let skin = self.lights[f]
             .as_ref()?
             .brightness(self.gaussian_exposures[f][i])
