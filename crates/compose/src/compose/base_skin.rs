@@ -8,10 +8,10 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::colour::{semantic_skin_likeness, SkinStats};
 use super::dark_features::{holds_dark_features, holds_stubble};
 use super::recipe::ResolvedRecipe;
 use super::selection::Csr;
+use super::skin_transfer::{semantic_skin_likeness, SkinStats};
 use crate::avatar::binding::triangle_frame;
 use crate::model::geometry::smoothstep;
 use crate::model::regions::Region;

@@ -30,8 +30,9 @@
 
 use glam::Vec3;
 
-use super::colour::{lab_to_srgb, srgb_to_linear, SkinStats};
+use super::colour::{lab_to_srgb, srgb_to_linear};
 use super::shading::{BakedLight, Exposure};
+use super::skin_transfer::SkinStats;
 use crate::model::geometry::smoothstep;
 use crate::model::regions::Region;
 
@@ -178,9 +179,8 @@ pub fn hair_brightness(hair: Vec3, skin: &SkinStats) -> Option<f32> {
 /// they are far enough apart to unmix is [`hue_tells_apart`]'s, once per
 /// source) or a value is broken.
 pub fn skin_shares_by_colour(colour: Vec3, skin: Vec3, hair: Vec3) -> Option<Vec3> {
-    let (ss, sh, hh) = (skin.dot(skin), skin.dot(hair), hair.dot(hair));
-    let det = ss * hh - sh * sh;
-    // det / (|skin|²·|hair|²) is the squared sine of their angle; NaN fails.
+    let Gram { ss, sh, hh, det } = Gram::of(skin, hair);
+    // NaN fails.
     let solvable = det > 1e-6 * ss * hh;
     if !solvable || !colour.is_finite() {
         return None;
@@ -211,9 +211,31 @@ pub fn skin_shares_by_colour(colour: Vec3, skin: Vec3, hair: Vec3) -> Option<Vec
 /// source, so that its Gaussians, whose skin the light predicts each in
 /// its own shade, do not flip between two rules. False for broken values.
 pub fn hue_tells_apart(skin: Vec3, hair: Vec3) -> bool {
-    let (ss, sh, hh) = (skin.dot(skin), skin.dot(hair), hair.dot(hair));
+    let Gram { ss, hh, det, .. } = Gram::of(skin, hair);
     // NaN fails.
-    ss * hh - sh * sh >= UNMIX_MIN_SINE2 * ss * hh && ss * hh > 0.0
+    det >= UNMIX_MIN_SINE2 * ss * hh && ss * hh > 0.0
+}
+
+/// The dot products of a skin's and a hair's colours with themselves and
+/// each other, and their determinant: det / (ss·hh) is the squared sine of
+/// the angle between the two.
+struct Gram {
+    ss: f32,
+    sh: f32,
+    hh: f32,
+    det: f32,
+}
+
+impl Gram {
+    fn of(skin: Vec3, hair: Vec3) -> Self {
+        let (ss, sh, hh) = (skin.dot(skin), skin.dot(hair), hair.dot(hair));
+        Self {
+            ss,
+            sh,
+            hh,
+            det: ss * hh - sh * sh,
+        }
+    }
 }
 
 /// The least squared sine of the angle between a skin's and a hair's
@@ -306,7 +328,7 @@ mod tests {
 
     #[test]
     fn a_shared_transfer_goes_that_share_of_the_way_in_linear_light() {
-        use crate::compose::colour::{semantic_skin_gain, semantic_skin_gain_shared};
+        use crate::compose::skin_transfer::{semantic_skin_gain, semantic_skin_gain_shared};
         let at = |rgb: Vec3| SkinStats::at(srgb_to_lab(rgb));
         let (from, to) = (
             at(Vec3::new(0.45, 0.30, 0.21)),

@@ -14,12 +14,7 @@ use super::base_skin::{
 };
 use super::blend::{Blender, SparseRhs};
 use super::clothing::{self, ClothingMean};
-use super::colour::{
-    apply_gain, chromaticity, colour_weight, gain_by_channel_share, hair_colour,
-    hair_display_chromaticity, lab_to_srgb, seen_colours, semantic_skin_gain_shared,
-    semantic_skin_likeness, skin_stats, skin_transfer_gain, thesis_gain, weighted_mean_colour,
-    whole_skin_gain_shared, SkinStats, SKIN_REFERENCE_REGIONS,
-};
+use super::colour::{apply_gain, colour_weight, thesis_gain, weighted_mean_colour};
 use super::copying::{copy_own, relight_sh, CopyOwn, OpacityEdit, OwnBlock};
 use super::correction::{Correction, SharedGains};
 use super::dark_features;
@@ -32,8 +27,10 @@ use super::reshape::{note_anchor, Anchored, ReshapeSource, Reshaping, SourceAnch
 use super::seam_colours::{SeamColours, SourceTables};
 use super::seams::{limit_reach, SeamNeighbours};
 use super::selection::{Csr, SelectionTables};
-use super::shading::{source_light, vertex_exposures, BakedLight, Exposure};
+use super::shading::{vertex_exposures, BakedLight, Exposure};
+use super::skin_transfer::{semantic_skin_likeness, skin_transfer_gain, SkinStats};
 use super::smoothing::{own_share, BorderTables};
+use super::source_colours::SourceColours;
 use crate::avatar::binding::{triangle_frames_into, TriangleFrame};
 use crate::avatar::database::Database;
 use crate::avatar::gaussians::GaussianSet;
@@ -53,26 +50,8 @@ pub struct Engine {
     region_rhs: Vec<Vec<SparseRhs>>,
     /// `[source][region]` → thesis-weighted mean colour.
     mean_colour: [Vec<Vec<Option<Vec3>>>; 2],
-    /// Skin statistics per source.
-    skin: Vec<Option<SkinStats>>,
-    /// `[source]` → each Gaussian's colour as the capture's cameras saw it,
-    /// what its skin likeness and colour transfer judge it by.
-    seen: Vec<Vec<Vec3>>,
-    /// The light baked into each source's colours, fitted to its skin.
-    lights: Vec<Option<BakedLight>>,
-    /// Per source, its hair's brightness relative to its skin tone: the
-    /// darkest brows and lashes its eye regions' skin Gaussians may mix with
-    /// (`dark_features`, method §7.7).
-    hair_brightness: Vec<Option<f32>>,
-    /// Per source, its hair's mean chromaticity in display values
-    /// (`colour::hair_display_chromaticity`): what a Gaussian round the eyes
-    /// is unmixed against (`dark_features::skin_shares_by_colour`); `None`
-    /// where the hair's hue does not tell it from the skin tone
-    /// (`dark_features::hue_tells_apart`).
-    hair_display_chromaticity: Vec<Option<Vec3>>,
-    /// `[source]` → the exposure where each Gaussian sits on its parent
-    /// triangle of the source's neutral mesh.
-    gaussian_exposures: Vec<Vec<Exposure>>,
+    /// What each source's colours say about its skin, hair and light.
+    colours: SourceColours,
     /// Per-Gaussian skin-transfer gains by (source, colour reference), computed on
     /// first use: the CIELAB transfer costs ~100 ns a Gaussian, applying a gain ~5.
     skin_gains: Mutex<HashMap<GainKey, SharedGains>>,
@@ -221,17 +200,8 @@ impl Engine {
                 })
                 .collect()
         });
-        // Each source's Gaussians of the regions its skin is judged by.
-        let skin_indices: Vec<Vec<u32>> = (0..db.sources.len())
-            .map(|f| {
-                SKIN_REFERENCE_REGIONS
-                    .iter()
-                    .flat_map(|&r| tables.region(Membership::Parent, f, r).iter().copied())
-                    .collect()
-            })
-            .collect();
-        // Where each Gaussian sits on its parent triangle, and the exposure
-        // there: what its colour's baked light depends on.
+        // Where each Gaussian sits on its parent triangle: where its
+        // colour's baked light is read.
         let parent_placements: Vec<Vec<[f32; 3]>> = (0..db.sources.len())
             .into_par_iter()
             .map(|f| {
@@ -239,71 +209,7 @@ impl Engine {
                 placements(&db.model, set, &neutrals[f], &set.binding)
             })
             .collect();
-        let gaussian_exposures: Vec<Vec<Exposure>> = (0..db.sources.len())
-            .into_par_iter()
-            .map(|f| {
-                let vertex = vertex_exposures(&neutrals[f], &db.model.triangles);
-                let set = &db.sources[f].gaussians;
-                set.binding
-                    .iter()
-                    .zip(&parent_placements[f])
-                    .map(|(&t, &bary)| {
-                        db.model
-                            .triangles
-                            .get(t as usize)
-                            .map_or_else(Exposure::default, |&tri| Exposure::at(&vertex, tri, bary))
-                    })
-                    .collect()
-            })
-            .collect();
-        let seen: Vec<Vec<Vec3>> = db
-            .sources
-            .iter()
-            .map(|source| seen_colours(&source.gaussians))
-            .collect();
-        let (hair, hair_chromaticity): (Vec<Option<Vec3>>, Vec<Option<Vec3>>) =
-            (0..db.sources.len())
-                .map(|f| {
-                    let (set, indices) = (
-                        &db.sources[f].gaussians,
-                        tables.region(Membership::Parent, f, Region::Hair),
-                    );
-                    (
-                        hair_colour(set, &seen[f], indices),
-                        hair_display_chromaticity(set, &seen[f], indices),
-                    )
-                })
-                .unzip();
-        let skin: Vec<Option<SkinStats>> = (0..db.sources.len())
-            .into_par_iter()
-            .map(|f| {
-                skin_stats(&db.sources[f].gaussians, &seen[f], &skin_indices[f])
-                    .map(|s| s.beside_hair(hair[f].and_then(chromaticity)))
-            })
-            .collect();
-        let hair_brightness: Vec<Option<f32>> = (0..db.sources.len())
-            .map(|f| dark_features::hair_brightness(hair[f]?, skin[f].as_ref()?))
-            .collect();
-        let hair_display_chromaticity: Vec<Option<Vec3>> = hair_chromaticity
-            .iter()
-            .zip(&skin)
-            .map(|(&hair, skin)| {
-                let tone = lab_to_srgb(skin.as_ref()?.tone);
-                hair.filter(|&h| dark_features::hue_tells_apart(tone, h))
-            })
-            .collect();
-        let lights: Vec<Option<BakedLight>> = (0..db.sources.len())
-            .into_par_iter()
-            .map(|f| {
-                let set = &db.sources[f].gaussians;
-                source_light(
-                    set,
-                    &gaussian_exposures[f],
-                    &skin_indices[f],
-                    skin[f].as_ref(),
-                )
-            })
-            .collect();
+        let colours = SourceColours::new(&db, &tables, &neutrals, &parent_placements);
         let vertex_triangles = Csr::vertex_triangles(db.model.vertex_count(), &db.model.triangles);
         let placements = parent_placements
             .into_iter()
@@ -322,12 +228,7 @@ impl Engine {
             neutrals,
             region_rhs,
             mean_colour,
-            skin,
-            seen,
-            lights,
-            hair_brightness,
-            hair_display_chromaticity,
-            gaussian_exposures,
+            colours,
             skin_gains: Mutex::new(HashMap::new()),
             vertex_triangles,
             placements,
@@ -353,7 +254,7 @@ impl Engine {
     /// The light baked into a source's colours, fitted to its skin (method
     /// §7.10); None where its skin could not tell one.
     pub fn light(&self, source: usize) -> Option<&BakedLight> {
-        self.lights.get(source)?.as_ref()
+        self.colours.light(source)
     }
 
     /// Neutral mesh of a source.
@@ -605,7 +506,7 @@ impl Engine {
         reference: usize,
         semantic: Option<Membership>,
     ) -> Option<SharedGains> {
-        let (from, to) = (self.skin[source]?, self.skin[reference]?);
+        let (from, to) = (*self.colours.skin(source)?, *self.colours.skin(reference)?);
         // Built before the lock: its first build runs on the thread pool,
         // whose jobs must not wait on a lock this thread holds.
         self.colour_weights_of(source);
@@ -613,66 +514,28 @@ impl Engine {
         let gains = cache
             .entry((source, reference, semantic))
             .or_insert_with(|| {
-                let set = &self.db.sources[source].gaussians;
+                let count = self.db.sources[source].gaussians.len();
                 let regions = &self.db.model.triangle_regions;
-                let colours = &self.seen[source];
+                let colours = self.colours.seen(source);
                 let brightens = dark_features::transfer_brightens(&from, &to);
                 let clothing = semantic.map(|m| self.clothing_of(source, m, &from));
-                let gains = (0..set.len())
+                let gains = (0..count)
                     .into_par_iter()
-                    .map(|i| {
-                        let rgb = colours[i];
-                        match semantic {
-                            Some(m) => {
-                                let t = self.tables.counted_triangles(m, source)[i];
-                                let region = regions[t as usize];
-                                let beside_clothing = clothing
-                                    .as_ref()
-                                    .and_then(|c| c[region.index()])
-                                    .and_then(|c| self.skin_share_beside(source, i, c));
-                                if let Some(share) = beside_clothing {
-                                    return whole_skin_gain_shared(rgb, &from, &to, share);
-                                }
-                                if brightens && dark_features::moved_by_brightness_share(region) {
-                                    if let Some(share) = self.tellable_skin_share(source, i) {
-                                        let likeness = semantic_skin_likeness(rgb, region, &from)
-                                            .unwrap_or(0.0);
-                                        let share = dark_features::hairline_share(likeness, share);
-                                        return whole_skin_gain_shared(rgb, &from, &to, share);
-                                    }
-                                }
-                                if !brightens && dark_features::holds_dark_features(region) {
-                                    if let Some(share) = self.tellable_skin_share(source, i) {
-                                        let likeness = semantic_skin_likeness(rgb, region, &from)
-                                            .unwrap_or(0.0);
-                                        let by_share = match self.skin_shares_in_colour(source, i) {
-                                            // The mixed colour's own transfer
-                                            // measured better than that of
-                                            // the skin the light predicts
-                                            // (method §7.7, session 45).
-                                            Some(shares) => gain_by_channel_share(
-                                                whole_skin_gain_shared(rgb, &from, &to, 1.0),
-                                                shares,
-                                            ),
-                                            None => whole_skin_gain_shared(rgb, &from, &to, share),
-                                        };
-                                        return dark_features::darkening_gain(
-                                            likeness,
-                                            semantic_skin_gain_shared(rgb, region, &from, &to, 1.0),
-                                            by_share,
-                                        );
-                                    }
-                                }
-                                let share =
-                                    if brightens && dark_features::holds_dark_features(region) {
-                                        self.skin_share_of_brightness(source, i)
-                                    } else {
-                                        1.0
-                                    };
-                                semantic_skin_gain_shared(rgb, region, &from, &to, share)
-                            }
-                            None => skin_transfer_gain(rgb, &from, &to),
+                    .map(|i| match semantic {
+                        Some(m) => {
+                            let t = self.tables.counted_triangles(m, source)[i];
+                            let region = regions[t as usize];
+                            let clothing = clothing.as_ref().and_then(|c| c[region.index()]);
+                            self.colours.semantic_gain(
+                                source,
+                                i,
+                                region,
+                                (&from, &to),
+                                brightens,
+                                clothing,
+                            )
                         }
+                        None => skin_transfer_gain(colours[i], &from, &to),
                     })
                     .collect();
                 Arc::new(gains)
@@ -686,7 +549,7 @@ impl Engine {
     /// clothing ([`clothing::holds_clothing`]) or show none.
     fn clothing_of(&self, f: usize, m: Membership, skin: &SkinStats) -> Vec<Option<Vec3>> {
         let mut means = vec![ClothingMean::default(); Region::COUNT];
-        let (counted, colours) = (self.tables.counted_triangles(m, f), &self.seen[f]);
+        let (counted, colours) = (self.tables.counted_triangles(m, f), self.colours.seen(f));
         let weights = self.colour_weights_of(f);
         for (i, &t) in counted.iter().enumerate() {
             let region = self.db.model.triangle_regions[t as usize];
@@ -696,69 +559,6 @@ impl Engine {
             }
         }
         means.iter().map(ClothingMean::mean).collect()
-    }
-
-    /// The share of Gaussian `i` of source `f`'s brightness that is skin
-    /// where it mixes skin with clothing of mean linear colour `clothing`
-    /// (the `clothing` module), by the skin's colour the source's light
-    /// shows there; `None` where the source has no light or the colour is
-    /// no such mix.
-    fn skin_share_beside(&self, f: usize, i: usize, clothing: Vec3) -> Option<f32> {
-        let skin = self.lights[f]
-            .as_ref()?
-            .brightness(self.gaussian_exposures[f][i]);
-        clothing::skin_share_beside_clothing(self.seen[f][i], skin, clothing)
-    }
-
-    /// Whether the skin transfer from source `from` to source `to` brightens
-    /// (`dark_features::transfer_brightens`); false where either has no
-    /// skin statistics.
-    fn transfer_brightens(&self, from: usize, to: usize) -> bool {
-        match (&self.skin[from], &self.skin[to]) {
-            (Some(from), Some(to)) => dark_features::transfer_brightens(from, to),
-            _ => false,
-        }
-    }
-
-    /// The share of Gaussian `i` of source `f`'s brightness that is skin,
-    /// where a brow or lash of the source's hair's brightness may be mixed
-    /// in (`dark_features`); one where that cannot be told
-    /// ([`Engine::tellable_skin_share`]).
-    fn skin_share_of_brightness(&self, f: usize, i: usize) -> f32 {
-        self.tellable_skin_share(f, i).unwrap_or(1.0)
-    }
-
-    /// Per channel, the share of Gaussian `i` of source `f`'s colour that is
-    /// skin, unmixed into the skin its light predicts there and its hair
-    /// (`dark_features::skin_shares_by_colour`); `None` where the source has
-    /// no hair or light, or its hair's hue does not tell it from its skin.
-    fn skin_shares_in_colour(&self, f: usize, i: usize) -> Option<Vec3> {
-        let hair = self.hair_display_chromaticity[f]?;
-        let skin = self.lights[f]
-            .as_ref()?
-            .brightness(self.gaussian_exposures[f][i])
-            .clamp(Vec3::ZERO, Vec3::ONE);
-        let colour = self.seen[f][i].clamp(Vec3::ZERO, Vec3::ONE);
-        dark_features::skin_shares_by_colour(colour, skin, hair)
-    }
-
-    /// [`Engine::skin_share_of_brightness`] where it can be told
-    /// ([`Engine::brightness_against_hair`]).
-    fn tellable_skin_share(&self, f: usize, i: usize) -> Option<f32> {
-        self.brightness_against_hair(f, i)
-            .map(|(r, h)| dark_features::skin_share_of_brightness(r, h))
-    }
-
-    /// Gaussian `i` of source `f`'s brightness relative to the skin where it
-    /// sits, by the source's light, and its hair's relative to its skin
-    /// tone (`dark_features`); `None` where the source has no hair, hair too
-    /// light to tell from its skin (`dark_features::is_tellable`), no light,
-    /// or a light that predicts black at the Gaussian's place.
-    fn brightness_against_hair(&self, f: usize, i: usize) -> Option<(f32, f32)> {
-        let feature = self.hair_brightness[f].filter(|&h| dark_features::is_tellable(h))?;
-        let at = self.gaussian_exposures[f][i];
-        let r = dark_features::relative_brightness(self.lights[f].as_ref()?, at, self.seen[f][i])?;
-        Some((r, feature))
     }
 
     /// The colour correction of Gaussians of source `f` bound in `region`.
@@ -837,7 +637,7 @@ impl Engine {
                 &self.db.model.triangle_regions,
                 |s| self.triangle_skin_of(s, membership),
                 Some((&composite.base_misfit, topology)),
-                |s| self.transfer_brightens(s, recipe.base),
+                |s| self.colours.transfer_brightens(s, recipe.base),
             ),
         });
         // Per region, the source's Gaussians counted for it; under `skin =
@@ -1007,12 +807,13 @@ impl Engine {
     fn skin_likeness_of(&self, source: usize, membership: Membership) -> &[f32] {
         self.skin_likeness[source][membership as usize].get_or_init(|| {
             skin_likeness(
-                &self.seen[source],
+                self.colours.seen(source),
                 self.tables.counted_triangles(membership, source),
                 &self.db.model.triangle_regions,
-                self.skin[source].as_ref(),
+                self.colours.skin(source),
                 |i| {
-                    self.brightness_against_hair(source, i)
+                    self.colours
+                        .brightness_against_hair(source, i)
                         .map(|(r, h)| dark_features::skin_share_of_area(r, h))
                 },
             )
@@ -1096,14 +897,16 @@ impl Engine {
         // Under `skin = "base"` the base shows in every swapped region.
         let base = (recipe.post.skin == SkinSource::Base).then_some(recipe.base);
         for f in recipe.gaussians.iter().copied().chain(base) {
-            let (Some(light), true) = (self.lights[f], gains[f].is_empty()) else {
+            let (Some(light), true) = (self.colours.light(f), gains[f].is_empty()) else {
                 continue;
             };
             let to: &Vec<Exposure> = target
                 .get_or_insert_with(|| vertex_exposures(&composite.neutral, &model.triangles));
             let bary = self.placements_of(Membership::Parent, f);
             let binding = &self.db.sources[f].gaussians.binding;
-            gains[f] = self.gaussian_exposures[f]
+            gains[f] = self
+                .colours
+                .exposures(f)
                 .par_iter()
                 .zip(bary)
                 .zip(binding)
@@ -1179,7 +982,7 @@ impl SourceTables for Engine {
     }
 
     fn seen(&self, source: usize) -> &[Vec3] {
-        &self.seen[source]
+        self.colours.seen(source)
     }
 
     fn triangles_around(&self, v: u32) -> &[u32] {

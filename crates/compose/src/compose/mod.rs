@@ -20,7 +20,9 @@ pub mod seam_colours;
 pub mod seams;
 pub mod selection;
 pub mod shading;
+pub mod skin_transfer;
 pub mod smoothing;
+pub mod source_colours;
 
 use crate::avatar::database::Database;
 use recipe::ResolvedRecipe;

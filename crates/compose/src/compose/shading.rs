@@ -12,7 +12,8 @@
 
 use glam::{Vec3, Vec4};
 
-use super::colour::{colour_weight, skin_likeness, srgb_to_lab, SkinStats};
+use super::colour::{colour_weight, srgb_to_lab};
+use super::skin_transfer::{skin_likeness, SkinStats};
 use crate::avatar::gaussians::{dc_to_rgb, GaussianSet};
 use crate::avatar::synthetic::vertex_normals;
 
