@@ -5,12 +5,13 @@
 //! triangles face another way and hollows deepen or open, but their colours
 //! still say how the source's own face was lit. Each source's light is
 //! estimated from its own skin — colour as a linear function of the surface
-//! normal and of how far the surface lies in a hollow, c = a + b·n + e·κ per
-//! channel (first-order irradiance and a cavity term; the skin's albedo is
-//! taken as even) — and every Gaussian moved onto a triangle whose exposure
-//! changed is relit by the ratio of that light there to the light it had.
+//! normal, darkened in proportion to how far the surface lies in a hollow,
+//! c = (a + b·n)·(1 + e·κ) per channel (first-order irradiance times an
+//! ambient occlusion; the skin's albedo is taken as even) — and every
+//! Gaussian moved onto a triangle whose exposure changed is relit by the
+//! ratio of that light there to the light it had.
 
-use glam::{Vec3, Vec4};
+use glam::{DVec3, Vec3, Vec4};
 
 use super::colour::{colour_weight, srgb_to_lab};
 use super::skin_transfer::{skin_likeness, SkinStats};
@@ -31,6 +32,19 @@ const MIN_SAMPLES: usize = 64;
 /// nothing (a surface without hollows): the fit leaves the term out.
 const MIN_CAVITY_VARIANCE: f64 = 1e-6;
 
+/// The most a unit of cavity depth may take of the light (e ≥ −0.9), so
+/// that a hollow keeps some: an occlusion that put a pit out entirely
+/// would relight by dividing by nothing.
+const MAX_OCCLUSION: f32 = 0.9;
+
+/// Rounds of the occlusion's alternating fit ([`BakedLight::fit`]) at most;
+/// it stops sooner once e moves by less than [`OCCLUSION_SETTLED`].
+const OCCLUSION_ROUNDS: usize = 50;
+
+/// A change of e (per channel, per unit of cavity depth) under which the
+/// occlusion's fit has settled.
+const OCCLUSION_SETTLED: f64 = 1e-7;
+
 /// What the light baked at a point of a surface depends on: which way the
 /// surface faces and how far it lies in a hollow.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -41,19 +55,21 @@ pub struct Exposure {
     pub cavity: f32,
 }
 
-/// The light a source's skin shows: per channel, brightness a + b·n + e·κ
-/// for a surface of unit normal n in a hollow of cavity depth κ (e ≤ 0:
-/// hollows are shaded by the rest of the face).
+/// The light a source's skin shows: per channel, brightness
+/// (a + b·n)·(1 + e·κ) for a surface of unit normal n in a hollow of cavity
+/// depth κ (−0.9 ≤ e ≤ 0: hollows are shaded by the rest of the face, and
+/// the shade takes a share of whatever light reaches them).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BakedLight {
     /// Per channel (r, g, b): (bx, by, bz, a).
     channels: [Vec4; 3],
-    /// Per channel: e, the brightness a unit of cavity depth takes away.
+    /// Per channel: e, the share of the light a unit of cavity depth takes
+    /// away.
     cavity: Vec3,
 }
 
 impl BakedLight {
-    /// The light of these per-channel (a, bx, by, bz) and cavity terms e.
+    /// The light of these per-channel (a, bx, by, bz) and occlusion terms e.
     pub fn new(channels: [[f64; 4]; 3], cavity: Vec3) -> BakedLight {
         BakedLight {
             channels: channels
@@ -68,15 +84,22 @@ impl BakedLight {
     /// light's, or leave a channel dark where they face. The cavity term is
     /// left out where the samples' hollows vary too little to tell it, or
     /// where they would come out brighter (no light does that).
+    ///
+    /// First the weighted least squares of c ≈ a + b·n + e'·κ (a cavity
+    /// that takes the same brightness whatever the light) decides whether
+    /// there is a cavity term; where there is, (a + b·n)·(1 + e·κ) is
+    /// fitted from there by alternating least squares: (a, b) with e held,
+    /// then e with (a, b) held, each step lowering the same squared error.
     pub fn fit(samples: impl IntoIterator<Item = (Vec3, Exposure, f32)>) -> Option<BakedLight> {
         let mut system = [[0.0f64; 5]; 5];
         let mut rhs = [[0.0f64; 5]; 3];
-        let mut count = 0usize;
+        let mut kept = Vec::new();
         for (colour, exposure, weight) in samples {
             let Exposure { normal: n, cavity } = exposure;
             if !(weight > 0.0 && colour.is_finite() && n.is_finite() && cavity.is_finite()) {
                 continue;
             }
+            kept.push((colour, exposure, weight));
             let x = [1.0, n.x as f64, n.y as f64, n.z as f64, cavity as f64];
             let w = weight as f64;
             for (row, &xi) in system.iter_mut().zip(&x) {
@@ -89,16 +112,16 @@ impl BakedLight {
                     *entry += w * xi * colour[ch] as f64;
                 }
             }
-            count += 1;
         }
-        if count < MIN_SAMPLES {
+        if kept.len() < MIN_SAMPLES {
             return None;
         }
         let total = system[0][0].max(f64::MIN_POSITIVE);
         let cavity_variance = system[4][4] / total - (system[0][4] / total).powi(2);
         let with_cavity = cavity_variance > MIN_CAVITY_VARIANCE;
         let light = Self::solve(&system, &rhs, with_cavity)
-            .filter(|l| l.cavity.max_element() <= 0.0)
+            .filter(|l| l.cavity.max_element() <= 0.0 && l.cavity != Vec3::ZERO)
+            .and_then(|additive| Self::fit_occlusion(&kept, additive))
             .or_else(|| Self::solve(&system, &rhs, false))?;
         let mean_normal = Vec3::new(
             (system[0][1] / total) as f32,
@@ -113,9 +136,79 @@ impl BakedLight {
             .then_some(light)
     }
 
-    /// Solves the weighted least squares of [`BakedLight::fit`], with the
-    /// cavity term or without; None for a system that cannot tell the light
-    /// (normals all alike).
+    /// The light (a + b·n)·(1 + e·κ) closest to the samples in weighted
+    /// squares, from the additive light `start` (a + b·n + e'·κ): e begins
+    /// as e' over the samples' mean brightness, then (a, b) and e are
+    /// fitted in turn until e settles. None where a step cannot tell (a, b)
+    /// (normals all alike); e stays within [−[`MAX_OCCLUSION`], 0].
+    fn fit_occlusion(samples: &[(Vec3, Exposure, f32)], start: BakedLight) -> Option<BakedLight> {
+        let (mut lit, mut total) = (DVec3::ZERO, 0.0f64);
+        for &(_, exposure, weight) in samples {
+            lit += weight as f64 * start.unoccluded(exposure.normal).as_dvec3();
+            total += weight as f64;
+        }
+        let share = |e: DVec3| e.clamp(DVec3::splat(-MAX_OCCLUSION as f64), DVec3::ZERO);
+        let mut occlusion = share(start.cavity.as_dvec3() / (lit / total).max(DVec3::splat(1e-3)));
+        let mut light = start;
+        for _ in 0..OCCLUSION_ROUNDS {
+            light = Self::fit_unoccluded(samples, occlusion)?;
+            let (mut along, mut norm) = (DVec3::ZERO, DVec3::ZERO);
+            for &(colour, exposure, weight) in samples {
+                let unoccluded = light.unoccluded(exposure.normal).as_dvec3();
+                let shade = exposure.cavity as f64 * unoccluded;
+                along += weight as f64 * shade * (colour.as_dvec3() - unoccluded);
+                norm += weight as f64 * shade * shade;
+            }
+            let next = share(DVec3::select(
+                norm.cmpgt(DVec3::ZERO),
+                along / norm,
+                DVec3::ZERO,
+            ));
+            let settled = (next - occlusion).abs().max_element() < OCCLUSION_SETTLED;
+            occlusion = next;
+            light.cavity = occlusion.as_vec3();
+            if settled {
+                break;
+            }
+        }
+        Some(light)
+    }
+
+    /// The weighted least squares of c ≈ (a + b·n)·(1 + e·κ) for (a, b) per
+    /// channel, with e = `occlusion` held; its e is `occlusion`.
+    fn fit_unoccluded(samples: &[(Vec3, Exposure, f32)], occlusion: DVec3) -> Option<BakedLight> {
+        let mut channels = [[0.0f64; 4]; 3];
+        for (ch, out) in channels.iter_mut().enumerate() {
+            let mut system = [[0.0f64; 5]; 5];
+            let mut rhs = [0.0f64; 5];
+            for &(colour, Exposure { normal: n, cavity }, weight) in samples {
+                let s = 1.0 + occlusion[ch] * cavity as f64;
+                let x = [s, s * n.x as f64, s * n.y as f64, s * n.z as f64];
+                let w = weight as f64;
+                for (row, &xi) in system.iter_mut().zip(&x) {
+                    for (entry, &xj) in row.iter_mut().zip(&x) {
+                        *entry += w * xi * xj;
+                    }
+                }
+                for (entry, &xi) in rhs.iter_mut().zip(&x) {
+                    *entry += w * xi * colour[ch] as f64;
+                }
+            }
+            // Scaled by the total weight, so its size does not decide.
+            let scale = system[0][0].max(f64::MIN_POSITIVE);
+            system.iter_mut().flatten().for_each(|v| *v /= scale);
+            rhs.iter_mut().for_each(|v| *v /= scale);
+            let x = cholesky_solve(&cholesky(&system, 4)?, &rhs, 4);
+            out.copy_from_slice(&x[..4]);
+        }
+        Some(BakedLight::new(channels, occlusion.as_vec3()))
+    }
+
+    /// Solves the weighted least squares of c ≈ a + b·n + e'·κ
+    /// ([`BakedLight::fit`]'s first step), with the cavity term or without;
+    /// None for a system that cannot tell the light (normals all alike).
+    /// Without it the light is final (e = 0); with it, e' is a brightness,
+    /// not yet a share, and only starts [`BakedLight::fit_occlusion`].
     fn solve(system: &[[f64; 5]; 5], rhs: &[[f64; 5]; 3], with_cavity: bool) -> Option<Self> {
         let n = if with_cavity { 5 } else { 4 };
         // Scaled by the total weight, so its size does not decide.
@@ -140,12 +233,18 @@ impl BakedLight {
 
     /// Brightness per channel of a surface of this exposure.
     pub fn brightness(&self, at: Exposure) -> Vec3 {
-        let x = at.normal.extend(1.0);
+        self.unoccluded(at.normal) * (Vec3::ONE + self.cavity * at.cavity)
+    }
+
+    /// Brightness per channel of a surface of unit normal `normal` outside
+    /// any hollow: a + b·n.
+    fn unoccluded(&self, normal: Vec3) -> Vec3 {
+        let x = normal.extend(1.0);
         Vec3::new(
             self.channels[0].dot(x),
             self.channels[1].dot(x),
             self.channels[2].dot(x),
-        ) + self.cavity * at.cavity
+        )
     }
 
     /// The per-channel gain that relights a colour seen on a surface of
@@ -328,7 +427,8 @@ mod tests {
     }
 
     /// Samples of a hemisphere lit by a wrapped key light, in hollows of
-    /// depth 0 to 0.9 that take `darkening` per unit of depth away.
+    /// depth 0 to 0.9 that take a share `darkening` of the light per unit
+    /// of depth away (as the built-in generator's occlusion does).
     fn sphere_samples(light: Vec3, albedo: Vec3, darkening: f32) -> Vec<(Vec3, Exposure, f32)> {
         let mut out = Vec::new();
         for i in 0..40 {
@@ -339,7 +439,7 @@ mod tests {
                     continue;
                 }
                 let cavity = ((i * 7 + j * 3) % 10) as f32 / 10.0;
-                let shade = 0.55 + 0.5 * (n.dot(light) + 0.4) / 1.4 - darkening * cavity;
+                let shade = (0.55 + 0.5 * (n.dot(light) + 0.4) / 1.4) * (1.0 - darkening * cavity);
                 let exposure = Exposure { normal: n, cavity };
                 out.push((albedo * shade, exposure, 1.0));
             }
@@ -370,14 +470,23 @@ mod tests {
         assert_eq!(light.gain(to, nudged), Vec3::ONE);
     }
 
-    /// Skin darker in its hollows gives the light a cavity term: a Gaussian
-    /// moved out of a hollow brightens by what the hollow took, one moved
-    /// into a hollow darkens, one that only turned relights as before.
+    /// Skin darker in its hollows by a share of its light gives the light
+    /// that share as its occlusion: a Gaussian moved out of a hollow
+    /// brightens by what the hollow took, one moved into a hollow darkens —
+    /// by more where it faces the light, which a hollow taking the same
+    /// brightness everywhere got wrong — and one that only turned relights
+    /// as before.
     #[test]
     fn recovers_the_darkening_of_hollows() {
         let albedo = Vec3::new(0.8, 0.6, 0.5);
         let light = BakedLight::fit(sphere_samples(key(), albedo, 0.3)).unwrap();
-        let shade = |e: Exposure| 0.55 + 0.5 * (e.normal.dot(key()) + 0.4) / 1.4 - 0.3 * e.cavity;
+        assert!(
+            (light.cavity - Vec3::splat(-0.3)).abs().max_element() < 1e-4,
+            "{:?}",
+            light.cavity
+        );
+        let shade =
+            |e: Exposure| (0.55 + 0.5 * (e.normal.dot(key()) + 0.4) / 1.4) * (1.0 - 0.3 * e.cavity);
         let hollow = Exposure {
             normal: Vec3::Z,
             cavity: 0.8,
@@ -391,6 +500,45 @@ mod tests {
             );
         }
         assert!(light.gain(hollow, facing(Vec3::Z)).min_element() > 1.2);
+        let away = Exposure {
+            normal: Vec3::new(-0.6, 0.0, 0.8),
+            cavity: 0.8,
+        };
+        let toward = Exposure {
+            normal: Vec3::new(0.6, 0.0, 0.8),
+            ..away
+        };
+        for to in [away, toward] {
+            let from = facing(to.normal);
+            let relit = albedo * shade(from) * light.gain(from, to);
+            assert!(
+                (relit - albedo * shade(to)).abs().max_element() < 1e-4,
+                "{to:?}: {relit}"
+            );
+        }
+    }
+
+    /// Hollows that take (nearly) all of their light: the occlusion stops
+    /// at [`MAX_OCCLUSION`], every brightness stays finite and a Gaussian
+    /// moved into the deepest hollow darkens within [`RELIGHT_RANGE`].
+    #[test]
+    fn an_occlusion_that_takes_everything_stops_short() {
+        let light = BakedLight::fit(sphere_samples(key(), Vec3::splat(0.7), 1.2)).unwrap();
+        assert!(
+            light.cavity.min_element() >= -MAX_OCCLUSION,
+            "{:?}",
+            light.cavity
+        );
+        let pit = Exposure {
+            normal: Vec3::Z,
+            cavity: 1.0,
+        };
+        assert!(light.brightness(pit).is_finite());
+        let gain = light.gain(facing(Vec3::Z), pit);
+        assert!(
+            gain.is_finite() && gain.min_element() >= RELIGHT_RANGE.0,
+            "{gain}"
+        );
     }
 
     /// A cavity term that would brighten hollows (no light does; an albedo
