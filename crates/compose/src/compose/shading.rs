@@ -37,7 +37,8 @@ const MIN_CAVITY_VARIANCE: f64 = 1e-6;
 /// would relight by dividing by nothing.
 const MAX_OCCLUSION: f32 = 0.9;
 
-/// Rounds of the occlusion's alternating fit ([`BakedLight::fit`]) at most;
+/// Rounds of the occlusion's alternating fit ([`BakedLight::fit_occlusion`])
+/// at most;
 /// it stops sooner once e moves by less than [`OCCLUSION_SETTLED`].
 const OCCLUSION_ROUNDS: usize = 50;
 
@@ -65,16 +66,32 @@ pub struct BakedLight {
     channels: [Vec4; 3],
     /// Per channel: e, the share of the light a unit of cavity depth takes
     /// away.
-    cavity: Vec3,
+    occlusion: Vec3,
+}
+
+/// A light's coefficients in f64 while it is fitted: per channel (a, bx,
+/// by, bz), and per channel a cavity term (a brightness in the additive
+/// first step, a share of the light after).
+type Coefficients = ([[f64; 4]; 3], DVec3);
+
+/// a + b·n per channel, of coefficients (a, bx, by, bz) per channel.
+fn unoccluded_brightness(channels: &[[f64; 4]; 3], normal: Vec3) -> DVec3 {
+    let n = normal.as_dvec3();
+    DVec3::from_array(channels.map(|[a, x, y, z]| a + x * n.x + y * n.y + z * n.z))
+}
+
+/// e kept within [−[`MAX_OCCLUSION`], 0] per channel.
+fn clamp_occlusion(e: DVec3) -> DVec3 {
+    e.clamp(DVec3::splat(-MAX_OCCLUSION as f64), DVec3::ZERO)
 }
 
 impl BakedLight {
     /// The light of these per-channel (a, bx, by, bz) and occlusion terms e.
-    pub fn new(channels: [[f64; 4]; 3], cavity: Vec3) -> BakedLight {
+    pub fn new(channels: [[f64; 4]; 3], occlusion: Vec3) -> BakedLight {
         BakedLight {
             channels: channels
                 .map(|[a, x, y, z]| Vec4::new(x as f32, y as f32, z as f32, a as f32)),
-            cavity,
+            occlusion,
         }
     }
 
@@ -119,10 +136,16 @@ impl BakedLight {
         let total = system[0][0].max(f64::MIN_POSITIVE);
         let cavity_variance = system[4][4] / total - (system[0][4] / total).powi(2);
         let with_cavity = cavity_variance > MIN_CAVITY_VARIANCE;
-        let light = Self::solve(&system, &rhs, with_cavity)
-            .filter(|l| l.cavity.max_element() <= 0.0 && l.cavity != Vec3::ZERO)
-            .and_then(|additive| Self::fit_occlusion(&kept, additive))
-            .or_else(|| Self::solve(&system, &rhs, false))?;
+        let occluded = with_cavity
+            .then(|| Self::solve(&system, &rhs, true))
+            .flatten()
+            .filter(|(_, cavity)| cavity.max_element() <= 0.0 && *cavity != DVec3::ZERO)
+            .and_then(|additive| Self::fit_occlusion(&kept, additive));
+        let (channels, occlusion) = match occluded {
+            Some(fitted) => fitted,
+            None => Self::solve(&system, &rhs, false)?,
+        };
+        let light = BakedLight::new(channels, occlusion.as_vec3());
         let mean_normal = Vec3::new(
             (system[0][1] / total) as f32,
             (system[0][2] / total) as f32,
@@ -139,44 +162,50 @@ impl BakedLight {
     /// The light (a + b·n)·(1 + e·κ) closest to the samples in weighted
     /// squares, from the additive light `start` (a + b·n + e'·κ): e begins
     /// as e' over the samples' mean brightness, then (a, b) and e are
-    /// fitted in turn until e settles. None where a step cannot tell (a, b)
-    /// (normals all alike); e stays within [−[`MAX_OCCLUSION`], 0].
-    fn fit_occlusion(samples: &[(Vec3, Exposure, f32)], start: BakedLight) -> Option<BakedLight> {
+    /// fitted in turn, in f64, until e moves by less than
+    /// [`OCCLUSION_SETTLED`] or [`OCCLUSION_ROUNDS`] have run. None where a
+    /// step cannot tell (a, b) (normals all alike) or e is not a number;
+    /// e stays within [−[`MAX_OCCLUSION`], 0].
+    fn fit_occlusion(
+        samples: &[(Vec3, Exposure, f32)],
+        start: Coefficients,
+    ) -> Option<Coefficients> {
+        let (mut channels, additive) = start;
         let (mut lit, mut total) = (DVec3::ZERO, 0.0f64);
         for &(_, exposure, weight) in samples {
-            lit += weight as f64 * start.unoccluded(exposure.normal).as_dvec3();
+            lit += weight as f64 * unoccluded_brightness(&channels, exposure.normal);
             total += weight as f64;
         }
-        let share = |e: DVec3| e.clamp(DVec3::splat(-MAX_OCCLUSION as f64), DVec3::ZERO);
-        let mut occlusion = share(start.cavity.as_dvec3() / (lit / total).max(DVec3::splat(1e-3)));
-        let mut light = start;
+        let mut occlusion = clamp_occlusion(additive / (lit / total).max(DVec3::splat(1e-3)));
         for _ in 0..OCCLUSION_ROUNDS {
-            light = Self::fit_unoccluded(samples, occlusion)?;
+            channels = Self::fit_unoccluded(samples, occlusion)?;
             let (mut along, mut norm) = (DVec3::ZERO, DVec3::ZERO);
             for &(colour, exposure, weight) in samples {
-                let unoccluded = light.unoccluded(exposure.normal).as_dvec3();
-                let shade = exposure.cavity as f64 * unoccluded;
-                along += weight as f64 * shade * (colour.as_dvec3() - unoccluded);
+                let lit = unoccluded_brightness(&channels, exposure.normal);
+                let shade = exposure.cavity as f64 * lit;
+                along += weight as f64 * shade * (colour.as_dvec3() - lit);
                 norm += weight as f64 * shade * shade;
             }
-            let next = share(DVec3::select(
-                norm.cmpgt(DVec3::ZERO),
-                along / norm,
-                DVec3::ZERO,
-            ));
+            let best = DVec3::select(norm.cmpgt(DVec3::ZERO), along / norm, DVec3::ZERO);
+            if !best.is_finite() {
+                return None;
+            }
+            let next = clamp_occlusion(best);
             let settled = (next - occlusion).abs().max_element() < OCCLUSION_SETTLED;
             occlusion = next;
-            light.cavity = occlusion.as_vec3();
             if settled {
                 break;
             }
         }
-        Some(light)
+        Some((channels, occlusion))
     }
 
     /// The weighted least squares of c ≈ (a + b·n)·(1 + e·κ) for (a, b) per
-    /// channel, with e = `occlusion` held; its e is `occlusion`.
-    fn fit_unoccluded(samples: &[(Vec3, Exposure, f32)], occlusion: DVec3) -> Option<BakedLight> {
+    /// channel, with e = `occlusion` held.
+    fn fit_unoccluded(
+        samples: &[(Vec3, Exposure, f32)],
+        occlusion: DVec3,
+    ) -> Option<[[f64; 4]; 3]> {
         let mut channels = [[0.0f64; 4]; 3];
         for (ch, out) in channels.iter_mut().enumerate() {
             let mut system = [[0.0f64; 5]; 5];
@@ -194,14 +223,15 @@ impl BakedLight {
                     *entry += w * xi * colour[ch] as f64;
                 }
             }
-            // Scaled by the total weight, so its size does not decide.
+            // Scaled by its first entry (the weights times (1 + e·κ)²), so
+            // the weights' size does not decide.
             let scale = system[0][0].max(f64::MIN_POSITIVE);
             system.iter_mut().flatten().for_each(|v| *v /= scale);
             rhs.iter_mut().for_each(|v| *v /= scale);
             let x = cholesky_solve(&cholesky(&system, 4)?, &rhs, 4);
             out.copy_from_slice(&x[..4]);
         }
-        Some(BakedLight::new(channels, occlusion.as_vec3()))
+        Some(channels)
     }
 
     /// Solves the weighted least squares of c ≈ a + b·n + e'·κ
@@ -209,7 +239,11 @@ impl BakedLight {
     /// None for a system that cannot tell the light (normals all alike).
     /// Without it the light is final (e = 0); with it, e' is a brightness,
     /// not yet a share, and only starts [`BakedLight::fit_occlusion`].
-    fn solve(system: &[[f64; 5]; 5], rhs: &[[f64; 5]; 3], with_cavity: bool) -> Option<Self> {
+    fn solve(
+        system: &[[f64; 5]; 5],
+        rhs: &[[f64; 5]; 3],
+        with_cavity: bool,
+    ) -> Option<Coefficients> {
         let n = if with_cavity { 5 } else { 4 };
         // Scaled by the total weight, so its size does not decide.
         let scale = system[0][0].max(f64::MIN_POSITIVE);
@@ -221,19 +255,19 @@ impl BakedLight {
         }
         let factor = cholesky(&matrix, n)?;
         let mut channels = [[0.0f64; 4]; 3];
-        let mut cavity = Vec3::ZERO;
+        let mut cavity = DVec3::ZERO;
         for ch in 0..3 {
             let b: [f64; 5] = std::array::from_fn(|i| rhs[ch][i] / scale);
             let x = cholesky_solve(&factor, &b, n);
             channels[ch].copy_from_slice(&x[..4]);
-            cavity[ch] = if with_cavity { x[4] as f32 } else { 0.0 };
+            cavity[ch] = if with_cavity { x[4] } else { 0.0 };
         }
-        Some(BakedLight::new(channels, cavity))
+        Some((channels, cavity))
     }
 
     /// Brightness per channel of a surface of this exposure.
     pub fn brightness(&self, at: Exposure) -> Vec3 {
-        self.unoccluded(at.normal) * (Vec3::ONE + self.cavity * at.cavity)
+        self.unoccluded(at.normal) * (Vec3::ONE + self.occlusion * at.cavity)
     }
 
     /// Brightness per channel of a surface of unit normal `normal` outside
@@ -481,9 +515,9 @@ mod tests {
         let albedo = Vec3::new(0.8, 0.6, 0.5);
         let light = BakedLight::fit(sphere_samples(key(), albedo, 0.3)).unwrap();
         assert!(
-            (light.cavity - Vec3::splat(-0.3)).abs().max_element() < 1e-4,
+            (light.occlusion - Vec3::splat(-0.3)).abs().max_element() < 1e-4,
             "{:?}",
-            light.cavity
+            light.occlusion
         );
         let shade =
             |e: Exposure| (0.55 + 0.5 * (e.normal.dot(key()) + 0.4) / 1.4) * (1.0 - 0.3 * e.cavity);
@@ -518,27 +552,21 @@ mod tests {
         }
     }
 
-    /// Hollows that take (nearly) all of their light: the occlusion stops
-    /// at [`MAX_OCCLUSION`], every brightness stays finite and a Gaussian
-    /// moved into the deepest hollow darkens within [`RELIGHT_RANGE`].
+    /// Hollows whose shade would take more than all of their light (the
+    /// deepest samples' colours below zero): the occlusion stops at
+    /// [`MAX_OCCLUSION`], and a Gaussian moved into the deepest hollow
+    /// darkens, within [`RELIGHT_RANGE`].
     #[test]
     fn an_occlusion_that_takes_everything_stops_short() {
         let light = BakedLight::fit(sphere_samples(key(), Vec3::splat(0.7), 1.2)).unwrap();
-        assert!(
-            light.cavity.min_element() >= -MAX_OCCLUSION,
-            "{:?}",
-            light.cavity
-        );
+        assert_eq!(light.occlusion, Vec3::splat(-MAX_OCCLUSION));
         let pit = Exposure {
             normal: Vec3::Z,
             cavity: 1.0,
         };
-        assert!(light.brightness(pit).is_finite());
         let gain = light.gain(facing(Vec3::Z), pit);
-        assert!(
-            gain.is_finite() && gain.min_element() >= RELIGHT_RANGE.0,
-            "{gain}"
-        );
+        assert!(gain.max_element() < 1.0, "{gain}");
+        assert!(gain.min_element() >= RELIGHT_RANGE.0, "{gain}");
     }
 
     /// A cavity term that would brighten hollows (no light does; an albedo
@@ -553,9 +581,9 @@ mod tests {
                 .map(|(c, e, w)| (c, facing(e.normal), w)),
         )
         .unwrap();
-        assert_eq!(normals_only.cavity, Vec3::ZERO);
+        assert_eq!(normals_only.occlusion, Vec3::ZERO);
         let brighter = BakedLight::fit(sphere_samples(key(), albedo, -0.2)).unwrap();
-        assert_eq!(brighter.cavity, Vec3::ZERO);
+        assert_eq!(brighter.occlusion, Vec3::ZERO);
         let hollow = Exposure {
             normal: Vec3::Z,
             cavity: 0.9,

@@ -184,12 +184,16 @@ impl SourceColours {
     /// is the mean linear colour of `f`'s clothing in the region, if it
     /// shows any. The first rule that applies decides:
     /// - skin mixed with clothing moves by its share of skin;
-    /// - brightening, on the hairline and round the eyes where a dark
-    ///   feature can be told from skin, by the skin's share of brightness;
-    /// - darkening round the eyes, by the skin's share per channel where
-    ///   the hair's hue tells it from skin, else by its share of brightness;
-    /// - otherwise by the region's likeness, round the eyes a brightening
-    ///   one by the skin's share of brightness where it can be told.
+    /// - brightening, on the hairline (the remainder) where a dark feature
+    ///   can be told from skin, by the skin's share of brightness, gated by
+    ///   the likeness (`dark_features::hairline_share`);
+    /// - darkening round the eyes, where a dark feature can be told, by the
+    ///   skin's share per channel where the hair's hue tells it from skin,
+    ///   else by its share of brightness — blended by the likeness with the
+    ///   likeness's own transfer (`dark_features::darkening_gain`);
+    /// - otherwise by the region's likeness, taken (brightening, round the
+    ///   eyes) the skin's share of brightness of the way where it can be
+    ///   told.
     pub fn semantic_gain(
         &self,
         f: usize,
