@@ -80,6 +80,16 @@ fn unoccluded_brightness(channels: &[[f64; 4]; 3], normal: Vec3) -> DVec3 {
     DVec3::from_array(channels.map(|[a, x, y, z]| a + x * n.x + y * n.y + z * n.z))
 }
 
+/// Adds one sample's row `x`, weighted `w`, to a least-squares normal
+/// matrix: w·x·xᵀ over its leading `x.len()` rows and columns.
+fn add_outer(system: &mut [[f64; 5]; 5], x: &[f64], w: f64) {
+    for (row, &xi) in system.iter_mut().zip(x) {
+        for (entry, &xj) in row.iter_mut().zip(x) {
+            *entry += w * xi * xj;
+        }
+    }
+}
+
 /// e kept within [−[`MAX_OCCLUSION`], 0] per channel.
 fn clamp_occlusion(e: DVec3) -> DVec3 {
     e.clamp(DVec3::splat(-MAX_OCCLUSION as f64), DVec3::ZERO)
@@ -119,11 +129,7 @@ impl BakedLight {
             kept.push((colour, exposure, weight));
             let x = [1.0, n.x as f64, n.y as f64, n.z as f64, cavity as f64];
             let w = weight as f64;
-            for (row, &xi) in system.iter_mut().zip(&x) {
-                for (entry, &xj) in row.iter_mut().zip(&x) {
-                    *entry += w * xi * xj;
-                }
-            }
+            add_outer(&mut system, &x, w);
             for (ch, r) in rhs.iter_mut().enumerate() {
                 for (entry, &xi) in r.iter_mut().zip(&x) {
                     *entry += w * xi * colour[ch] as f64;
@@ -214,11 +220,7 @@ impl BakedLight {
                 let s = 1.0 + occlusion[ch] * cavity as f64;
                 let x = [s, s * n.x as f64, s * n.y as f64, s * n.z as f64];
                 let w = weight as f64;
-                for (row, &xi) in system.iter_mut().zip(&x) {
-                    for (entry, &xj) in row.iter_mut().zip(&x) {
-                        *entry += w * xi * xj;
-                    }
-                }
+                add_outer(&mut system, &x, w);
                 for (entry, &xi) in rhs.iter_mut().zip(&x) {
                     *entry += w * xi * colour[ch] as f64;
                 }
