@@ -596,8 +596,14 @@ fn membership_by_place_counts_a_drifted_gaussian_where_it_sits_and_keeps_borders
         placed[on_border], border as u32,
         "a Gaussian on the border keeps its parent"
     );
+    // Off the eyeballs (whose covered part counts for the lids: the next
+    // test), the built-in Gaussians sit on their triangles.
     let moved = (0..set.len())
-        .filter(|&i| placed[i] != set.binding[i])
+        .filter(|&i| {
+            let parent = regions[set.binding[i] as usize];
+            placed[i] != set.binding[i]
+                && !matches!(parent, Region::LeftEyeball | Region::RightEyeball)
+        })
         .count();
     assert!(
         moved < set.len() / 100,
@@ -743,4 +749,77 @@ fn skin_shown_from_a_swapped_mouths_inside_takes_the_bases_tone_and_its_lining_s
         }
     }
     assert!(skins > 10 && linings > 10, "{skins} skin, {linings} lining");
+}
+
+#[test]
+fn an_eyeball_gaussian_under_the_lid_counts_for_the_lid_and_one_in_the_opening_for_the_eye() {
+    use visage::compose::membership::place_triangles;
+    let mut db = small_db();
+    let model = db.model.clone();
+    let neutral = db.sources[0].neutral(&model);
+    let regions = &model.triangle_regions;
+    let centroid = |t: usize| {
+        let [a, b, c] = model.triangles[t].map(|v| neutral[v as usize]);
+        (a + b + c) / 3.0
+    };
+    let eyeball: Vec<usize> = (0..model.triangles.len())
+        .filter(|&t| regions[t] == Region::RightEyeball)
+        .collect();
+    let centre = eyeball.iter().map(|&t| centroid(t)).sum::<Vec3>() / eyeball.len() as f32;
+    let radius = eyeball
+        .iter()
+        .map(|&t| (centroid(t) - centre).length())
+        .sum::<f32>()
+        / eyeball.len() as f32;
+    // The front of the eye shows in the opening; high on its front
+    // hemisphere the upper lid covers it.
+    let front = *eyeball
+        .iter()
+        .max_by(|&&a, &&b| centroid(a).z.total_cmp(&centroid(b).z))
+        .unwrap();
+    let covered = *eyeball
+        .iter()
+        .filter(|&&t| centroid(t).z > centre.z + 0.3 * radius)
+        .max_by(|&&a, &&b| centroid(a).y.total_cmp(&centroid(b).y))
+        .unwrap();
+    let set = &mut db.sources[0].gaussians;
+    for (i, t) in [(0, front), (1, covered), (2, covered)] {
+        set.binding[i] = t as u32;
+        drift_to(set, i, &neutral, &model.triangles, centroid(t));
+    }
+    set.position[2] = Vec3::NAN;
+
+    let placed = place_triangles(&model, set, &neutral);
+    assert_eq!(regions[placed[0] as usize], Region::RightEyeball);
+    let lid = regions[placed[1] as usize];
+    assert!(
+        matches!(lid, Region::RightEyeRegion | Region::RightEyeSocket),
+        "under the lid it counts for {lid:?}"
+    );
+    let lid_centre = centroid(placed[1] as usize);
+    assert!(
+        lid_centre.z > centroid(covered).z,
+        "the lid lies in front of it"
+    );
+    assert_eq!(placed[2], covered as u32, "a NaN centre keeps its parent");
+    let under_lids = (0..set.len())
+        .filter(|&i| {
+            let parent = regions[set.binding[i] as usize];
+            matches!(parent, Region::LeftEyeball | Region::RightEyeball)
+                && regions[placed[i] as usize].group() == parent.group()
+                && regions[placed[i] as usize] != parent
+        })
+        .count();
+    let on_eyeballs = (0..set.len())
+        .filter(|&i| {
+            matches!(
+                regions[set.binding[i] as usize],
+                Region::LeftEyeball | Region::RightEyeball
+            )
+        })
+        .count();
+    assert!(
+        under_lids > 0 && under_lids < on_eyeballs * 3 / 4,
+        "{under_lids} of {on_eyeballs} eyeball Gaussians lie under the lids"
+    );
 }

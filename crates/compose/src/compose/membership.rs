@@ -15,6 +15,8 @@ use crate::avatar::gaussians::GaussianSet;
 use crate::model::head::HeadModel;
 use crate::model::nearest::{barycentric, TriangleGrid};
 
+use super::lids::triangles_over_eyeballs;
+
 /// How much nearer (metres of template space) another region's surface must
 /// be to a Gaussian's centre than its parent triangle for it to count there:
 /// Gaussians on or near their own triangle keep its region, so a Gaussian on
@@ -30,13 +32,22 @@ pub const ANCHOR_MARGIN: f32 = 1e-4;
 /// The triangle each Gaussian of `set` counts for by place, on the source's
 /// `neutral` mesh: the triangle nearest its centre when that is another
 /// region's and more than [`PLACE_MARGIN`] nearer than its parent triangle,
-/// otherwise its parent. Gaussians with a non-finite centre (or a binding
-/// past the mesh) keep their parent.
+/// otherwise its parent — except that a Gaussian so counted for an eyeball
+/// with its lid in front of it counts for the lid
+/// ([`triangles_over_eyeballs`]). Gaussians with a non-finite centre (or a
+/// binding past the mesh) keep their parent.
 pub fn place_triangles(model: &HeadModel, set: &GaussianSet, neutral: &[Vec3]) -> Vec<u32> {
     let regions = &model.triangle_regions;
-    nearer_triangles(model, set, neutral, PLACE_MARGIN, |parent, t| {
+    let mut places = nearer_triangles(model, set, neutral, PLACE_MARGIN, |parent, t| {
         regions.get(parent as usize) != regions.get(t as usize)
-    })
+    });
+    let lids = triangles_over_eyeballs(model, set, neutral, &places);
+    for (place, lid) in places.iter_mut().zip(lids) {
+        if let Some(lid) = lid {
+            *place = lid;
+        }
+    }
+    places
 }
 
 /// The triangle whose reshaping each Gaussian of `set` follows under

@@ -11,6 +11,7 @@ pub mod correction;
 pub mod dark_features;
 pub mod deform;
 pub mod engine;
+pub mod lids;
 pub mod membership;
 pub mod random;
 pub mod recipe;
