@@ -823,3 +823,30 @@ fn an_eyeball_gaussian_under_the_lid_counts_for_the_lid_and_one_in_the_opening_f
         "{under_lids} of {on_eyeballs} eyeball Gaussians lie under the lids"
     );
 }
+
+#[test]
+fn the_canonical_order_depends_on_the_gaussians_not_on_how_a_composite_lists_them() {
+    use visage::compose::{canonical_order, reordered};
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[1]);
+    r.groups.insert("eyes".into(), edit(&n[0], &[(&n[0], 0.5)]));
+    let set = e.compose(&resolve(e, &r)).gaussians;
+    let model = &e.database().model;
+    let mut backwards: Vec<u32> = (0..set.len() as u32).collect();
+    backwards.reverse();
+    let shuffled = reordered(&set, &backwards);
+    let canonical = |s| reordered(s, &canonical_order(model, s));
+    let (a, b) = (canonical(&set), canonical(&shuffled));
+    assert_eq!(a.binding, b.binding);
+    assert_eq!(a.position, b.position);
+    assert_eq!(a.sh, b.sh);
+    assert_eq!(a.opacity_logit, b.opacity_logit);
+    // By region of the triangle first, as exports have always listed them.
+    let regions: Vec<usize> = a
+        .binding
+        .iter()
+        .map(|&t| model.triangle_regions[t as usize].index())
+        .collect();
+    assert!(regions.windows(2).all(|w| w[0] <= w[1]));
+}

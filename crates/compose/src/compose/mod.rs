@@ -88,14 +88,41 @@ pub fn composite_hash(
 }
 
 /// The order a composite's Gaussians are compared and exported in: by region of
-/// their triangle (table order), keeping the composite's order within a region —
-/// the order selection produces when the export is loaded back as a source.
+/// their triangle (table order), then by triangle, then by their parameters'
+/// bits (position, rotation, log-scale, opacity, SH) — an order that depends
+/// only on what the Gaussians are, not on the order a composite lists them
+/// in. Membership by place (method §5.1) counts a Gaussian by where it sits
+/// on a neutral mesh, and an export loaded back is placed on the
+/// composite's neutral, not its source's: a Gaussian under a lid by a hair
+/// may be counted for another region there, and selection, which lists a
+/// composite region by region, then lists it elsewhere.
 pub fn canonical_order(
     model: &crate::model::head::HeadModel,
     set: &crate::avatar::gaussians::GaussianSet,
 ) -> Vec<u32> {
+    let region = |i: usize| {
+        model
+            .triangle_regions
+            .get(set.binding[i] as usize)
+            .map_or(usize::MAX, |r| r.index())
+    };
+    let bits = |i: usize| {
+        let v = |v: glam::Vec3| v.to_array().map(f32::to_bits);
+        (
+            v(set.position[i]),
+            set.rotation[i].to_array().map(f32::to_bits),
+            v(set.log_scale[i]),
+            set.opacity_logit[i].to_bits(),
+        )
+    };
+    let sh = |i: usize| set.sh_of(i).iter().map(|x| x.to_bits());
     let mut order: Vec<u32> = (0..set.len() as u32).collect();
-    order.sort_by_key(|&i| model.triangle_regions[set.binding[i as usize] as usize].index());
+    order.sort_by(|&a, &b| {
+        let (a, b) = (a as usize, b as usize);
+        (region(a), set.binding[a], bits(a))
+            .cmp(&(region(b), set.binding[b], bits(b)))
+            .then_with(|| sh(a).cmp(sh(b)))
+    });
     order
 }
 
