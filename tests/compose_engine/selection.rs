@@ -596,8 +596,9 @@ fn membership_by_place_counts_a_drifted_gaussian_where_it_sits_and_keeps_borders
         placed[on_border], border as u32,
         "a Gaussian on the border keeps its parent"
     );
-    // Off the eyeballs (whose covered part counts for the lids: the next
-    // test), the built-in Gaussians sit on their triangles.
+    // Off the eyeballs (whose covered part counts for the lids:
+    // an_eyeball_gaussian_under_the_lid_counts_for_the_lid_…), the built-in
+    // Gaussians sit on their triangles.
     let moved = (0..set.len())
         .filter(|&i| {
             let parent = regions[set.binding[i] as usize];
@@ -840,6 +841,8 @@ fn the_canonical_order_depends_on_the_gaussians_not_on_how_a_composite_lists_the
     let (a, b) = (canonical(&set), canonical(&shuffled));
     assert_eq!(a.binding, b.binding);
     assert_eq!(a.position, b.position);
+    assert_eq!(a.rotation, b.rotation);
+    assert_eq!(a.log_scale, b.log_scale);
     assert_eq!(a.sh, b.sh);
     assert_eq!(a.opacity_logit, b.opacity_logit);
     // By region of the triangle first, as exports have always listed them.

@@ -18,11 +18,11 @@ use crate::model::regions::Region;
 
 /// Per Gaussian of `set`, counted for the triangles `counted` of the
 /// source's `neutral` mesh: where it counts for an eyeball and a triangle of
-/// another region of the eyeball's group lies in front of it — along the
-/// head frame's +z, out of the face (method §1.1), within the eyeball's
-/// radius — the nearest such triangle (the lid, or the socket, over the
-/// covered part of the eye); `None` for every other Gaussian, and for one
-/// whose centre is not finite.
+/// that eye's lid or socket (its eye region or eye socket) lies in front of
+/// it — along the head frame's +z, out of the face (method §1.1), within the
+/// eyeball's radius — the nearest such triangle; `None` for every other Gaussian, and for one
+/// whose centre is not finite or whose triangle (bound or counted) is past
+/// the mesh.
 pub fn triangles_over_eyeballs(
     model: &HeadModel,
     set: &GaussianSet,
@@ -40,10 +40,11 @@ pub fn triangles_over_eyeballs(
     (0..set.len())
         .into_par_iter()
         .map(|i| {
-            let region = model.triangle_regions.get(counted[i] as usize)?;
+            let region = model.triangle_regions.get(*counted.get(i)? as usize)?;
             let eye = eyes.iter().find(|e| e.region == *region)?;
-            let frame = frames.get(set.binding[i] as usize)?;
-            let centre = frame.scale * (frame.rotation * set.position[i]) + frame.center;
+            let centre = frames
+                .get(set.binding[i] as usize)?
+                .to_world(set.position[i]);
             if !centre.is_finite() {
                 return None;
             }
@@ -52,20 +53,21 @@ pub fn triangles_over_eyeballs(
         .collect()
 }
 
-/// An eyeball of a neutral mesh and the triangles of its group that may lie
-/// in front of it.
+/// An eyeball of a neutral mesh and the triangles of its lid and socket
+/// that may lie in front of it.
 struct Eyeball {
     region: Region,
     radius: f64,
-    /// Triangles of the eyeball's group's other regions with a corner
-    /// within two radii of the centre (and every corner on the mesh).
+    /// Triangles of the eyeball's lid and socket on the same side
+    /// (`Region::anchor_regions`) that come within two radii of the centre
+    /// (by the ball round their centroid through their farthest corner).
     near: Vec<usize>,
 }
 
 impl Eyeball {
     /// The eyeball of `region` on `neutral`: the mean of its triangles'
     /// corners and their mean distance from it; `None` where the region has
-    /// no triangles or no size.
+    /// no triangles or no size, or is no eyeball.
     fn of(model: &HeadModel, neutral: &[Vec3], region: Region) -> Option<Eyeball> {
         let mut corners: Vec<u32> = model
             .triangles
@@ -78,8 +80,7 @@ impl Eyeball {
         corners.dedup();
         let points: Vec<DVec3> = corners
             .iter()
-            .filter_map(|&v| neutral.get(v as usize))
-            .map(|p| p.as_dvec3())
+            .map(|&v| neutral[v as usize].as_dvec3())
             .collect();
         if points.is_empty() {
             return None;
@@ -89,19 +90,20 @@ impl Eyeball {
         if !(radius.is_finite() && radius > 0.0) {
             return None;
         }
+        let lids = region.anchor_regions()?;
         let near = (0..model.triangles.len())
-            .filter(|&t| {
-                let other = model.triangle_regions[t];
-                other.group() == region.group() && !is_eyeball(other)
+            .zip(&model.triangle_regions)
+            .filter(|(_, other)| lids.contains(other))
+            .filter(|&(t, _)| {
+                let corners = model.triangles[t].map(|v| neutral[v as usize].as_dvec3());
+                let middle = corners.iter().sum::<DVec3>() / 3.0;
+                let reach = corners
+                    .iter()
+                    .map(|c| c.distance(middle))
+                    .fold(0.0, f64::max);
+                middle.distance(centre) - reach < 2.0 * radius
             })
-            .filter(|&t| {
-                let corners = model.triangles[t].map(|v| neutral.get(v as usize));
-                corners.iter().all(Option::is_some)
-                    && corners
-                        .iter()
-                        .flatten()
-                        .any(|p| p.as_dvec3().distance(centre) < 2.0 * radius)
-            })
+            .map(|(t, _)| t)
             .collect();
         Some(Eyeball {
             region,
@@ -126,11 +128,6 @@ impl Eyeball {
     }
 }
 
-/// Whether `region` is one of the eyeballs.
-fn is_eyeball(region: Region) -> bool {
-    matches!(region, Region::LeftEyeball | Region::RightEyeball)
-}
-
 /// The distance along the unit `direction` from `origin` at which the ray
 /// meets triangle `[a, b, c]` (Möller–Trumbore), if it does at or past the
 /// origin; `None` for a ray in the triangle's plane and a degenerate
@@ -152,7 +149,8 @@ fn ray_hit(origin: DVec3, direction: DVec3, [a, b, c]: [DVec3; 3]) -> Option<f64
     }
     let q = to_origin.cross(e1);
     let v = direction.dot(q) / det;
-    if v < 0.0 || u + v > 1.0 {
+    let inside = v >= 0.0 && u + v <= 1.0;
+    if !inside {
         return None;
     }
     let d = e2.dot(q) / det;

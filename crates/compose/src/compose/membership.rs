@@ -179,6 +179,9 @@ pub fn placements(
 /// Gaussian `i`'s centre on the mesh whose triangle `frames` are given
 /// (`None` for a binding past the mesh).
 fn neutral_centre(frames: &[TriangleFrame], set: &GaussianSet, i: usize) -> Option<Vec3> {
-    let frame = frames.get(set.binding[i] as usize)?;
-    Some(frame.scale * (frame.rotation * set.position[i]) + frame.center)
+    Some(
+        frames
+            .get(set.binding[i] as usize)?
+            .to_world(set.position[i]),
+    )
 }

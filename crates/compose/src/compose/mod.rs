@@ -87,7 +87,8 @@ pub fn composite_hash(
     h.finalize().to_hex()[..16].to_string()
 }
 
-/// The order a composite's Gaussians are compared and exported in: by region of
+/// The order a composite's Gaussians are hashed in and written to a
+/// GaussianAvatars export (a world-space PLY keeps the composite's order): by region of
 /// their triangle (table order), then by triangle, then by their parameters'
 /// bits (position, rotation, log-scale, opacity, SH) — an order that depends
 /// only on what the Gaussians are, not on the order a composite lists them

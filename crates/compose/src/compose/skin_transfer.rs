@@ -135,18 +135,23 @@ pub fn skin_transfer_gain(rgb: Vec3, from: &SkinStats, to: &SkinStats) -> Vec3 {
 }
 
 /// Regions that hold no skin at all: the semantic correction leaves them as
-/// captured whatever their colour. The eyeballs are not among them (since
-/// session 18): the lids cover their rim, and lid skin counted there moves
-/// by the strict likeness with lightness counted fully, which leaves whites
-/// and irises — a dark skin's brown iris too — as they are. Nor is the
-/// mouth's inside (since session 27, method §7.7): a trained source keeps
-/// Gaussians bound to its cavity that paint the lips and the skin round
-/// them while its mouth is closed, and they carry that skin out over the
-/// chin when a composite's mouth opens wider than the source's did.
+/// captured whatever their colour. The eyeballs are among them again since
+/// session 47: from session 18 their lid skin over the rim moved by a strict
+/// likeness, but under membership by place the Gaussians drawing it count
+/// for the lid now (`lids`, method §5.1), and what is left on an eyeball is
+/// its white and iris (by parent, lid skin over the rim keeps its tone). The mouth's inside is not (since session 27, method §7.7): a
+/// trained source keeps Gaussians bound to its cavity that paint the lips
+/// and the skin round them while its mouth is closed, and they carry that
+/// skin out over the chin when a composite's mouth opens wider than the
+/// source's did.
 pub fn holds_no_skin(region: Region) -> bool {
     matches!(
         region,
-        Region::TeethUpper | Region::TeethLower | Region::Hair
+        Region::TeethUpper
+            | Region::TeethLower
+            | Region::Hair
+            | Region::LeftEyeball
+            | Region::RightEyeball
     )
 }
 
@@ -247,10 +252,6 @@ pub fn semantic_skin_likeness(rgb: Vec3, region: Region, stats: &SkinStats) -> O
     }
     Some(if mostly_skin(region) {
         skin_likeness(lab, stats)
-    } else if matches!(region, Region::LeftEyeball | Region::RightEyeball) {
-        // Lightness counted fully: a brown iris in shade is a dark skin's
-        // hue and chroma, but far darker than the lid skin over the rim.
-        smoothstep(14.0, 8.0, (lab - stats.mean).length()) * keeps_skin_chroma(lab, stats)
     } else if region == Region::Remainder {
         hairline_skin_likeness(rgb, lab, stats)
     } else if matches!(region, Region::Lips | Region::LipsInside) {
@@ -259,30 +260,6 @@ pub fn semantic_skin_likeness(rgb: Vec3, region: Region, stats: &SkinStats) -> O
         strict_skin_likeness(lab, stats)
     })
 }
-
-/// How surely a colour on an eyeball keeps the colourfulness of the
-/// source's skin: 0 under [`EYE_WHITE_CHROMA`]'s lower share of the skin's
-/// CIELAB chroma, 1 over its upper share (and 1 for a skin too grey for
-/// chroma to say anything, under [`HUE_CHROMA`]). The white of a light
-/// source's eye in the lid's shade falls to its skin's lightness but stays
-/// greyer; lid skin in the same shade keeps its colour (method §7.7).
-pub fn keeps_skin_chroma(lab: Vec3, stats: &SkinStats) -> f32 {
-    let skin = stats.mean.y.hypot(stats.mean.z);
-    if skin.is_nan() || skin < HUE_CHROMA {
-        return 1.0;
-    }
-    let (white, lid) = EYE_WHITE_CHROMA;
-    smoothstep(white * skin, lid * skin, lab.y.hypot(lab.z))
-}
-
-/// The shares of the skin's CIELAB chroma at which a colour on an eyeball
-/// stops being the eye's white (under the first) and starts being lid skin
-/// (over the second) in [`keeps_skin_chroma`]. A trained source's white is
-/// not grey: the lashes and lid it borders blur into it, and ada's whites in
-/// the lid's shade (CIELAB L 60-80) carry about half her skin's chroma
-/// (session 45; 0.4 to 0.7 before, which moved them a quarter of the way to
-/// a dark base's tone).
-pub const EYE_WHITE_CHROMA: (f32, f32) = (0.6, 0.9);
 
 /// How surely a colour is not redder than the source's skin tone: 1 within
 /// [`LIP_HUE`]'s near bound of the tone's hue angle (CIELAB h = atan2(b*,
@@ -598,47 +575,19 @@ mod tests {
             assert_eq!(likeness(skin), 1.0, "{region:?}");
             assert_eq!(likeness(lips), 0.0, "{region:?}");
         }
-        // On an eyeball, lid skin moves; the white and a green or brown iris
-        // do not.
+        // On an eyeball nothing moves: not the white, a green or a dark
+        // skin's brown iris, nor a colour like the skin's — lid skin drawn
+        // over the rim counts for the lid (method §5.1).
         for region in [Region::LeftEyeball, Region::RightEyeball] {
-            let gain = semantic_skin_gain(light, region, &stats(light), &stats(dark));
-            let got = srgb_to_lab(corrected(light, gain));
-            assert!(
-                (got - srgb_to_lab(dark)).length() < 2.0,
-                "{region:?}: {got}"
-            );
             for eye in [
                 Vec3::new(0.93, 0.91, 0.88),
                 Vec3::new(0.25, 0.45, 0.3),
                 Vec3::new(0.3, 0.17, 0.08),
+                light,
             ] {
                 let gain = semantic_skin_gain(eye, region, &stats(light), &stats(dark));
                 assert_eq!(gain, Vec3::ONE, "{region:?} {eye}");
             }
-            // The white in the lid's shade, at the skin's lightness with
-            // under half its chroma, is no skin either (it was 0.43); nor
-            // is a trained white blurred with its lid to 0.55 of the
-            // skin's chroma (about 0.45 before session 45).
-            for share in [0.45, 0.55] {
-                let shaded = srgb_to_lab(light) * Vec3::new(1.0, share, share);
-                let white = semantic_skin_likeness(lab_to_srgb(shaded), region, &stats(light));
-                assert!(white.unwrap() < 0.1, "{region:?} at {share}: {white:?}");
-            }
-            // Lid skin that keeps most of its chroma moves.
-            let lid = srgb_to_lab(light) * Vec3::new(1.0, 0.95, 0.95);
-            let likeness = semantic_skin_likeness(lab_to_srgb(lid), region, &stats(light));
-            assert!(likeness.unwrap() > 0.9, "{region:?}: {likeness:?}");
-            // The skin's own colour keeps its chroma; a skin too grey for
-            // chroma to tell anything leaves the likeness to lightness.
-            let own = srgb_to_lab(light);
-            assert_eq!(keeps_skin_chroma(own, &stats(light)), 1.0);
-            let grey = Vec3::splat(0.6);
-            assert_eq!(keeps_skin_chroma(srgb_to_lab(grey), &stats(grey)), 1.0);
-            // A dark skin's brown iris is near its skin in hue and chroma,
-            // and stays: it is much darker.
-            let (skin, iris) = (Vec3::new(0.53, 0.36, 0.25), Vec3::new(0.3, 0.17, 0.08));
-            let gain = semantic_skin_gain(iris, region, &stats(skin), &stats(light));
-            assert_eq!(gain, Vec3::ONE, "{region:?}");
         }
         // Pink lips and a dark brow in mixed regions stay as they are, while the
         // lenient skin mode half-corrects the lips.

@@ -21,6 +21,14 @@ pub struct TriangleFrame {
     pub scale: f32,
 }
 
+impl TriangleFrame {
+    /// The world position of a point at `local` in this frame (units of the
+    /// triangle's size): k·R·local + c.
+    pub fn to_world(&self, local: Vec3) -> Vec3 {
+        self.scale * (self.rotation * local) + self.center
+    }
+}
+
 /// The GaussianAvatars safe normalisation.
 pub fn safe_normalize(x: Vec3) -> Vec3 {
     x / x.length_squared().max(1e-20).sqrt()
@@ -146,7 +154,7 @@ pub fn local_to_world(
     log_scale: Vec3,
 ) -> WorldGaussian {
     WorldGaussian {
-        position: frame.scale * (frame.rotation * local_position) + frame.center,
+        position: frame.to_world(local_position),
         rotation: normalize_quat(frame.quat * normalize_quat(local_rotation)),
         scale: log_scale.exp() * frame.scale,
     }
