@@ -5,8 +5,9 @@
 //! the lid's margin — were fitted to what the cameras saw in front of them:
 //! lid skin, not the eye's white. They count for the lid instead, so its
 //! colour rules judge them (a light source's lid skin in shade is as light
-//! and nearly as grey as its white, which the eyeball's rule keeps) and the
-//! base's lid skin takes over from them where it takes over the lid.
+//! and nearly as grey as its white: no rule by colour alone on the eyeball
+//! told the two apart) and the base's lid skin takes over from them where
+//! it takes over the lid.
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -20,9 +21,9 @@ use crate::model::regions::Region;
 /// source's `neutral` mesh: where it counts for an eyeball and a triangle of
 /// that eye's lid or socket (its eye region or eye socket) lies in front of
 /// it — along the head frame's +z, out of the face (method §1.1), within the
-/// eyeball's radius — the nearest such triangle; `None` for every other Gaussian, and for one
-/// whose centre is not finite or whose triangle (bound or counted) is past
-/// the mesh.
+/// eyeball's radius — the nearest such triangle; `None` for every other
+/// Gaussian, and for one whose centre is not finite or whose triangle
+/// (bound or counted) is past the mesh.
 pub fn triangles_over_eyeballs(
     model: &HeadModel,
     set: &GaussianSet,

@@ -88,8 +88,9 @@ pub fn composite_hash(
 }
 
 /// The order a composite's Gaussians are hashed in and written to a
-/// GaussianAvatars export (a world-space PLY keeps the composite's order): by region of
-/// their triangle (table order), then by triangle, then by their parameters'
+/// GaussianAvatars export in (a world-space PLY keeps the composite's
+/// order): by region of their triangle (table order), then by triangle,
+/// then by their parameters'
 /// bits (position, rotation, log-scale, opacity, SH) — an order that depends
 /// only on what the Gaussians are, not on the order a composite lists them
 /// in. Membership by place (method §5.1) counts a Gaussian by where it sits

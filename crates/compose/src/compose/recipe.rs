@@ -66,8 +66,8 @@ pub enum ColourCorrection {
     /// in linear RGB) on skin-coloured Gaussians only.
     Skin,
     /// The same transfer on skin only by what it is: never in regions that
-    /// hold no skin (teeth, hair, eyeballs), and elsewhere only where a Gaussian's
-    /// colour is close to its source's own skin — in the lips and the
+    /// hold no skin (teeth, hair, eyeballs), and elsewhere only where a
+    /// Gaussian's colour is close to its source's own skin — in the lips and the
     /// mouth's inside also no redder in hue (lips, brows, lashes and beards
     /// keep theirs; docs/method.md §7.7).
     Semantic,

@@ -139,11 +139,12 @@ pub fn skin_transfer_gain(rgb: Vec3, from: &SkinStats, to: &SkinStats) -> Vec3 {
 /// session 47: from session 18 their lid skin over the rim moved by a strict
 /// likeness, but under membership by place the Gaussians drawing it count
 /// for the lid now (`lids`, method §5.1), and what is left on an eyeball is
-/// its white and iris (by parent, lid skin over the rim keeps its tone). The mouth's inside is not (since session 27, method §7.7): a
-/// trained source keeps Gaussians bound to its cavity that paint the lips
-/// and the skin round them while its mouth is closed, and they carry that
-/// skin out over the chin when a composite's mouth opens wider than the
-/// source's did.
+/// its white and iris (by parent, lid skin over the rim keeps its tone).
+/// The mouth's inside is not (since session 27, method §7.7): a trained
+/// source keeps Gaussians bound to its cavity that paint the lips and the
+/// skin round them while its mouth is closed, and they carry that skin out
+/// over the chin when a composite's mouth opens wider than the source's
+/// did.
 pub fn holds_no_skin(region: Region) -> bool {
     matches!(
         region,
