@@ -20,8 +20,9 @@ use crate::model::regions::Region;
 /// Per Gaussian of `set`, counted for the triangles `counted` of the
 /// source's `neutral` mesh: where it counts for an eyeball and a triangle of
 /// that eye's lid or socket (its eye region or eye socket) lies in front of
-/// it — along the head frame's +z, out of the face (method §1.1), within the
-/// eyeball's radius — the nearest such triangle; `None` for every other
+/// it — along the head frame's +z, out of the face (method §1.1), and
+/// [`COVER_YAW_DEG`] to either side, within the eyeball's radius — the
+/// nearest such triangle along +z; `None` for every other
 /// Gaussian, and for one whose centre is not finite or whose triangle
 /// (bound or counted) is past the mesh.
 pub fn triangles_over_eyeballs(
@@ -53,6 +54,12 @@ pub fn triangles_over_eyeballs(
         })
         .collect()
 }
+
+/// How far from +z (degrees of yaw, either way) the lid must cover an
+/// eyeball Gaussian as well: the frontal pair of a NeRSemble-like rig
+/// (cameras at ±20°, as `visage capture`'s) sees round the corners of the
+/// eye, where the white shows past a lid that covers it straight ahead.
+pub const COVER_YAW_DEG: f64 = 20.0;
 
 /// An eyeball of a neutral mesh and the triangles of its lid and socket
 /// that may lie in front of it.
@@ -114,16 +121,24 @@ impl Eyeball {
     }
 
     /// The nearest triangle in front of `point` along +z (out of the face),
-    /// within one radius of the eyeball.
+    /// within one radius of the eyeball, where one also lies in front of it
+    /// along each of the directions turned [`COVER_YAW_DEG`] either way.
     fn cover(&self, model: &HeadModel, neutral: &[Vec3], point: Vec3) -> Option<u32> {
         let origin = point.as_dvec3();
-        self.near
-            .iter()
-            .filter_map(|&t| {
+        let hits = |direction: DVec3| {
+            self.near.iter().filter_map(move |&t| {
                 let [a, b, c] = model.triangles[t].map(|v| neutral[v as usize].as_dvec3());
-                ray_hit(origin, DVec3::Z, [a, b, c]).map(|d| (d, t))
+                ray_hit(origin, direction, [a, b, c])
+                    .filter(|&d| d <= self.radius)
+                    .map(|d| (d, t))
             })
-            .filter(|&(d, _)| d <= self.radius)
+        };
+        let yaw = COVER_YAW_DEG.to_radians();
+        let turned = [-yaw, yaw].map(|a| DVec3::new(a.sin(), 0.0, a.cos()));
+        if turned.iter().any(|&d| hits(d).next().is_none()) {
+            return None;
+        }
+        hits(DVec3::Z)
             .min_by(|x, y| x.0.total_cmp(&y.0))
             .map(|(_, t)| t as u32)
     }
