@@ -154,7 +154,17 @@ pub fn base_skin_confidence<'a>(
         let f = recipe.gaussians[regions[t].group().index()];
         skin_of(f)[t].min(base[t])
     };
-    let beside_feature = misfit.map(|(_, topology)| beside_feature(topology, regions.len(), both));
+    let beside_feature = misfit.map(|(_, topology)| {
+        let features = Features {
+            either: (0..regions.len()).map(|t| both(t) < BOTH_SKIN.0).collect(),
+            base: base.iter().map(|&s| s < BOTH_SKIN.0).collect(),
+        };
+        let only_base = |t: usize| {
+            let source = recipe.gaussians[regions[t].group().index()];
+            only_base_features_count(regions[t], brightens(source))
+        };
+        beside_feature(topology, regions.len(), &features, only_base)
+    });
     (0..regions.len())
         .map(|t| {
             let group = regions[t].group().index();
@@ -188,20 +198,59 @@ pub fn base_skin_confidence<'a>(
         .collect()
 }
 
-/// Per triangle: whether it shares a corner with a triangle where either side
-/// shows a feature (`both` under [`BOTH_SKIN`]'s lower edge) — a collar's
-/// edge, a beard's, a lip's. The fitted part of the base's skin stays off
-/// those: the base's skin Gaussians there were trained beside the base's own
-/// features, not the source's (every-group's neck lost 3.2 dB to a light line
-/// along cleo's collar without this); round the eyes, under a brightening
-/// transfer, the shape-weighted part does too.
-fn beside_feature(topology: Topology, triangles: usize, both: impl Fn(usize) -> f32) -> Vec<bool> {
-    let feature: Vec<bool> = (0..triangles).map(|t| both(t) < BOTH_SKIN.0).collect();
+/// Per triangle: where a feature stands, on either side of a swap and on
+/// the base's alone (a skin share under [`BOTH_SKIN`]'s lower edge).
+struct Features {
+    either: Vec<bool>,
+    base: Vec<bool>,
+}
+
+/// Whether only the base's own features keep the base's skin off a
+/// triangle of `region` beside them (else either side's do), `brightens`
+/// saying whether the skin transfer from the region's source to the base
+/// brightens. The base's skin Gaussians at the edge of one of its features
+/// carry that feature's colour; beside one of the source's they were
+/// trained beside skin, and what the source's Gaussians there hold is
+/// mostly the transfer's error where the source's features are those a
+/// skin share reads poorly: the neck's shade and light stubble, the
+/// sockets' lid skin over the eyeball's rim, the lids under a darkening
+/// transfer (method §7.11, "Beside whose feature"). A dark source's brows
+/// and lashes under a brightening one, and a hairline's hair, are drawn to
+/// their edge by the source's Gaussians beside them, and those stay.
+fn only_base_features_count(region: Region, brightens: bool) -> bool {
+    match region {
+        Region::Neck | Region::LeftEyeSocket | Region::RightEyeSocket => true,
+        Region::LeftEyeRegion | Region::RightEyeRegion => !brightens,
+        _ => false,
+    }
+}
+
+/// Per triangle (of the first `triangles`): whether it shares a corner with
+/// a triangle where a feature stands — a collar's edge, a beard's, a lip's:
+/// the base's own alone where `only_base(t)`
+/// ([`only_base_features_count`]), either side's elsewhere. The fitted part
+/// of the base's skin stays off those: the base's skin Gaussians there were
+/// trained beside the base's own features, not the source's (every-group's
+/// neck lost 3.2 dB to a light line along cleo's collar without this);
+/// round the eyes, under a brightening transfer, the shape-weighted part
+/// does too.
+fn beside_feature(
+    topology: Topology,
+    triangles: usize,
+    features: &Features,
+    only_base: impl Fn(usize) -> bool,
+) -> Vec<bool> {
     topology
         .triangles
         .iter()
         .take(triangles)
-        .map(|corners| {
+        .enumerate()
+        .map(|(t, corners)| {
+            let feature = if only_base(t) {
+                &features.base
+            } else {
+                &features.either
+            };
             corners.iter().any(|&v| {
                 topology
                     .vertex_triangles
@@ -528,6 +577,70 @@ mod tests {
         // Judged by the shape weight alone, the base takes nothing.
         let c = base_skin_confidence(&recipe, &regions, skin_of, None, |_| false);
         assert!(c.iter().all(|&c| c == 0.0));
+    }
+
+    #[test]
+    fn on_the_neck_and_in_the_sockets_only_the_bases_own_features_keep_its_skin_off() {
+        let grid = grid();
+        let (triangles, topology) = (&grid.triangles, grid.topology());
+        let misfit = vec![0.0f32; triangles.len()];
+        let confidence = |group: Group, region: Region, skins: &FeatureOnLast, brightens: bool| {
+            let recipe = from_source_one(group, vec![0.0, 1.0]);
+            let regions = vec![region; triangles.len()];
+            let skin_of = |s: usize| skins.of(s);
+            base_skin_confidence(
+                &recipe,
+                &regions,
+                skin_of,
+                Some((&misfit, topology)),
+                |_| brightens,
+            )
+        };
+        // The source's feature (light stubble, shade read as one) on the last
+        // triangle: on the neck, in a socket and on a lid under a darkening
+        // transfer the base takes over beside it; on the nose, and on a lid
+        // under a brightening transfer (a dark source's brow), it does not.
+        let source_feature = FeatureOnLast::new(triangles.len());
+        for (group, region, brightens) in [
+            (Group::Neck, Region::Neck, true),
+            (Group::Eyes, Region::RightEyeSocket, true),
+            (Group::Eyes, Region::LeftEyeRegion, false),
+        ] {
+            let c = confidence(group, region, &source_feature, brightens);
+            assert_eq!(
+                (c[17], c[16], c[11], c[0]),
+                (0.0, 1.0, 1.0, 1.0),
+                "{region:?}: {c:?}"
+            );
+        }
+        for (group, region) in [
+            (Group::Nose, Region::Nose),
+            (Group::Eyes, Region::LeftEyeRegion),
+        ] {
+            let c = confidence(group, region, &source_feature, true);
+            assert_eq!(
+                (c[17], c[16], c[11], c[0]),
+                (0.0, 0.0, 0.0, 1.0),
+                "{region:?}: {c:?}"
+            );
+        }
+        // The base's own feature (its collar) keeps its skin off everywhere.
+        let base_feature = FeatureOnLast {
+            base: source_feature.source.clone(),
+            source: source_feature.base.clone(),
+        };
+        for (group, region) in [
+            (Group::Neck, Region::Neck),
+            (Group::Eyes, Region::LeftEyeSocket),
+            (Group::Nose, Region::Nose),
+        ] {
+            let c = confidence(group, region, &base_feature, false);
+            assert_eq!(
+                (c[17], c[16], c[11], c[0]),
+                (0.0, 0.0, 0.0, 1.0),
+                "{region:?}: {c:?}"
+            );
+        }
     }
 
     #[test]
