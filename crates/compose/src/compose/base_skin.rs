@@ -133,8 +133,10 @@ pub struct Topology<'a> {
 /// from the skin of the source the triangle's region shows — how well the
 /// base's Gaussians fit the composite's surface there (the larger of the
 /// base's share of the group's shape and the fit its `misfit` gives, see
-/// [`BASE_FIT`]; the fit counts nowhere beside a feature, nor the shape
-/// weight beside one round the eyes where the base's skin is lighter)
+/// [`BASE_FIT`]; the fit counts nowhere beside a feature — either side's,
+/// or only the base's where [`only_base_features_keep_off`] says so — nor
+/// the shape weight beside one round the eyes where the base's skin is
+/// lighter)
 /// times how surely both show skin there; 0 where the region shows the
 /// base. `skin_of(s)` is source s's [`triangle_skin`]; `misfit` is
 /// [`similarity_misfit`] from the base's neutral to the composite's, None
@@ -157,11 +159,11 @@ pub fn base_skin_confidence<'a>(
     let beside_feature = misfit.map(|(_, topology)| {
         let features = Features {
             either: (0..regions.len()).map(|t| both(t) < BOTH_SKIN.0).collect(),
-            base: base.iter().map(|&s| s < BOTH_SKIN.0).collect(),
+            base: (0..regions.len()).map(|t| base[t] < BOTH_SKIN.0).collect(),
         };
         let only_base = |t: usize| {
             let source = recipe.gaussians[regions[t].group().index()];
-            only_base_features_count(regions[t], brightens(source))
+            only_base_features_keep_off(regions[t], || brightens(source))
         };
         beside_feature(topology, regions.len(), &features, only_base)
     });
@@ -206,34 +208,33 @@ struct Features {
 }
 
 /// Whether only the base's own features keep the base's skin off a
-/// triangle of `region` beside them (else either side's do), `brightens`
+/// triangle of `region` beside them (else either side's do), `brightens()`
 /// saying whether the skin transfer from the region's source to the base
-/// brightens. The base's skin Gaussians at the edge of one of its features
+/// brightens (asked only round the eyes: it converts colours). The base's skin Gaussians at the edge of one of its features
 /// carry that feature's colour; beside one of the source's they were
 /// trained beside skin, and what the source's Gaussians there hold is
 /// mostly the transfer's error where the source's features are those a
 /// skin share reads poorly: the neck's shade and light stubble, the
-/// sockets' lid skin over the eyeball's rim, the lids under a darkening
-/// transfer (method §7.11, "Beside whose feature"). A dark source's brows
+/// sockets' lid skin over the eyeball's rim, the lids where the transfer
+/// does not brighten (method §7.11, "Beside whose feature"). A dark source's brows
 /// and lashes under a brightening one, and a hairline's hair, are drawn to
 /// their edge by the source's Gaussians beside them, and those stay.
-fn only_base_features_count(region: Region, brightens: bool) -> bool {
+fn only_base_features_keep_off(region: Region, brightens: impl FnOnce() -> bool) -> bool {
     match region {
         Region::Neck | Region::LeftEyeSocket | Region::RightEyeSocket => true,
-        Region::LeftEyeRegion | Region::RightEyeRegion => !brightens,
+        Region::LeftEyeRegion | Region::RightEyeRegion => !brightens(),
         _ => false,
     }
 }
 
 /// Per triangle (of the first `triangles`): whether it shares a corner with
 /// a triangle where a feature stands — a collar's edge, a beard's, a lip's:
-/// the base's own alone where `only_base(t)`
-/// ([`only_base_features_count`]), either side's elsewhere. The fitted part
-/// of the base's skin stays off those: the base's skin Gaussians there were
-/// trained beside the base's own features, not the source's (every-group's
-/// neck lost 3.2 dB to a light line along cleo's collar without this);
-/// round the eyes, under a brightening transfer, the shape-weighted part
-/// does too.
+/// the base's own alone where `only_base(t)`, either side's elsewhere (why,
+/// in [`only_base_features_keep_off`]). The fitted part of the base's skin
+/// stays off those: the base's skin Gaussians beside its own features were
+/// trained beside them (every-group's neck lost 3.2 dB to a light line along
+/// cleo's collar without this); round the eyes, under a brightening
+/// transfer, the shape-weighted part does too.
 fn beside_feature(
     topology: Topology,
     triangles: usize,
@@ -588,13 +589,9 @@ mod tests {
             let recipe = from_source_one(group, vec![0.0, 1.0]);
             let regions = vec![region; triangles.len()];
             let skin_of = |s: usize| skins.of(s);
-            base_skin_confidence(
-                &recipe,
-                &regions,
-                skin_of,
-                Some((&misfit, topology)),
-                |_| brightens,
-            )
+            base_skin_confidence(&recipe, &regions, skin_of, Some((&misfit, topology)), |s| {
+                s == 1 && brightens
+            })
         };
         // The source's feature (light stubble, shade read as one) on the last
         // triangle: on the neck, in a socket and on a lid under a darkening
@@ -604,7 +601,9 @@ mod tests {
         for (group, region, brightens) in [
             (Group::Neck, Region::Neck, true),
             (Group::Eyes, Region::RightEyeSocket, true),
+            (Group::Eyes, Region::LeftEyeSocket, false),
             (Group::Eyes, Region::LeftEyeRegion, false),
+            (Group::Eyes, Region::RightEyeRegion, false),
         ] {
             let c = confidence(group, region, &source_feature, brightens);
             assert_eq!(
@@ -616,6 +615,7 @@ mod tests {
         for (group, region) in [
             (Group::Nose, Region::Nose),
             (Group::Eyes, Region::LeftEyeRegion),
+            (Group::Eyes, Region::RightEyeRegion),
         ] {
             let c = confidence(group, region, &source_feature, true);
             assert_eq!(
@@ -632,6 +632,7 @@ mod tests {
         for (group, region) in [
             (Group::Neck, Region::Neck),
             (Group::Eyes, Region::LeftEyeSocket),
+            (Group::Eyes, Region::RightEyeRegion),
             (Group::Nose, Region::Nose),
         ] {
             let c = confidence(group, region, &base_feature, false);
