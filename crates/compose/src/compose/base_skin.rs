@@ -597,50 +597,78 @@ mod tests {
         // triangle: on the neck, in a socket and on a lid under a darkening
         // transfer the base takes over beside it; on the nose, and on a lid
         // under a brightening transfer (a dark source's brow), it does not.
-        let source_feature = FeatureOnLast::new(triangles.len());
-        for (group, region, brightens) in [
-            (Group::Neck, Region::Neck, true),
-            (Group::Eyes, Region::RightEyeSocket, true),
-            (Group::Eyes, Region::LeftEyeSocket, false),
-            (Group::Eyes, Region::LeftEyeRegion, false),
-            (Group::Eyes, Region::RightEyeRegion, false),
-        ] {
-            let c = confidence(group, region, &source_feature, brightens);
-            assert_eq!(
-                (c[17], c[16], c[11], c[0]),
-                (0.0, 1.0, 1.0, 1.0),
-                "{region:?}: {c:?}"
-            );
-        }
-        for (group, region) in [
-            (Group::Nose, Region::Nose),
-            (Group::Eyes, Region::LeftEyeRegion),
-            (Group::Eyes, Region::RightEyeRegion),
-        ] {
-            let c = confidence(group, region, &source_feature, true);
-            assert_eq!(
-                (c[17], c[16], c[11], c[0]),
-                (0.0, 0.0, 0.0, 1.0),
-                "{region:?}: {c:?}"
-            );
-        }
         // The base's own feature (its collar) keeps its skin off everywhere.
+        let source_feature = FeatureOnLast::new(triangles.len());
         let base_feature = FeatureOnLast {
             base: source_feature.source.clone(),
             source: source_feature.base.clone(),
         };
-        for (group, region) in [
-            (Group::Neck, Region::Neck),
-            (Group::Eyes, Region::LeftEyeSocket),
-            (Group::Eyes, Region::RightEyeRegion),
-            (Group::Nose, Region::Nose),
-        ] {
-            let c = confidence(group, region, &base_feature, false);
-            assert_eq!(
-                (c[17], c[16], c[11], c[0]),
-                (0.0, 0.0, 0.0, 1.0),
-                "{region:?}: {c:?}"
-            );
+        let (takes_over, keeps_off) = ((0.0, 1.0, 1.0, 1.0), (0.0, 0.0, 0.0, 1.0));
+        let cases = [
+            (Group::Neck, Region::Neck, &source_feature, true, takes_over),
+            (
+                Group::Eyes,
+                Region::RightEyeSocket,
+                &source_feature,
+                true,
+                takes_over,
+            ),
+            (
+                Group::Eyes,
+                Region::LeftEyeSocket,
+                &source_feature,
+                false,
+                takes_over,
+            ),
+            (
+                Group::Eyes,
+                Region::LeftEyeRegion,
+                &source_feature,
+                false,
+                takes_over,
+            ),
+            (
+                Group::Eyes,
+                Region::RightEyeRegion,
+                &source_feature,
+                false,
+                takes_over,
+            ),
+            (Group::Nose, Region::Nose, &source_feature, true, keeps_off),
+            (
+                Group::Eyes,
+                Region::LeftEyeRegion,
+                &source_feature,
+                true,
+                keeps_off,
+            ),
+            (
+                Group::Eyes,
+                Region::RightEyeRegion,
+                &source_feature,
+                true,
+                keeps_off,
+            ),
+            (Group::Neck, Region::Neck, &base_feature, false, keeps_off),
+            (
+                Group::Eyes,
+                Region::LeftEyeSocket,
+                &base_feature,
+                false,
+                keeps_off,
+            ),
+            (
+                Group::Eyes,
+                Region::RightEyeRegion,
+                &base_feature,
+                false,
+                keeps_off,
+            ),
+            (Group::Nose, Region::Nose, &base_feature, false, keeps_off),
+        ];
+        for (group, region, skins, brightens, expected) in cases {
+            let c = confidence(group, region, skins, brightens);
+            assert_eq!((c[17], c[16], c[11], c[0]), expected, "{region:?}: {c:?}");
         }
     }
 
