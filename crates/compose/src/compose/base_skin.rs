@@ -210,15 +210,16 @@ struct Features {
 /// Whether only the base's own features keep the base's skin off a
 /// triangle of `region` beside them (else either side's do), `brightens()`
 /// saying whether the skin transfer from the region's source to the base
-/// brightens (asked only round the eyes: it converts colours). The base's skin Gaussians at the edge of one of its features
-/// carry that feature's colour; beside one of the source's they were
-/// trained beside skin, and what the source's Gaussians there hold is
-/// mostly the transfer's error where the source's features are those a
-/// skin share reads poorly: the neck's shade and light stubble, the
-/// sockets' lid skin over the eyeball's rim, the lids where the transfer
-/// does not brighten (method §7.11, "Beside whose feature"). A dark source's brows
-/// and lashes under a brightening one, and a hairline's hair, are drawn to
-/// their edge by the source's Gaussians beside them, and those stay.
+/// brightens (asked only round the eyes: it converts colours). The base's
+/// skin Gaussians at the edge of one of its features carry that feature's
+/// colour; beside one of the source's they were trained beside skin, and
+/// what the source's Gaussians there hold is mostly the transfer's error
+/// where the source's features are those a skin share reads poorly: the
+/// neck's shade and light stubble, the sockets' lid skin over the
+/// eyeball's rim, the lids where the transfer does not brighten (method
+/// §7.11, "Beside whose feature"). A dark source's brows and lashes under a
+/// brightening transfer, and a hairline's hair, are drawn to their edge by
+/// the source's Gaussians beside them, and those stay.
 fn only_base_features_keep_off(region: Region, brightens: impl FnOnce() -> bool) -> bool {
     match region {
         Region::Neck | Region::LeftEyeSocket | Region::RightEyeSocket => true,
