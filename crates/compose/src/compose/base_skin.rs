@@ -14,7 +14,7 @@ use super::selection::Csr;
 use super::skin_transfer::{semantic_skin_likeness, SkinStats};
 use crate::avatar::binding::triangle_frame;
 use crate::model::geometry::smoothstep;
-use crate::model::regions::Region;
+use crate::model::regions::{Group, Region};
 
 /// The skin shares triangles' mean likeness must reach, on both sides, for
 /// the base's skin to take over (smoothly between the two): where either
@@ -156,15 +156,15 @@ pub fn base_skin_confidence<'a>(
         let f = recipe.gaussians[regions[t].group().index()];
         skin_of(f)[t].min(base[t])
     };
+    // Only the eye regions' rules ask the transfer's direction, and it
+    // converts colours: ask once, for the eyes' source.
+    let eyes_brighten = brightens(recipe.gaussians[Group::Eyes.index()]);
     let beside_feature = misfit.map(|(_, topology)| {
         let features = Features {
             either: (0..regions.len()).map(|t| both(t) < BOTH_SKIN.0).collect(),
             base: (0..regions.len()).map(|t| base[t] < BOTH_SKIN.0).collect(),
         };
-        let only_base = |t: usize| {
-            let source = recipe.gaussians[regions[t].group().index()];
-            only_base_features_keep_off(regions[t], || brightens(source))
-        };
+        let only_base = |t: usize| only_base_features_keep_off(regions[t], eyes_brighten);
         beside_feature(topology, regions.len(), &features, only_base)
     });
     (0..regions.len())
@@ -183,7 +183,7 @@ pub fn base_skin_confidence<'a>(
             // base's skin paints over the source's brows and lashes; a
             // darker one's errs little there, and takes over the lid skin a
             // light source would leave light.
-            let light_beside_dark = beside && holds_dark_features(regions[t]) && brightens(source);
+            let light_beside_dark = beside && holds_dark_features(regions[t]) && eyes_brighten;
             let shape = if light_beside_dark {
                 0.0
             } else {
@@ -208,9 +208,9 @@ struct Features {
 }
 
 /// Whether only the base's own features keep the base's skin off a
-/// triangle of `region` beside them (else either side's do), `brightens()`
-/// saying whether the skin transfer from the region's source to the base
-/// brightens (asked only round the eyes: it converts colours). The base's
+/// triangle of `region` beside them (else either side's do), `eyes_brighten`
+/// saying whether the skin transfer from the eyes' source to the base
+/// brightens. The base's
 /// skin Gaussians at the edge of one of its features carry that feature's
 /// colour; beside one of the source's they were trained beside skin, and
 /// what the source's Gaussians there hold is mostly the transfer's error
@@ -220,10 +220,10 @@ struct Features {
 /// §7.11, "Beside whose feature"). A dark source's brows and lashes under a
 /// brightening transfer, and a hairline's hair, are drawn to their edge by
 /// the source's Gaussians beside them, and those stay.
-fn only_base_features_keep_off(region: Region, brightens: impl FnOnce() -> bool) -> bool {
+fn only_base_features_keep_off(region: Region, eyes_brighten: bool) -> bool {
     match region {
         Region::Neck | Region::LeftEyeSocket | Region::RightEyeSocket => true,
-        Region::LeftEyeRegion | Region::RightEyeRegion => !brightens(),
+        Region::LeftEyeRegion | Region::RightEyeRegion => !eyes_brighten,
         _ => false,
     }
 }
@@ -324,7 +324,6 @@ pub fn showing(share: SkinShare, all: &[u32], counted: &[u32]) -> Vec<u32> {
 mod tests {
     use super::*;
     use crate::compose::colour::srgb_to_lab;
-    use crate::model::regions::Group;
 
     fn stats(rgb: Vec3) -> SkinStats {
         let lab = srgb_to_lab(rgb);
