@@ -1,11 +1,12 @@
 //! The composition engine: everything precomputed per database, composites built
 //! from recipes (and rebuilt only where a recipe changed), and posed frames.
 
+mod colour_gains;
 mod posing;
 
 use std::borrow::Cow;
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Mutex, OnceLock};
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -15,22 +16,19 @@ use super::base_skin::{
     Topology,
 };
 use super::blend::{Blender, SparseRhs};
-use super::clothing::{self, ClothingMean};
-use super::colour::{apply_gain, colour_weight, thesis_gain, weighted_mean_colour};
+use super::colour::{apply_gain, colour_weight, weighted_mean_colour};
 use super::copying::{copy_own, relight_sh, CopyOwn, OpacityEdit, OwnBlock};
 use super::correction::{Correction, SharedGains};
 use super::dark_features;
 use super::membership::{footprint_triangles, placements};
 use super::recipe::{
-    Anchor, ColourCorrection, Deform, Membership, PostProcess, ResolvedRecipe, Shading, SkinSource,
-    Smoothing,
+    Anchor, Deform, Membership, PostProcess, ResolvedRecipe, Shading, SkinSource, Smoothing,
 };
 use super::reshape::{note_anchor, Anchored, ReshapeSource, Reshaping, SourceAnchors};
 use super::seam_colours::{SeamColours, SourceTables};
 use super::seams::{limit_reach, SeamNeighbours};
 use super::selection::{Csr, SelectionTables};
 use super::shading::{vertex_exposures, BakedLight, Exposure};
-use super::skin_transfer::{semantic_skin_likeness, skin_transfer_gain, SkinStats};
 use super::smoothing::{own_share, BorderTables};
 use super::source_colours::SourceColours;
 use crate::avatar::binding::TriangleFrame;
@@ -347,97 +345,6 @@ impl Engine {
 
     fn source_of(recipe: &ResolvedRecipe, region: Region) -> usize {
         recipe.gaussians[region.group().index()]
-    }
-
-    /// Skin-transfer gains of every Gaussian of `source` towards `reference`:
-    /// by colour likeness alone (`semantic` = None) or by the region each
-    /// Gaussian counts for under a membership as well (`Semantic`).
-    fn skin_gains(
-        &self,
-        source: usize,
-        reference: usize,
-        semantic: Option<Membership>,
-    ) -> Option<SharedGains> {
-        let (from, to) = (*self.colours.skin(source)?, *self.colours.skin(reference)?);
-        // Built before the lock: its first build runs on the thread pool,
-        // whose jobs must not wait on a lock this thread holds.
-        self.colour_weights_of(source);
-        let mut cache = self.skin_gains.lock().unwrap_or_else(|e| e.into_inner());
-        let gains = cache
-            .entry((source, reference, semantic))
-            .or_insert_with(|| {
-                let count = self.db.sources[source].gaussians.len();
-                let regions = &self.db.model.triangle_regions;
-                let colours = self.colours.seen(source);
-                let brightens = dark_features::transfer_brightens(&from, &to);
-                let clothing = semantic.map(|m| self.clothing_of(source, m, &from));
-                let gains = (0..count)
-                    .into_par_iter()
-                    .map(|i| match semantic {
-                        Some(m) => {
-                            let t = self.tables.counted_triangles(m, source)[i];
-                            let region = regions[t as usize];
-                            let clothing = clothing.as_ref().and_then(|c| c[region.index()]);
-                            self.colours.semantic_gain(
-                                source,
-                                i,
-                                region,
-                                (&from, &to),
-                                brightens,
-                                clothing,
-                            )
-                        }
-                        None => skin_transfer_gain(colours[i], &from, &to),
-                    })
-                    .collect();
-                Arc::new(gains)
-            });
-        Some(gains.clone())
-    }
-
-    /// Per region (by [`Region::index`]), the mean linear colour of source
-    /// `f`'s clothing in it under membership `m`, judged skin or not by the
-    /// source's skin statistics `skin`; `None` in regions that hold no
-    /// clothing ([`clothing::holds_clothing`]) or show none.
-    fn clothing_of(&self, f: usize, m: Membership, skin: &SkinStats) -> Vec<Option<Vec3>> {
-        let mut means = vec![ClothingMean::default(); Region::COUNT];
-        let (counted, colours) = (self.tables.counted_triangles(m, f), self.colours.seen(f));
-        let weights = self.colour_weights_of(f);
-        for (i, &t) in counted.iter().enumerate() {
-            let region = self.db.model.triangle_regions[t as usize];
-            if clothing::holds_clothing(region) {
-                let likeness = semantic_skin_likeness(colours[i], region, skin).unwrap_or(1.0);
-                means[region.index()].add(colours[i], likeness, weights[i]);
-            }
-        }
-        means.iter().map(ClothingMean::mean).collect()
-    }
-
-    /// The colour correction of Gaussians of source `f` bound in `region`.
-    fn correction(&self, recipe: &ResolvedRecipe, region: Region, f: usize) -> Correction {
-        if f == recipe.base {
-            return Correction::None;
-        }
-        match recipe.post.colour {
-            ColourCorrection::Off => Correction::None,
-            ColourCorrection::Thesis => {
-                let means = &self.mean_colour[recipe.post.membership as usize];
-                let reference = means[recipe.base][region.index()];
-                let source = means[f][region.index()];
-                match (reference, source) {
-                    (Some(r), Some(s)) => Correction::Gain(thesis_gain(r, s)),
-                    _ => Correction::None,
-                }
-            }
-            ColourCorrection::Skin | ColourCorrection::Semantic => {
-                let semantic = (recipe.post.colour == ColourCorrection::Semantic)
-                    .then_some(recipe.post.membership);
-                match self.skin_gains(f, recipe.base, semantic) {
-                    Some(g) => Correction::PerGaussian(g),
-                    None => Correction::None,
-                }
-            }
-        }
     }
 
     /// Rebuilds the composite's Gaussian set from the lookup tables, reusing its
