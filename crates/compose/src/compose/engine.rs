@@ -1,7 +1,7 @@
 //! The composition engine: everything precomputed per database, composites built
 //! from recipes (and rebuilt only where a recipe changed), and posed frames.
 
-mod colour_gains;
+mod colour_correction;
 mod posing;
 
 use std::borrow::Cow;

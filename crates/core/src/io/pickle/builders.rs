@@ -35,6 +35,8 @@ pub const ALLOWED_GLOBALS: &[(&str, &str)] = &[
     ("builtins", "frozenset"),
 ];
 
+/// Resolves a `GLOBAL` to one of [`ALLOWED_GLOBALS`], or refuses it with an
+/// error naming it.
 pub(super) fn allowed(module: &str, name: &str) -> Result<Value, String> {
     ALLOWED_GLOBALS
         .iter()

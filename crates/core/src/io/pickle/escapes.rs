@@ -83,10 +83,12 @@ pub(super) fn raw_unicode_unescape(line: &str) -> Result<String, String> {
     Ok(out)
 }
 
+/// A Python 2 byte string as text, one character per byte (latin-1).
 pub(super) fn latin1(bytes: &[u8]) -> String {
     bytes.iter().map(|&b| b as char).collect()
 }
 
+/// A Python 3 string's bytes as text (UTF-8).
 pub(super) fn utf8(bytes: &[u8]) -> Result<String, String> {
     String::from_utf8(bytes.to_vec()).map_err(|_| "pickle string is not UTF-8".to_string())
 }

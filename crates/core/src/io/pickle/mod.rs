@@ -9,10 +9,10 @@
 //! the input size (every element comes from at least one input byte, and arrays
 //! must match the bytes that carry them).
 //!
-//! The reader is three steps, one file each: [`machine`] runs the pickle's
-//! opcodes over a heap of shared objects, [`builders`] turns the few Python
-//! constructors it may name into data, and [`value`] holds what comes out;
-//! [`escapes`] decodes protocol 0's text forms for the first two.
+//! The reader is three steps, one file each: `machine.rs` runs the pickle's
+//! opcodes over a heap of shared objects, `builders.rs` turns the few Python
+//! constructors it may name into data, and `value.rs` holds what comes out;
+//! `escapes.rs` decodes protocol 0's text forms for the first two.
 
 mod builders;
 mod escapes;

@@ -370,6 +370,7 @@ impl Value {
         }
     }
 
+    /// What the value is, in words, for error messages.
     pub(super) fn kind(&self) -> &'static str {
         match self {
             Value::None => "None",

@@ -8,9 +8,10 @@
 //! at the same views); and the decomposition swap → +shape → +smoothing →
 //! +colour.
 //!
-//! Four files: [`pixels`] says what each pixel of a view shows, [`tally`]
-//! sums the errors view by view into a [`CompositeReport`] ([`report`]
-//! holds its types), and this one builds the composites and walks the views.
+//! Four files: `pixels.rs` says what each pixel of a view shows, `tally.rs`
+//! sums the errors view by view into a [`CompositeReport`] (`report.rs`
+//! holds its types and the sums they are made from), and this one builds
+//! the composites and walks the views.
 
 mod pixels;
 mod report;
@@ -46,7 +47,7 @@ pub use report::{
     CompositeReport, FitRun, GroupQuality, Leak, Pictures, Quality, RegionQuality, SourceCeiling,
     Step, ViewQuality, OPEN_MOUTH_DEG,
 };
-use tally::{Tally, ViewSums};
+use tally::{SourceView, Tally, ViewSums};
 
 /// What to measure.
 #[derive(Clone, Debug)]
@@ -287,6 +288,9 @@ pub fn evaluate_variants(
     variants: &[(&'static str, Composite)],
 ) -> Result<(CompositeReport, Pictures)> {
     let start = std::time::Instant::now();
+    if variants.is_empty() {
+        return Err(Error::input("no composite to evaluate"));
+    }
     let trained = engine.database();
     let resolved = recipe.resolve(trained)?;
     check_dataset(dataset, &resolved, trained)?;
@@ -323,7 +327,8 @@ pub fn evaluate_variants(
     let all: Vec<&View> = views.iter().map(|(_, v)| *v).collect();
     let times = timesteps(dataset, model, &all)?;
 
-    let mut tally = Tally::new(own.len(), variants.len());
+    let step_names = variants.iter().map(|(name, _)| *name).collect();
+    let mut tally = Tally::new(&resolved, &model.triangle_regions, used.clone(), step_names);
     let mut pictures = Vec::new();
     for (split, view) in &views {
         let t = &times[&view.timestep];
@@ -338,7 +343,7 @@ pub fn evaluate_variants(
             let pose = posed(engine, composite, t);
             let image = render(m, &pose.frames, camera);
             let ssim = ssim_map(&image, &goal, w as usize, h as usize);
-            tally.add_step(k, &labels, (&image, &goal, &ssim), &mut sums);
+            tally.add_step(k, &labels, &image, &goal, &ssim, &mut sums);
             if k == last
                 && pictures.len() < options.picture_views
                 && (*split != "train" || pictures.is_empty())
@@ -362,19 +367,11 @@ pub fn evaluate_variants(
                 )
             })
             .collect();
-        tally.add_leak(&labels, &everything, &shares, &mut sums);
+        tally.add_leak_and_holes(&labels, &everything, &shares, &mut sums);
         // The ceiling: each used source on its own ground truth.
         for (k, (source, surface)) in own.iter().zip(&surfaces).enumerate() {
             let drawn = source.draw(surface, model, t, camera, &resolved, options.border_px);
-            tally.add_ceiling(
-                (k, source.index),
-                &drawn.shown,
-                &model.triangle_regions,
-                &resolved,
-                &drawn.band,
-                (&drawn.image, &drawn.goal, &drawn.ssim),
-                &mut sums,
-            );
+            tally.add_ceiling(k, &drawn, &mut sums);
         }
         let jaw_deg = (t.pose.joints[Joint::Jaw as usize].length() as f64).to_degrees();
         let figures = ViewQuality {
@@ -388,35 +385,22 @@ pub fn evaluate_variants(
         };
         tally.end_view(&sums, figures);
     }
-    let steps: Vec<&'static str> = variants.iter().map(|(name, _)| *name).collect();
-    let mut report = tally.report(trained, &resolved, &used, &steps, options.border_px);
-    report.eval_ms = start.elapsed().as_secs_f64() * 1e3;
-    Ok((report, pictures))
+    let eval_ms = start.elapsed().as_secs_f64() * 1e3;
+    Ok((tally.report(trained, options.border_px, eval_ms), pictures))
 }
 
-/// A used source's own trained avatar and ground-truth surface: what the
-/// ceiling is drawn from.
+/// A used source's own trained avatar and the person it was trained on:
+/// what the ceiling is drawn from.
 struct OwnSource {
-    /// Its index in the database.
-    index: usize,
+    /// The trained avatar, as the rasteriser draws it.
     trainable: Trainable,
+    /// The built-in person's shape and look: its ground truth.
     sitter: Sitter,
 }
 
-/// A source drawn on its own ground truth at one view.
-struct OwnView {
-    /// Its render and the truth's, and their SSIM map.
-    image: Vec<f64>,
-    goal: Vec<f64>,
-    ssim: Vec<f64>,
-    /// The triangle shown at each pixel where the truth's mask holds the head.
-    shown: Vec<Option<u32>>,
-    /// The border band as it lies in the source's own image: where its
-    /// groups meet groups the recipe gives other sources.
-    band: Vec<bool>,
-}
-
 impl OwnSource {
+    /// Source `index` of `trained`; an error for one that is not a built-in
+    /// person (it has no ground truth).
     fn new(trained: &Database, index: usize) -> Result<Self> {
         let avatar = &trained.sources[index];
         let look = look_index(&avatar.name).ok_or_else(|| {
@@ -426,7 +410,6 @@ impl OwnSource {
             ))
         })?;
         Ok(Self {
-            index,
             trainable: Trainable::from_set(&avatar.gaussians),
             sitter: Sitter::avatar(avatar, look, trained.model.triangle_count()),
         })
@@ -442,7 +425,7 @@ impl OwnSource {
         camera: &TrainCamera,
         recipe: &ResolvedRecipe,
         border_px: u32,
-    ) -> OwnView {
+    ) -> SourceView {
         let sitter = &self.sitter;
         let truth = model.forward(
             &sitter.shape,
@@ -471,7 +454,7 @@ impl OwnSource {
             .zip(&truth_mask)
             .map(|(tri, &m)| tri.filter(|_| m > 127))
             .collect();
-        OwnView {
+        SourceView {
             image,
             goal,
             ssim,

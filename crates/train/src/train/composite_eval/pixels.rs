@@ -41,6 +41,9 @@ pub(super) struct Labels {
     pub(super) band: Vec<bool>,
 }
 
+/// What each pixel of a view (`camera`, its foreground `mask`) shows of the
+/// ground truth's posed mesh `truth`, and the band `border_px` wide round
+/// the places where `recipe` changes source.
 pub(super) fn labels(
     truth: &[Vec3],
     model: &HeadModel,

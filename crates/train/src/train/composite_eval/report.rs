@@ -25,13 +25,18 @@ pub struct Quality {
 /// Sums that become a [`Quality`].
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct Sums {
+    /// Squared colour error, summed over channels and pixels.
     squared: f64,
+    /// SSIM, summed over pixels.
     ssim: f64,
+    /// CIE76 ΔE, summed over pixels.
     delta_e: f64,
+    /// How many pixels were added.
     pub(super) pixels: usize,
 }
 
 impl Sums {
+    /// Adds one pixel's squared error (over its channels), SSIM and ΔE.
     pub(super) fn add(&mut self, squared: f64, ssim: f64, delta_e: f64) {
         self.squared += squared;
         self.ssim += ssim;
@@ -44,6 +49,7 @@ impl Sums {
         self.squared / (3.0 * self.pixels as f64)
     }
 
+    /// Adds another set of sums to these.
     pub(super) fn merge(&mut self, other: &Sums) {
         self.squared += other.squared;
         self.ssim += other.ssim;
@@ -51,6 +57,7 @@ impl Sums {
         self.pixels += other.pixels;
     }
 
+    /// The sums as PSNR, mean SSIM and mean ΔE (NaN over no pixels).
     pub(super) fn quality(&self) -> Quality {
         if self.pixels == 0 {
             return Quality {

@@ -20,22 +20,47 @@ pub(super) struct ViewSums {
     /// The full composite, over the head.
     pub(super) composite: Sums,
     /// The sources on their own ground truth.
-    pub(super) ceiling: Sums,
+    ceiling: Sums,
     /// Head pixels the composite covers less than half.
-    pub(super) holes: usize,
+    holes: usize,
     /// Head pixels.
-    pub(super) head: usize,
+    head_pixels: usize,
 }
 
 impl ViewSums {
     /// Share of the view's head pixels that are holes (0-1).
     pub(super) fn hole_share(&self) -> f64 {
-        self.holes as f64 / self.head.max(1) as f64
+        self.holes as f64 / self.head_pixels.max(1) as f64
     }
 }
 
-/// Everything summed so far, over every view.
-pub(super) struct Tally {
+/// A used source drawn on its own ground truth at one view: what the
+/// ceiling is summed from.
+pub(super) struct SourceView {
+    /// The source's render.
+    pub(super) image: Vec<f64>,
+    /// The source's ground truth.
+    pub(super) goal: Vec<f64>,
+    /// SSIM of the render against the truth, per pixel.
+    pub(super) ssim: Vec<f64>,
+    /// The triangle shown at each pixel where the truth's mask holds the head.
+    pub(super) shown: Vec<Option<u32>>,
+    /// The border band as it lies in the source's own image: where its
+    /// groups meet groups the recipe gives other sources.
+    pub(super) band: Vec<bool>,
+}
+
+/// Everything summed so far, over every view, for one recipe.
+pub(super) struct Tally<'a> {
+    /// The recipe measured.
+    recipe: &'a ResolvedRecipe,
+    /// Per triangle of the model, its region.
+    regions: &'a [Region],
+    /// The sources the recipe uses (database indices), in the order the
+    /// ceiling's sums hold them.
+    used: Vec<usize>,
+    /// The decomposition's step names, in the order of the steps' sums.
+    steps: Vec<&'static str>,
     overall: Sums,
     splits: BTreeMap<&'static str, Sums>,
     per_view: Vec<ViewQuality>,
@@ -67,10 +92,22 @@ fn errors(a: glam::DVec3, b: glam::DVec3) -> (f64, f64) {
     ((a - b).length_squared(), (lab(a) - lab(b)).length())
 }
 
-impl Tally {
-    /// Empty sums for `sources` used sources and `steps` composites.
-    pub(super) fn new(sources: usize, steps: usize) -> Self {
+impl<'a> Tally<'a> {
+    /// Empty sums for `recipe` (its model's triangle regions `regions`), the
+    /// sources it uses, `used`, and the composites named `steps`, the full
+    /// recipe last.
+    pub(super) fn new(
+        recipe: &'a ResolvedRecipe,
+        regions: &'a [Region],
+        used: Vec<usize>,
+        steps: Vec<&'static str>,
+    ) -> Self {
+        let (sources, step_count) = (used.len(), steps.len());
         Self {
+            recipe,
+            regions,
+            used,
+            steps,
             overall: Sums::default(),
             splits: BTreeMap::new(),
             per_view: Vec::new(),
@@ -82,7 +119,7 @@ impl Tally {
             ceiling_zones: [Sums::default(); 2],
             ceiling_splits: BTreeMap::new(),
             source_sums: vec![Sums::default(); sources],
-            step_sums: vec![[Sums::default(); 5]; steps],
+            step_sums: vec![[Sums::default(); 5]; step_count],
             leak_sum: 0.0,
             leak_over: 0,
             leak_pixels: 0,
@@ -99,7 +136,9 @@ impl Tally {
         &mut self,
         step: usize,
         labels: &Labels,
-        (image, goal, ssim): (&[f64], &[f64], &[f64]),
+        image: &[f64],
+        goal: &[f64],
+        ssim: &[f64],
         view: &mut ViewSums,
     ) {
         let last = step + 1 == self.step_sums.len();
@@ -122,7 +161,7 @@ impl Tally {
 
     /// Adds a view's holes and leak: `everything` is the full composite's
     /// one-hot render of all its Gaussians, `shares` each used source's.
-    pub(super) fn add_leak(
+    pub(super) fn add_leak_and_holes(
         &mut self,
         labels: &Labels,
         everything: &[f64],
@@ -131,7 +170,7 @@ impl Tally {
     ) {
         let head: Vec<usize> = (0..labels.head.len()).filter(|&p| labels.head[p]).collect();
         view.holes = head.iter().filter(|&&p| everything[3 * p] < 0.5).count();
-        view.head = head.len();
+        view.head_pixels = head.len();
         self.hole_pixels += view.holes;
         self.head_pixels += head.len();
         for p in (0..labels.head.len()).filter(|&p| labels.head[p] && !labels.band[p]) {
@@ -150,29 +189,18 @@ impl Tally {
         }
     }
 
-    /// Adds used source number `k` (database index `source`) drawn on its own
-    /// ground truth: `shown` the triangle at each pixel where the truth's mask
-    /// holds the head, `regions` the model's per triangle, `own_band` the
-    /// band as it lies in this image.
-    #[allow(clippy::too_many_arguments)]
-    pub(super) fn add_ceiling(
-        &mut self,
-        (k, source): (usize, usize),
-        shown: &[Option<u32>],
-        regions: &[Region],
-        recipe: &ResolvedRecipe,
-        own_band: &[bool],
-        (image, goal, ssim): (&[f64], &[f64], &[f64]),
-        view: &mut ViewSums,
-    ) {
-        for (p, tri) in shown.iter().enumerate() {
+    /// Adds the `k`-th used source drawn on its own ground truth.
+    pub(super) fn add_ceiling(&mut self, k: usize, drawn: &SourceView, view: &mut ViewSums) {
+        let source = self.used[k];
+        let ssim = &drawn.ssim;
+        for (p, tri) in drawn.shown.iter().enumerate() {
             let Some(tri) = tri else { continue };
-            let (sq, de) = errors(rgb(image, p), rgb(goal, p));
+            let (sq, de) = errors(rgb(&drawn.image, p), rgb(&drawn.goal, p));
             self.source_sums[k].add(sq, ssim[p], de);
-            let region = regions[*tri as usize];
+            let region = self.regions[*tri as usize];
             let g = region.group();
-            if recipe.gaussians[g.index()] == source {
-                let zone = usize::from(!own_band[p]);
+            if self.recipe.gaussians[g.index()] == source {
+                let zone = usize::from(!drawn.band[p]);
                 self.ceilings[g.index()].add(sq, ssim[p], de);
                 view.ceiling.add(sq, ssim[p], de);
                 self.ceiling_parts[usize::from(!is_skin(region))].add(sq, ssim[p], de);
@@ -199,21 +227,22 @@ impl Tally {
         self.per_view.push(figures);
     }
 
-    /// The report: `trained` names the sources, `used` are the used sources'
-    /// indices in the order they were added, `steps` the decomposition's
-    /// names in the order of [`Tally::add_step`]'s steps.
+    /// The report: `trained` names the sources; `eval_ms` is how long the
+    /// evaluation took.
     pub(super) fn report(
         self,
         trained: &Database,
-        recipe: &ResolvedRecipe,
-        used: &[usize],
-        steps: &[&'static str],
         border_px: u32,
+        eval_ms: f64,
     ) -> CompositeReport {
         let name = |s: usize| trained.sources[s].name.clone();
         let mut ceiling = Sums::default();
         self.ceilings.iter().for_each(|c| ceiling.merge(c));
-        let final_step = &self.step_sums[self.step_sums.len() - 1];
+        let final_step = self
+            .step_sums
+            .last()
+            .expect("a tally has at least one step: the full recipe");
+        let recipe = self.recipe;
         CompositeReport {
             views: self.per_view.len(),
             border_px,
@@ -253,7 +282,8 @@ impl Tally {
             ceiling_interior: self.ceiling_zones[1].quality(),
             ceiling_splits: qualities(&self.ceiling_splits),
             ceiling_held_out: held_out(&self.ceiling_splits),
-            sources: used
+            sources: self
+                .used
                 .iter()
                 .zip(&self.source_sums)
                 .map(|(&s, sums)| SourceCeiling {
@@ -261,7 +291,8 @@ impl Tally {
                     quality: sums.quality(),
                 })
                 .collect(),
-            decomposition: steps
+            decomposition: self
+                .steps
                 .iter()
                 .zip(&self.step_sums)
                 .map(|(step, s)| Step {
@@ -273,7 +304,7 @@ impl Tally {
                     non_skin: s[4].quality(),
                 })
                 .collect(),
-            eval_ms: 0.0,
+            eval_ms,
             seam_fit: None,
         }
     }
