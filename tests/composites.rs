@@ -292,6 +292,20 @@ fn an_edited_composite_reports_regions_band_leak_ceiling_and_steps() {
     assert_eq!(nose["source"], "cleo");
     assert!(px(&nose["band"]) > 0, "{nose}");
     assert!(nose["ceiling_band_psnr_db"].as_f64().is_some(), "{nose}");
+    // Each region's band, split by what lies across it: every band pixel
+    // borders one region, and the nose (cleo's, on ada's face) borders the
+    // face's skin.
+    for region in regions {
+        let beside = region["beside"].as_array().unwrap();
+        let split: u64 = beside.iter().map(|b| px(&b["quality"])).sum();
+        assert_eq!(split, px(&region["band"]), "{region}");
+    }
+    let nose_beside = nose["beside"].as_array().unwrap();
+    assert!(
+        nose_beside.iter().any(|b| b["region"] == "skin"),
+        "{nose_beside:?}"
+    );
+    assert!(text.contains("    band beside "), "{text}");
     assert!(
         text.lines().any(|l| l
             .trim_start()

@@ -94,6 +94,10 @@ fn row(name: &str, q: &Quality) -> String {
 /// Regions listed under "error over the ceiling by region".
 const REGIONS_SHOWN: usize = 6;
 
+/// Per region listed, how many of the regions across its band are named
+/// (the costliest seams first).
+const SEAMS_SHOWN: usize = 3;
+
 /// A PSNR for a table cell, "-" where it is not a number (no pixels).
 fn decibels(db: f64) -> String {
     if db.is_finite() {
@@ -170,6 +174,23 @@ fn print_report(r: &CompositeReport) {
             decibels(g.ceiling_interior_psnr_db),
             100.0 * g.excess / head_error
         );
+        let seams: Vec<String> = g
+            .beside
+            .iter()
+            .filter(|b| b.excess > 0.0)
+            .take(SEAMS_SHOWN)
+            .map(|b| {
+                format!(
+                    "{} {} dB {:.1} %",
+                    b.region,
+                    decibels(b.quality.psnr_db).trim_start(),
+                    100.0 * b.excess / head_error
+                )
+            })
+            .collect();
+        if !seams.is_empty() {
+            println!("    band beside {}", seams.join(", "));
+        }
     }
     println!("sources on their own ground truth:");
     for s in &r.sources {

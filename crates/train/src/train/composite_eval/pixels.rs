@@ -39,6 +39,9 @@ pub(super) struct Labels {
     pub(super) source: Vec<u32>,
     /// Within the border band.
     pub(super) band: Vec<bool>,
+    /// In the band: the region across the change of source (see
+    /// [`band_neighbours`]); `None` elsewhere.
+    pub(super) beside: Vec<Option<Region>>,
 }
 
 /// What each pixel of a view (`camera`, its foreground `mask`) shows of the
@@ -60,12 +63,51 @@ pub(super) fn labels(
         .collect();
     let source = assigned_sources(&region, recipe);
     let band = band(&source, camera.size, border_px);
+    let beside = band_neighbours(&source, &region, &band, camera.size, border_px);
     Labels {
         head,
         region,
         source,
         band,
+        beside,
     }
+}
+
+/// Per pixel of the `band` (`k` pixels wide round the changes of `source`):
+/// the region shown most often by the pixels of another source within the
+/// same window, ties to the first in [`Region::ALL`] order; `None` outside
+/// the band. It says what a band pixel borders — a hairline's hair borders
+/// skin, a swapped ear's rim borders hair — so the band's error can be told
+/// apart by the seam it lies at.
+pub(super) fn band_neighbours(
+    source: &[u32],
+    region: &[Option<Region>],
+    band: &[bool],
+    size: [u32; 2],
+    k: u32,
+) -> Vec<Option<Region>> {
+    let [w, h] = [size[0] as i64, size[1] as i64];
+    let k = k as i64;
+    let mut out = vec![None; source.len()];
+    for (p, slot) in out.iter_mut().enumerate().filter(|(p, _)| band[*p]) {
+        let (x, y) = (p as i64 % w, p as i64 / w);
+        let mut counts = [0u32; Region::COUNT];
+        for yy in (y - k).max(0)..=(y + k).min(h - 1) {
+            for xx in (x - k).max(0)..=(x + k).min(w - 1) {
+                let q = (yy * w + xx) as usize;
+                if source[q] != u32::MAX && source[q] != source[p] {
+                    if let Some(r) = region[q] {
+                        counts[r.index()] += 1;
+                    }
+                }
+            }
+        }
+        let most = counts.iter().copied().max().unwrap_or(0);
+        *slot = (most > 0)
+            .then(|| Region::ALL.into_iter().find(|r| counts[r.index()] == most))
+            .flatten();
+    }
+    out
 }
 
 /// Per pixel: the region of the triangle `shown` there, if any.
@@ -183,5 +225,46 @@ mod tests {
             band(&[2; 9], [3, 3], 2).iter().all(|&x| !x),
             "one source has no band"
         );
+    }
+
+    #[test]
+    fn a_band_pixel_borders_the_region_most_shown_across_the_change() {
+        // Source 0 shows the hair (top row); source 1 the skin and, at the
+        // right, an ear; the background (last column) is no source.
+        let (m, hair, skin, ear) = (u32::MAX, Region::Hair, Region::Skin, Region::LeftEar);
+        let source = [
+            0, 0, 0, 0, m, //
+            1, 1, 1, 1, m, //
+            1, 1, 1, 1, m,
+        ];
+        let region = [
+            Some(hair),
+            Some(hair),
+            Some(hair),
+            Some(hair),
+            None, //
+            Some(skin),
+            Some(skin),
+            Some(skin),
+            Some(ear),
+            None, //
+            Some(skin),
+            Some(skin),
+            Some(skin),
+            Some(ear),
+            None,
+        ];
+        let b = band(&source, [5, 3], 1);
+        let beside = band_neighbours(&source, &region, &b, [5, 3], 1);
+        // The hair above skin borders skin; at the right end, its window
+        // holds one skin and one ear pixel of the other source: the tie goes
+        // to the region first in order (LeftEar before Skin).
+        assert_eq!(
+            &beside[..4],
+            &[Some(skin), Some(skin), Some(skin), Some(ear)]
+        );
+        assert_eq!(&beside[5..9], &[Some(hair); 4]);
+        assert!(beside[10..].iter().all(Option::is_none), "{beside:?}");
+        assert_eq!(beside[4], None, "the background has no band");
     }
 }

@@ -142,6 +142,22 @@ pub struct RegionQuality {
     /// images lack is told against the region's whole ceiling; a region they
     /// never show has none. Regions are listed largest first.
     pub excess: f64,
+    /// The band split by the region across the change of source (what each
+    /// band pixel borders), the largest excess over the region's band
+    /// ceiling first: which of a region's seams costs most.
+    pub beside: Vec<BandBeside>,
+}
+
+/// A region's band pixels beside one other region.
+#[derive(Clone, Debug, Serialize)]
+pub struct BandBeside {
+    /// The region across the change of source.
+    pub region: &'static str,
+    /// Over these pixels.
+    pub quality: Quality,
+    /// Their squared error over the band ceiling's (as
+    /// [`RegionQuality::excess`]).
+    pub excess: f64,
 }
 
 /// Where colour comes from another source than the one assigned.
@@ -269,6 +285,7 @@ pub type Pictures = Vec<(String, [RgbImage; 3])>;
 pub(super) fn region_figures(
     sums: &[[Sums; 2]; Region::COUNT],
     ceilings: &[[Sums; 2]; Region::COUNT],
+    beside: &[[Sums; Region::COUNT]; Region::COUNT],
     source_of: impl Fn(Region) -> String,
 ) -> Vec<RegionQuality> {
     let mut regions: Vec<RegionQuality> = Region::ALL
@@ -281,16 +298,27 @@ pub(super) fn region_figures(
             // the source's own images never show adds nothing.
             let mut whole = ceiling[0];
             whole.merge(&ceiling[1]);
+            let over = |z: &Sums, c: &Sums| {
+                let c = if c.pixels > 0 { c } else { &whole };
+                Some((z.mse() - c.mse()) * z.pixels as f64)
+                    .filter(|e| z.pixels > 0 && e.is_finite())
+            };
             let excess = zones
                 .iter()
                 .zip(ceiling)
-                .filter(|(z, _)| z.pixels > 0)
-                .map(|(z, c)| {
-                    let c = if c.pixels > 0 { c } else { &whole };
-                    (z.mse() - c.mse()) * z.pixels as f64
-                })
-                .filter(|e| e.is_finite())
+                .filter_map(|(z, c)| over(z, c))
                 .sum();
+            let mut by_neighbour: Vec<BandBeside> = Region::ALL
+                .iter()
+                .map(|n| (n, &beside[r.index()][n.index()]))
+                .filter(|(_, s)| s.pixels > 0)
+                .map(|(n, s)| BandBeside {
+                    region: n.name(),
+                    quality: s.quality(),
+                    excess: over(s, &ceiling[0]).unwrap_or(0.0),
+                })
+                .collect();
+            by_neighbour.sort_by(|a, b| b.excess.total_cmp(&a.excess));
             RegionQuality {
                 region: r.name(),
                 source: source_of(r),
@@ -299,6 +327,7 @@ pub(super) fn region_figures(
                 ceiling_band_psnr_db: ceiling[0].quality().psnr_db,
                 ceiling_interior_psnr_db: ceiling[1].quality().psnr_db,
                 excess,
+                beside: by_neighbour,
             }
         })
         .collect();

@@ -69,6 +69,8 @@ pub(super) struct Tally<'a> {
     /// Per region, [band, interior], of the composite and of the ceiling.
     region_sums: [[Sums; 2]; Region::COUNT],
     region_ceilings: [[Sums; 2]; Region::COUNT],
+    /// Per region, its band pixels by the region across the change of source.
+    band_beside: [[Sums; Region::COUNT]; Region::COUNT],
     /// [skin, other] pixels of the ceiling.
     ceiling_parts: [Sums; 2],
     /// [band, interior] pixels of the ceiling.
@@ -115,6 +117,7 @@ impl<'a> Tally<'a> {
             ceilings: [Sums::default(); Group::COUNT],
             region_sums: [[Sums::default(); 2]; Region::COUNT],
             region_ceilings: [[Sums::default(); 2]; Region::COUNT],
+            band_beside: [[Sums::default(); Region::COUNT]; Region::COUNT],
             ceiling_parts: [Sums::default(); 2],
             ceiling_zones: [Sums::default(); 2],
             ceiling_splits: BTreeMap::new(),
@@ -154,6 +157,9 @@ impl<'a> Tally<'a> {
                 if let Some(r) = labels.region[p] {
                     self.groups[r.group().index()].add(sq, ssim[p], de);
                     self.region_sums[r.index()][usize::from(!labels.band[p])].add(sq, ssim[p], de);
+                    if let Some(n) = labels.beside[p] {
+                        self.band_beside[r.index()][n.index()].add(sq, ssim[p], de);
+                    }
                 }
             }
         }
@@ -260,9 +266,12 @@ impl<'a> Tally<'a> {
                     ceiling_psnr_db: self.ceilings[g.index()].quality().psnr_db,
                 })
                 .collect(),
-            regions: region_figures(&self.region_sums, &self.region_ceilings, |r| {
-                name(recipe.gaussians[r.group().index()])
-            }),
+            regions: region_figures(
+                &self.region_sums,
+                &self.region_ceilings,
+                &self.band_beside,
+                |r| name(recipe.gaussians[r.group().index()]),
+            ),
             border: final_step[1].quality(),
             interior: final_step[2].quality(),
             skin: final_step[3].quality(),
