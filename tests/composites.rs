@@ -300,12 +300,40 @@ fn an_edited_composite_reports_regions_band_leak_ceiling_and_steps() {
         let split: u64 = beside.iter().map(|b| px(&b["quality"])).sum();
         assert_eq!(split, px(&region["band"]), "{region}");
     }
+    for region in regions {
+        let excess: Vec<f64> = region["beside"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|b| b["excess"].as_f64().unwrap())
+            .collect();
+        assert!(excess.windows(2).all(|w| w[0] >= w[1]), "{region}");
+    }
     let nose_beside = nose["beside"].as_array().unwrap();
     assert!(
         nose_beside.iter().any(|b| b["region"] == "skin"),
         "{nose_beside:?}"
     );
-    assert!(text.contains("    band beside "), "{text}");
+    // The text names the costliest seam of the costliest region on the line
+    // under its row.
+    let lines: Vec<&str> = text.lines().collect();
+    let costliest = &regions[0];
+    let row = lines
+        .iter()
+        .position(|l| {
+            l.trim_start()
+                .starts_with(costliest["region"].as_str().unwrap())
+                && l.contains(" band ")
+        })
+        .unwrap();
+    let first_seam = &costliest["beside"][0];
+    if first_seam["excess"].as_f64().unwrap() > 0.0 {
+        let expect = format!(
+            "    band beside {} ",
+            first_seam["region"].as_str().unwrap()
+        );
+        assert!(lines[row + 1].starts_with(&expect), "{text}");
+    }
     assert!(
         text.lines().any(|l| l
             .trim_start()

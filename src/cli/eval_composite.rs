@@ -94,9 +94,9 @@ fn row(name: &str, q: &Quality) -> String {
 /// Regions listed under "error over the ceiling by region".
 const REGIONS_SHOWN: usize = 6;
 
-/// Per region listed, how many of the regions across its band are named
-/// (the costliest seams first).
-const SEAMS_SHOWN: usize = 3;
+/// Per region listed, how many of the regions beside its band are named
+/// (the costliest first).
+const BESIDE_SHOWN: usize = 3;
 
 /// A PSNR for a table cell, "-" where it is not a number (no pixels).
 fn decibels(db: f64) -> String {
@@ -178,7 +178,7 @@ fn print_report(r: &CompositeReport) {
             .beside
             .iter()
             .filter(|b| b.excess > 0.0)
-            .take(SEAMS_SHOWN)
+            .take(BESIDE_SHOWN)
             .map(|b| {
                 format!(
                     "{} {} dB {:.1} %",

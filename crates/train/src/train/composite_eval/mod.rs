@@ -44,8 +44,8 @@ use crate::model::head::{HeadModel, Joint, Pose};
 use pixels::{assigned_sources, labels, picture, read_mask, shown_regions};
 pub use pixels::{band, is_skin};
 pub use report::{
-    CompositeReport, FitRun, GroupQuality, Leak, Pictures, Quality, RegionQuality, SourceCeiling,
-    Step, ViewQuality, OPEN_MOUTH_DEG,
+    BandBeside, CompositeReport, FitRun, GroupQuality, Leak, Pictures, Quality, RegionQuality,
+    SourceCeiling, Step, ViewQuality, OPEN_MOUTH_DEG,
 };
 use tally::{SourceView, Tally, ViewSums};
 

@@ -40,7 +40,7 @@ pub(super) struct Labels {
     /// Within the border band.
     pub(super) band: Vec<bool>,
     /// In the band: the region across the change of source (see
-    /// [`band_neighbours`]); `None` elsewhere.
+    /// [`band_beside`]); `None` elsewhere.
     pub(super) beside: Vec<Option<Region>>,
 }
 
@@ -63,7 +63,7 @@ pub(super) fn labels(
         .collect();
     let source = assigned_sources(&region, recipe);
     let band = band(&source, camera.size, border_px);
-    let beside = band_neighbours(&source, &region, &band, camera.size, border_px);
+    let beside = band_beside(&source, &region, &band, camera.size, border_px);
     Labels {
         head,
         region,
@@ -79,7 +79,7 @@ pub(super) fn labels(
 /// the band. It says what a band pixel borders — a hairline's hair borders
 /// skin, a swapped ear's rim borders hair — so the band's error can be told
 /// apart by the seam it lies at.
-pub(super) fn band_neighbours(
+pub(super) fn band_beside(
     source: &[u32],
     region: &[Option<Region>],
     band: &[bool],
@@ -255,7 +255,7 @@ mod tests {
             None,
         ];
         let b = band(&source, [5, 3], 1);
-        let beside = band_neighbours(&source, &region, &b, [5, 3], 1);
+        let beside = band_beside(&source, &region, &b, [5, 3], 1);
         // The hair above skin borders skin; at the right end, its window
         // holds one skin and one ear pixel of the other source: the tie goes
         // to the region first in order (LeftEar before Skin).

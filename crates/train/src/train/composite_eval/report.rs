@@ -280,8 +280,10 @@ pub struct FitRun {
 pub type Pictures = Vec<(String, [RgbImage; 3])>;
 
 /// Per region shown (of `sums`, [band, interior] each, against the same of
-/// `ceilings`), largest excess over the ceiling first; `source_of` names the
-/// source a region shows.
+/// `ceilings`), largest excess over the ceiling first, with its band split
+/// by the region across the change of source (`beside`, per region and
+/// neighbour, into [`RegionQuality::beside`]); `source_of` names the source
+/// a region shows.
 pub(super) fn region_figures(
     sums: &[[Sums; 2]; Region::COUNT],
     ceilings: &[[Sums; 2]; Region::COUNT],
@@ -298,7 +300,7 @@ pub(super) fn region_figures(
             // the source's own images never show adds nothing.
             let mut whole = ceiling[0];
             whole.merge(&ceiling[1]);
-            let over = |z: &Sums, c: &Sums| {
+            let excess_over = |z: &Sums, c: &Sums| {
                 let c = if c.pixels > 0 { c } else { &whole };
                 Some((z.mse() - c.mse()) * z.pixels as f64)
                     .filter(|e| z.pixels > 0 && e.is_finite())
@@ -306,19 +308,19 @@ pub(super) fn region_figures(
             let excess = zones
                 .iter()
                 .zip(ceiling)
-                .filter_map(|(z, c)| over(z, c))
+                .filter_map(|(z, c)| excess_over(z, c))
                 .sum();
-            let mut by_neighbour: Vec<BandBeside> = Region::ALL
+            let mut beside_parts: Vec<BandBeside> = Region::ALL
                 .iter()
                 .map(|n| (n, &beside[r.index()][n.index()]))
                 .filter(|(_, s)| s.pixels > 0)
                 .map(|(n, s)| BandBeside {
                     region: n.name(),
                     quality: s.quality(),
-                    excess: over(s, &ceiling[0]).unwrap_or(0.0),
+                    excess: excess_over(s, &ceiling[0]).unwrap_or(0.0),
                 })
                 .collect();
-            by_neighbour.sort_by(|a, b| b.excess.total_cmp(&a.excess));
+            beside_parts.sort_by(|a, b| b.excess.total_cmp(&a.excess));
             RegionQuality {
                 region: r.name(),
                 source: source_of(r),
@@ -327,7 +329,7 @@ pub(super) fn region_figures(
                 ceiling_band_psnr_db: ceiling[0].quality().psnr_db,
                 ceiling_interior_psnr_db: ceiling[1].quality().psnr_db,
                 excess,
-                beside: by_neighbour,
+                beside: beside_parts,
             }
         })
         .collect();
@@ -338,6 +340,53 @@ pub(super) fn region_figures(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Sums of `n` pixels each with squared error `sq` (over its channels).
+    fn pixels(n: usize, sq: f64) -> Sums {
+        let mut s = Sums::default();
+        (0..n).for_each(|_| s.add(sq, 1.0, 0.0));
+        s
+    }
+
+    #[test]
+    fn a_bands_parts_beside_other_regions_add_up_to_its_excess() {
+        let none = || [[Sums::default(); 2]; Region::COUNT];
+        let (mut sums, mut ceilings) = (none(), none());
+        let mut beside = [[Sums::default(); Region::COUNT]; Region::COUNT];
+        let (hair, skin, ear, nose) = (
+            Region::Hair.index(),
+            Region::Skin.index(),
+            Region::LeftEar.index(),
+            Region::Nose.index(),
+        );
+        // The hair's band: 3 pixels beside the skin, 1 beside an ear, under a
+        // band ceiling of squared error 0.03 a pixel.
+        beside[hair][skin] = pixels(3, 0.3);
+        beside[hair][ear] = pixels(1, 0.006);
+        sums[hair][0] = pixels(3, 0.3);
+        sums[hair][0].merge(&pixels(1, 0.006));
+        ceilings[hair][0] = pixels(5, 0.03);
+        // The nose's band ceiling is empty (its band falls elsewhere in its
+        // source's own images): its part is told against its whole ceiling.
+        beside[nose][skin] = pixels(2, 0.3);
+        sums[nose][0] = pixels(2, 0.3);
+        ceilings[nose][1] = pixels(4, 0.03);
+        // The ear's source never shows it: no ceiling, no excess.
+        beside[ear][hair] = pixels(1, 0.3);
+        sums[ear][0] = pixels(1, 0.3);
+        let regions = region_figures(&sums, &ceilings, &beside, |_| "x".into());
+        let find = |name: &str| regions.iter().find(|r| r.region == name).unwrap();
+        let hair = find("hair");
+        let parts: Vec<(&str, f64)> = hair.beside.iter().map(|b| (b.region, b.excess)).collect();
+        // Per pixel and channel: (0.1 − 0.01) × 3 beside the skin, (0.002 −
+        // 0.01) × 1 beside the ear (better than the ceiling), costliest first.
+        assert_eq!(parts[0].0, "skin");
+        assert!((parts[0].1 - 0.27).abs() < 1e-12, "{parts:?}");
+        assert!((parts[1].1 + 0.008).abs() < 1e-12, "{parts:?}");
+        assert!((parts[0].1 + parts[1].1 - hair.excess).abs() < 1e-12);
+        assert!((find("nose").beside[0].excess - 0.18).abs() < 1e-12);
+        assert_eq!(find("left_ear").beside[0].excess, 0.0);
+    }
 
     #[test]
     fn sums_give_psnr_and_means() {
