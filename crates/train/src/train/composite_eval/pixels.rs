@@ -62,8 +62,9 @@ pub(super) fn labels(
         .map(|(r, &m)| r.is_some() && m > 127)
         .collect();
     let source = assigned_sources(&region, recipe);
-    let band = band(&source, camera.size, border_px);
-    let beside = band_beside(&source, &region, &band, camera.size, border_px);
+    // The band is where something lies across: one scan gives both.
+    let beside = band_beside(&source, &region, camera.size, border_px);
+    let band = beside.iter().map(Option::is_some).collect();
     Labels {
         head,
         region,
@@ -73,23 +74,26 @@ pub(super) fn labels(
     }
 }
 
-/// Per pixel of the `band` (`k` pixels wide round the changes of `source`):
-/// the region shown most often by the pixels of another source within the
-/// same window, ties to the first in [`Region::ALL`] order; `None` outside
-/// the band. It says what a band pixel borders — a hairline's hair borders
+/// Per pixel within `k` pixels (a square window) of a pixel showing another
+/// source — the band, as [`band`] marks it, `region` showing a region
+/// wherever `source` names one — the region shown most often by the pixels
+/// of another source in that window, ties to the first in [`Region::ALL`]
+/// order; `None` outside the band, so the band is where this is `Some`. It says what a band pixel borders — a hairline's hair borders
 /// skin, a swapped ear's rim borders hair — so the band's error can be told
 /// apart by the seam it lies at.
 pub(super) fn band_beside(
     source: &[u32],
     region: &[Option<Region>],
-    band: &[bool],
     size: [u32; 2],
     k: u32,
 ) -> Vec<Option<Region>> {
     let [w, h] = [size[0] as i64, size[1] as i64];
     let k = k as i64;
     let mut out = vec![None; source.len()];
-    for (p, slot) in out.iter_mut().enumerate().filter(|(p, _)| band[*p]) {
+    for (p, slot) in out.iter_mut().enumerate() {
+        if source[p] == u32::MAX {
+            continue;
+        }
         let (x, y) = (p as i64 % w, p as i64 / w);
         let mut counts = [0u32; Region::COUNT];
         for yy in (y - k).max(0)..=(y + k).min(h - 1) {
@@ -255,7 +259,10 @@ mod tests {
             None,
         ];
         let b = band(&source, [5, 3], 1);
-        let beside = band_beside(&source, &region, &b, [5, 3], 1);
+        let beside = band_beside(&source, &region, [5, 3], 1);
+        // The band is exactly where something lies across.
+        let across: Vec<bool> = beside.iter().map(Option::is_some).collect();
+        assert_eq!(across, b);
         // The hair above skin borders skin; at the right end, its window
         // holds one skin and one ear pixel of the other source: the tie goes
         // to the region first in order (LeftEar before Skin).
