@@ -13,7 +13,7 @@ use super::base_skin::SkinShare;
 use super::colour::apply_gain;
 use super::correction::Correction;
 use super::recipe::Membership;
-use super::reshape::{note_anchor, Anchored, SourceAnchors};
+use super::reshape::ReshapedSources;
 use super::seam_colours::{SeamColours, SourceTables};
 use super::smoothing::split_opacity;
 use crate::avatar::gaussians::{logit, sigmoid, GaussianSet};
@@ -44,7 +44,6 @@ pub fn copy_own(
                 let mut copied = ChunkCopied {
                     block: b,
                     gain_sum: Vec3::ZERO,
-                    anchored: Vec::new(),
                     at_seams: Vec::new(),
                 };
                 let block = &copying.blocks[b];
@@ -60,13 +59,15 @@ pub fn copy_own(
                     let exponent = copying.own_exponent[t as usize] * share;
                     let opacity = OpacityEdit::Split(exponent).apply(src.opacity_logit[i as usize]);
                     range.set_from(at, src, i as usize, opacity);
+                    if let Some(placed) = copying.reshaped.and_then(|r| r.placed(f, i)) {
+                        range.set_placement(at, *placed);
+                    }
                     let sh = range.sh_of_mut(at);
                     let gain = block.correction.gain(i as usize);
                     if gain != Vec3::ONE {
                         apply_gain(sh, gain);
                     }
                     copied.gain_sum += gain;
-                    note_anchor(&mut copied.anchored, block.anchors, at, f, i);
                     relight_sh(sh, copying.relight, f, i);
                     if let (Some(seams), Some(cache)) = (seams, cache.as_mut()) {
                         if seams.blend(sources, cache, f, i, sh) {
@@ -96,8 +97,6 @@ pub struct OwnBlock<'e> {
     pub indices: Cow<'e, [u32]>,
     /// Their colour correction.
     pub correction: Correction,
-    /// The source's anchored Gaussians, under `anchor = "nearest"`.
-    pub anchors: Option<&'e SourceAnchors>,
     /// Where the first lands in the composite.
     pub start: usize,
     /// The share of its opacity each Gaussian keeps under `skin = "base"`
@@ -118,6 +117,10 @@ pub struct CopyOwn<'e> {
     pub seams: Option<&'e SeamColours<'e>>,
     /// Per source, per Gaussian: its relighting gain (empty where not relit).
     pub relight: &'e [Vec<Vec3>],
+    /// The sources' Gaussians reshaped to the composite's shape, made for
+    /// every one copied, where they follow it (`deform = "affine"`,
+    /// `anchor = "nearest"`).
+    pub reshaped: Option<&'e ReshapedSources>,
 }
 
 /// What copying one chunk found beside the Gaussians themselves.
@@ -126,8 +129,6 @@ pub struct ChunkCopied {
     pub block: usize,
     /// The sum of its Gaussians' colour gains.
     pub gain_sum: Vec3,
-    /// Its Gaussians that follow another triangle than their parent.
-    pub anchored: Vec<Anchored>,
     /// Its Gaussians near another source's triangles.
     pub at_seams: Vec<u32>,
 }

@@ -24,7 +24,7 @@ use super::membership::{footprint_triangles, placements};
 use super::recipe::{
     Anchor, Deform, Membership, PostProcess, ResolvedRecipe, Shading, SkinSource, Smoothing,
 };
-use super::reshape::{note_anchor, Anchored, ReshapeSource, Reshaping, SourceAnchors};
+use super::reshape::{ReshapeSource, ReshapedSources, Reshaping, SourceAnchors};
 use super::seam_colours::{SeamColours, SourceTables};
 use super::seams::{limit_reach, SeamNeighbours};
 use super::selection::{Csr, SelectionTables};
@@ -131,9 +131,10 @@ pub struct Composite {
     pub gaussians: GaussianSet,
     /// What each range of `gaussians` is.
     pub blocks: Vec<Block>,
-    /// The Gaussians that follow another triangle than their parent
-    /// (`anchor = "nearest"`).
-    anchored: Vec<Anchored>,
+    /// Each source's Gaussians reshaped to this composite's shape, as far as
+    /// shown yet (`deform = "affine"`, `anchor = "nearest"`): an edit of
+    /// the Gaussians alone reuses them.
+    reshaped: ReshapedSources,
     /// Mean per-channel colour gain applied per region (1 where uncorrected).
     pub colour_gains: [Vec3; Region::COUNT],
     /// Per source, the relighting gain of each of its Gaussians for this
@@ -270,7 +271,7 @@ impl Engine {
             residual,
             gaussians: GaussianSet::default(),
             blocks: Vec::new(),
-            anchored: Vec::new(),
+            reshaped: ReshapedSources::default(),
             colour_gains: [Vec3::ONE; Region::COUNT],
             relight_gains: Vec::new(),
             base_misfit: Vec::new(),
@@ -302,6 +303,7 @@ impl Engine {
             composite.residual = residual;
             composite.relight_gains.clear();
             composite.base_misfit.clear();
+            composite.reshaped.clear();
         }
         if changes.gaussians {
             self.select_into(recipe, composite);
@@ -378,8 +380,6 @@ impl Engine {
                 }
             }
         }
-        let anchors =
-            |f: usize| (recipe.post.anchor == Anchor::Nearest).then(|| self.anchors_of(f));
         let topology = Topology {
             triangles: &self.db.model.triangles,
             vertex_triangles: &self.vertex_triangles,
@@ -436,10 +436,15 @@ impl Engine {
                     start: own_count - indices.len(),
                     indices,
                     correction: self.correction(recipe, region, source),
-                    anchors: anchors(source),
                     skin: share,
                 });
             }
+        }
+        let reshaped = Self::follows_reshaping(&recipe.post);
+        if reshaped {
+            let wanted: Vec<(usize, &[u32])> =
+                own.iter().map(|b| (b.source, &*b.indices)).collect();
+            self.make_reshaped(&recipe.post, composite, &wanted);
         }
         let set = &mut composite.gaussians;
         set.resize(own_count, degree);
@@ -477,12 +482,11 @@ impl Engine {
             own_exponent: &own_exponent,
             seams: seams.as_ref(),
             relight: &composite.relight_gains,
+            reshaped: reshaped.then_some(&composite.reshaped),
         };
         let copied = copy_own(self, &copying, set);
         let blocks = &mut composite.blocks;
         blocks.clear();
-        let anchored = &mut composite.anchored;
-        anchored.clear();
         let gains = &mut composite.colour_gains;
         *gains = [Vec3::ONE; Region::COUNT];
         // Own Gaussians near another source's triangles: their reach is
@@ -491,7 +495,6 @@ impl Engine {
         let mut gain_sums = vec![Vec3::ZERO; own.len()];
         for chunk in copied {
             gain_sums[chunk.block] += chunk.gain_sum;
-            anchored.extend(chunk.anchored);
             at_seams.extend(chunk.at_seams);
         }
         for (block, gain_sum) in own.iter().zip(gain_sums) {
@@ -510,9 +513,6 @@ impl Engine {
         if matches!(smoothing, Smoothing::Thesis | Smoothing::Crossfade) {
             self.add_border_extras(recipe, composite);
         }
-        if Self::follows_reshaping(&recipe.post) {
-            self.follow_reshaped_triangles(&recipe.post, composite);
-        }
         let triangles = &self.db.model.triangles;
         limit_reach(
             &mut composite.gaussians,
@@ -528,37 +528,49 @@ impl Engine {
     fn add_border_extras(&self, recipe: &ResolvedRecipe, composite: &mut Composite) {
         let smoothing = recipe.post.smoothing;
         let membership = recipe.post.membership;
-        let set = &mut composite.gaussians;
+        let reshaped = Self::follows_reshaping(&recipe.post);
         for (&(r, p), band) in self.borders.pairs() {
             let f = Self::source_of(recipe, r);
             if f == Self::source_of(recipe, p) {
                 continue;
             }
-            let anchors = (recipe.post.anchor == Anchor::Nearest).then(|| self.anchors_of(f));
+            let extras: Vec<(u32, OpacityEdit)> = band
+                .iter()
+                .filter_map(|&(t, ring)| match smoothing {
+                    Smoothing::Thesis if ring == 1 => Some((t, OpacityEdit::Scale(0.5))),
+                    Smoothing::Crossfade => Some((t, OpacityEdit::Split(1.0 - own_share(ring)))),
+                    _ => None,
+                })
+                .flat_map(|(t, edit)| {
+                    let counted = self.tables.triangle(membership, f, t);
+                    counted.iter().map(move |&i| (i, edit))
+                })
+                .collect();
+            if extras.is_empty() {
+                continue;
+            }
+            if reshaped {
+                let indices: Vec<u32> = extras.iter().map(|&(i, _)| i).collect();
+                self.make_reshaped(&recipe.post, composite, &[(f, &indices)]);
+            }
             let correction = self.correction(recipe, p, f);
+            let set = &mut composite.gaussians;
             let start = set.len();
-            for &(t, ring) in band {
-                let edit = match smoothing {
-                    Smoothing::Thesis if ring == 1 => OpacityEdit::Scale(0.5),
-                    Smoothing::Crossfade => OpacityEdit::Split(1.0 - own_share(ring)),
-                    _ => continue,
-                };
-                for &i in self.tables.triangle(membership, f, t) {
-                    self.push_corrected(set, f, i, &correction, edit);
-                    let last = set.len() - 1;
-                    note_anchor(&mut composite.anchored, anchors, last, f, i);
-                    relight_sh(set.sh_of_mut(last), &composite.relight_gains, f, i);
+            for (i, edit) in extras {
+                self.push_corrected(set, f, i, &correction, edit);
+                let last = set.len() - 1;
+                relight_sh(set.sh_of_mut(last), &composite.relight_gains, f, i);
+                if let Some(&placed) = composite.reshaped.placed(f, i).filter(|_| reshaped) {
+                    (set.position[last], set.rotation[last], set.log_scale[last]) = placed;
                 }
             }
-            if set.len() > start {
-                composite.blocks.push(Block {
-                    region: p,
-                    source: f,
-                    extra_from: Some(r),
-                    start,
-                    end: set.len(),
-                });
-            }
+            composite.blocks.push(Block {
+                region: p,
+                source: f,
+                extra_from: Some(r),
+                start,
+                end: set.len(),
+            });
         }
     }
 
@@ -610,35 +622,36 @@ impl Engine {
         })
     }
 
-    /// Moves the composite's Gaussians with the blend's reshaping of the
-    /// triangles they follow (method §6.7, §6.8), as `post` says: the
-    /// recipe being applied (an update sets the composite's own recipe only
-    /// after the selection, so that one is still the previous recipe's).
-    fn follow_reshaped_triangles(&self, post: &PostProcess, composite: &mut Composite) {
+    /// Makes the composite's reshaped values (method §6.7, §6.8) of
+    /// `wanted` — per source, Gaussians of it — where not made yet for its
+    /// shape, as `post` says: the recipe being applied (an update sets the
+    /// composite's own recipe only after the selection, so that one is
+    /// still the previous recipe's).
+    fn make_reshaped(
+        &self,
+        post: &PostProcess,
+        composite: &mut Composite,
+        wanted: &[(usize, &[u32])],
+    ) {
+        let nearest = post.anchor == Anchor::Nearest;
         let mut used = vec![false; self.db.sources.len()];
-        composite.blocks.iter().for_each(|b| used[b.source] = true);
+        wanted.iter().for_each(|&(f, _)| used[f] = true);
+        // Anchors are built here, before the parallel reshaping reads them
+        // (see `select_into` on tables built inside rayon jobs).
         let sources: Vec<ReshapeSource> = (0..self.db.sources.len())
             .map(|f| ReshapeSource {
                 neutral: &self.neutrals[f],
-                anchors: (used[f] && post.anchor == Anchor::Nearest).then(|| self.anchors_of(f)),
+                gaussians: &self.db.sources[f].gaussians,
+                anchors: (used[f] && nearest).then(|| self.anchors_of(f)),
             })
-            .collect();
-        let blocks: Vec<(usize, std::ops::Range<usize>)> = composite
-            .blocks
-            .iter()
-            .map(|b| (b.source, b.start..b.end))
             .collect();
         let reshaping = Reshaping {
             triangles: &self.db.model.triangles,
             target: &composite.neutral,
             affine: post.deform == Deform::Affine,
+            nearest,
         };
-        reshaping.apply(
-            &sources,
-            &blocks,
-            &composite.anchored,
-            &mut composite.gaussians,
-        );
+        composite.reshaped.make(&reshaping, &sources, wanted);
     }
 
     /// Makes the relighting gains of every source the recipe draws Gaussians

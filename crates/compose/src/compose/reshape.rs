@@ -4,8 +4,13 @@
 //! the triangle of their source's surface nearest them, written back in the
 //! parent's frame. The similarity every Gaussian follows as stored needs
 //! nothing here.
-
-use std::ops::Range;
+//!
+//! What a source's Gaussian becomes depends only on the source, the
+//! composite's shape and these two options, never on the assignment. So
+//! each source's reshaped Gaussians are kept ([`ReshapedSources`]) and made
+//! only as a composite first shows them: an assignment edit copies them in
+//! with the rest of each Gaussian, and only a shape edit (or a change of
+//! the options) starts again.
 
 use glam::{DMat3, Quat, Vec3};
 use rayon::prelude::*;
@@ -52,37 +57,12 @@ impl SourceAnchors {
         }
         found
     }
-}
 
-/// A composite Gaussian that follows another triangle than its parent.
-#[derive(Clone, Copy, Debug)]
-pub struct Anchored {
-    /// Its index in the composite.
-    at: u32,
-    /// Its source, and its entry in that source's [`SourceAnchors`].
-    source: u32,
-    slot: u32,
-}
-
-/// Notes the composite's Gaussian `at`, Gaussian `i` of source `f`, in
-/// `anchored` when `anchors` (the source's, under `anchor = "nearest"`) has
-/// it follow another triangle than its parent.
-pub fn note_anchor(
-    anchored: &mut Vec<Anchored>,
-    anchors: Option<&SourceAnchors>,
-    at: usize,
-    f: usize,
-    i: u32,
-) {
-    let Some(&slot) = anchors.and_then(|a| a.slot.get(i as usize)) else {
-        return;
-    };
-    if slot != u32::MAX {
-        anchored.push(Anchored {
-            at: at as u32,
-            source: f as u32,
-            slot,
-        });
+    /// Gaussian `i` in its anchor triangle's frame, where it follows another
+    /// triangle than its parent.
+    fn local(&self, i: u32) -> Option<&AnchorLocal> {
+        let slot = *self.slot.get(i as usize)?;
+        self.locals.get(slot as usize)
     }
 }
 
@@ -90,8 +70,9 @@ pub fn note_anchor(
 pub struct ReshapeSource<'a> {
     /// Its neutral mesh.
     pub neutral: &'a [Vec3],
-    /// Its anchored Gaussians, where the composite follows anchors and
-    /// draws on this source.
+    /// Its Gaussians as stored.
+    pub gaussians: &'a GaussianSet,
+    /// Its anchored Gaussians, under `anchor = "nearest"`.
     pub anchors: Option<&'a SourceAnchors>,
 }
 
@@ -104,6 +85,93 @@ pub struct Reshaping<'a> {
     /// Whether Gaussians follow their triangle's whole local deformation
     /// (`deform = "affine"`) rather than its similarity.
     pub affine: bool,
+    /// Whether Gaussians off their parent follow the triangle under them
+    /// (`anchor = "nearest"`).
+    pub nearest: bool,
+}
+
+/// A slot not made yet.
+const UNSEEN: u32 = u32::MAX;
+/// A slot made and found to need nothing: the triangle keeps its shape up
+/// to a similarity, or the Gaussian keeps its values as stored.
+const KEPT: u32 = u32::MAX - 1;
+
+/// A Gaussian's position, rotation and log-scales in its parent's frame.
+pub type Placed = (Vec3, Quat, Vec3);
+
+/// Every source's reshaped Gaussians for one composite shape and one choice
+/// of `deform` and `anchor`, made as the composite first shows them.
+#[derive(Clone, Debug, Default)]
+pub struct ReshapedSources {
+    /// The options they were made for: `affine`, `nearest`.
+    options: (bool, bool),
+    /// Per source; `None` until the composite first shows it.
+    sources: Vec<Option<ReshapedSource>>,
+}
+
+/// One source's Gaussians reshaped to a composite's shape, as far as made.
+#[derive(Clone, Debug)]
+struct ReshapedSource {
+    /// Per triangle: [`UNSEEN`], [`KEPT`] (a similarity) or its entry in `maps`.
+    map_slot: Vec<u32>,
+    /// The local maps made (`deform = "affine"`).
+    maps: Vec<DMat3>,
+    /// Per Gaussian: [`UNSEEN`], [`KEPT`] or its entry in `moved`.
+    slot: Vec<u32>,
+    /// The Gaussians reshaping moved.
+    moved: Vec<Placed>,
+}
+
+impl ReshapedSources {
+    /// Forgets every reshaped Gaussian: the composite's shape changed.
+    pub fn clear(&mut self) {
+        self.sources.clear();
+    }
+
+    /// Makes the reshaped values of `wanted` (per source, Gaussians of it)
+    /// not made yet, from the source's neutral mesh to the composite's as
+    /// `reshaping` says; what was made under other options is forgotten.
+    pub fn make(
+        &mut self,
+        reshaping: &Reshaping,
+        sources: &[ReshapeSource],
+        wanted: &[(usize, &[u32])],
+    ) {
+        let options = (reshaping.affine, reshaping.nearest);
+        if self.options != options || self.sources.len() != sources.len() {
+            self.options = options;
+            self.sources = (0..sources.len()).map(|_| None).collect();
+        }
+        for &(f, gaussians) in wanted {
+            let source = &sources[f];
+            let reshaped = self.sources[f].get_or_insert_with(|| ReshapedSource {
+                map_slot: vec![UNSEEN; reshaping.triangles.len()],
+                maps: Vec::new(),
+                slot: vec![UNSEEN; source.gaussians.len()],
+                moved: Vec::new(),
+            });
+            let mut missing: Vec<u32> = gaussians
+                .iter()
+                .copied()
+                .filter(|&i| reshaped.slot.get(i as usize) == Some(&UNSEEN))
+                .collect();
+            if !missing.is_empty() {
+                missing.sort_unstable();
+                missing.dedup();
+                reshaped.make(reshaping, source, &missing);
+            }
+        }
+    }
+
+    /// Gaussian `i` of source `f` on the composite's shape, where reshaping
+    /// moved it (made by [`Self::make`]); `None` where it keeps its values
+    /// as stored.
+    #[inline]
+    pub fn placed(&self, f: usize, i: u32) -> Option<&Placed> {
+        let reshaped = self.sources.get(f)?.as_ref()?;
+        let slot = *reshaped.slot.get(i as usize)?;
+        reshaped.moved.get(slot as usize)
+    }
 }
 
 impl Reshaping<'_> {
@@ -111,85 +179,98 @@ impl Reshaping<'_> {
         self.triangles[t as usize].map(|v| mesh[v as usize])
     }
 
-    /// Moves the Gaussians of `set`, each range of `blocks` from the source
-    /// it names, by the reshaping of the triangle each follows — its parent,
-    /// or for the `anchored` ones the triangle nearest it — from its
-    /// source's neutral mesh to the composite's.
-    pub fn apply(
-        &self,
-        sources: &[ReshapeSource],
-        blocks: &[(usize, Range<usize>)],
-        anchored: &[Anchored],
-        set: &mut GaussianSet,
-    ) {
-        let mut maps: Vec<Option<Vec<Option<DMat3>>>> = (0..sources.len()).map(|_| None).collect();
-        if self.affine {
-            for (f, _) in blocks {
-                if maps[*f].is_none() {
-                    let source = sources[*f].neutral;
-                    maps[*f] = Some(
-                        (0..self.triangles.len() as u32)
-                            .into_par_iter()
-                            .map(|t| {
-                                local_map(self.corners(source, t), self.corners(self.target, t))
-                            })
-                            .collect(),
-                    );
-                }
-            }
+    /// Gaussian `i` of `source` moved by the reshaping of the triangle it
+    /// follows — its parent, or for an anchored one the triangle nearest it
+    /// — from the source's neutral mesh to the composite's, with the maps
+    /// `made` holds; `None` where it keeps its values as stored.
+    fn reshape(&self, source: &ReshapeSource, made: &ReshapedSource, i: u32) -> Option<Placed> {
+        let set = source.gaussians;
+        let g = i as usize;
+        let parent = set.binding[g];
+        let mut placed = None;
+        if let Some(map) = made.map(parent) {
+            let (mut p, mut q, mut s) = (set.position[g], set.rotation[g], set.log_scale[g]);
+            apply_local_map(map, &mut p, &mut q, &mut s);
+            placed = Some((p, q, s));
         }
-        let map_of = |f: usize, t: u32| {
-            maps[f]
-                .as_ref()
-                .and_then(|m| m.get(t as usize))
-                .and_then(|m| m.as_ref())
+        // An anchored Gaussian starts again from its source's values: the
+        // parent's map is not its own.
+        let Some(local) = source.anchors.and_then(|a| a.local(i)) else {
+            return placed;
         };
-        if self.affine {
-            for (f, range) in blocks {
-                set.position[range.clone()]
-                    .par_iter_mut()
-                    .zip(&mut set.rotation[range.clone()])
-                    .zip(&mut set.log_scale[range.clone()])
-                    .zip(&set.binding[range.clone()])
-                    .for_each(|(((p, q), s), &t)| {
-                        if let Some(map) = map_of(*f, t) {
-                            apply_local_map(map, p, q, s);
-                        }
-                    });
-            }
+        let unmoved = |t: u32| self.corners(source.neutral, t) == self.corners(self.target, t);
+        if unmoved(parent) && unmoved(local.anchor) {
+            return placed;
         }
-        // Anchored Gaussians start again from their source's values: the
-        // parent's map above is not theirs.
-        let unmoved =
-            |f: usize, t: u32| self.corners(sources[f].neutral, t) == self.corners(self.target, t);
         let frame = |t: u32| {
             let [a, b, c] = self.corners(self.target, t);
             triangle_frame(a, b, c)
         };
-        // A few hundred on most sources: not worth waking the pool for.
-        let moved: Vec<Option<(Vec3, Quat, Vec3)>> = anchored
+        let map = made.map(local.anchor);
+        from_anchor(local, &frame(local.anchor), &frame(parent), map).or(placed)
+    }
+}
+
+impl ReshapedSource {
+    /// The local map of triangle `t`, where made and not a similarity.
+    fn map(&self, t: u32) -> Option<&DMat3> {
+        let slot = *self.map_slot.get(t as usize)?;
+        self.maps.get(slot as usize)
+    }
+
+    /// Makes the reshaped values of `missing` (Gaussians of `source` not
+    /// made yet, each once) and the maps of the triangles they follow.
+    fn make(&mut self, reshaping: &Reshaping, source: &ReshapeSource, missing: &[u32]) {
+        if reshaping.affine {
+            self.make_maps(reshaping, source, missing);
+        }
+        // A few hundred Gaussians under anchors alone: not worth waking the pool for.
+        let found: Vec<Option<Placed>> = missing
             .par_iter()
-            .with_min_len(2048)
-            .map(|a| {
-                let f = a.source as usize;
-                let local = &sources[f].anchors?.locals[a.slot as usize];
-                let parent = set.binding[a.at as usize];
-                if unmoved(f, parent) && unmoved(f, local.anchor) {
-                    return None;
+            .with_min_len(512)
+            .map(|&i| reshaping.reshape(source, self, i))
+            .collect();
+        for (&i, placed) in missing.iter().zip(found) {
+            self.slot[i as usize] = match placed {
+                Some(placed) => {
+                    self.moved.push(placed);
+                    (self.moved.len() - 1) as u32
                 }
-                from_anchor(
-                    local,
-                    &frame(local.anchor),
-                    &frame(parent),
-                    map_of(f, local.anchor),
+                None => KEPT,
+            };
+        }
+    }
+
+    /// Makes the local maps not made yet of the triangles `gaussians` of
+    /// `source` follow: their parents and anchors.
+    fn make_maps(&mut self, reshaping: &Reshaping, source: &ReshapeSource, gaussians: &[u32]) {
+        let anchor_of = |i: u32| source.anchors.and_then(|a| a.local(i)).map(|l| l.anchor);
+        let mut triangles: Vec<u32> = gaussians
+            .iter()
+            .flat_map(|&i| [Some(source.gaussians.binding[i as usize]), anchor_of(i)])
+            .flatten()
+            .filter(|&t| self.map_slot.get(t as usize) == Some(&UNSEEN))
+            .collect();
+        triangles.sort_unstable();
+        triangles.dedup();
+        let made: Vec<Option<DMat3>> = triangles
+            .par_iter()
+            .with_min_len(256)
+            .map(|&t| {
+                local_map(
+                    reshaping.corners(source.neutral, t),
+                    reshaping.corners(reshaping.target, t),
                 )
             })
             .collect();
-        for (a, moved) in anchored.iter().zip(moved) {
-            if let Some((p, q, s)) = moved {
-                let g = a.at as usize;
-                (set.position[g], set.rotation[g], set.log_scale[g]) = (p, q, s);
-            }
+        for (t, map) in triangles.into_iter().zip(made) {
+            self.map_slot[t as usize] = match map {
+                Some(map) => {
+                    self.maps.push(map);
+                    (self.maps.len() - 1) as u32
+                }
+                None => KEPT,
+            };
         }
     }
 }

@@ -270,6 +270,19 @@ impl<'a> GaussianRange<'a> {
         to[take..].fill(0.0);
     }
 
+    /// Moves the Gaussian at the set's index `at` to a new position,
+    /// rotation and log-scales in its parent's frame.
+    pub fn set_placement(
+        &mut self,
+        at: usize,
+        (position, rotation, log_scale): (Vec3, Quat, Vec3),
+    ) {
+        let k = at - self.start;
+        self.position[k] = position;
+        self.rotation[k] = rotation;
+        self.log_scale[k] = log_scale;
+    }
+
     /// Mutable SH coefficients of the Gaussian at the set's index `at`.
     pub fn sh_of_mut(&mut self, at: usize) -> &mut [f32] {
         let k = at - self.start;
