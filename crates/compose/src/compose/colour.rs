@@ -77,12 +77,15 @@ pub fn thesis_gain(reference: Vec3, source: Vec3) -> Vec3 {
 
 /// Applies `rgb ↦ gain ⊙ rgb` to one Gaussian's SH (coefficient-major `[coef][rgb]`).
 pub fn apply_gain(sh: &mut [f32], gain: Vec3) {
-    for ch in 0..3 {
-        let g = gain[ch];
-        sh[ch] = (g * (SH_C0 * sh[ch] + 0.5) - 0.5) / SH_C0;
-        for k in (3 + ch..sh.len()).step_by(3) {
-            sh[k] *= g;
-        }
+    let (dc, rest) = sh.split_at_mut(3.min(sh.len()));
+    for (c, g) in dc.iter_mut().zip(gain.to_array()) {
+        *c = (g * (SH_C0 * *c + 0.5) - 0.5) / SH_C0;
+    }
+    // Coefficient by coefficient, each an [r, g, b] triple.
+    for rgb in rest.chunks_exact_mut(3) {
+        rgb[0] *= gain.x;
+        rgb[1] *= gain.y;
+        rgb[2] *= gain.z;
     }
 }
 
