@@ -342,18 +342,19 @@ fn relighting_follows_the_turn_and_the_hollows_under_each_gaussian() {
 
 /// Reshaped Gaussians are made once per shape and kept between edits
 /// (method §6.7): whatever the order of edits — assignments, a shape
-/// weight, the options, a source shown again — a composite brought up to
-/// date equals one composed from scratch, bit for bit, with the cross-fade's
-/// border extras as with the colour seams' blend.
+/// weight, another base, the options, a source shown again — a composite
+/// brought up to date equals one composed from scratch, bit for bit, under
+/// the colour seams as under the thesis's and the cross-fade's border
+/// extras; and the edits do reshape (against the similarity alone).
 #[test]
 fn reshaped_gaussians_kept_between_edits_match_a_fresh_composite() {
+    use visage::compose::recipe::Anchor;
     let e = engine();
     let n = names(e);
-    for smoothing in [Smoothing::Blend, Smoothing::Crossfade] {
+    for smoothing in [Smoothing::Blend, Smoothing::Crossfade, Smoothing::Thesis] {
         let mut r = Recipe::unedited(&n[0]);
         r.post = PostProcess {
             smoothing,
-            deform: Deform::Affine,
             ..PostProcess::BEST
         };
         r.groups.insert("nose".into(), edit(&n[1], &[(&n[2], 0.7)]));
@@ -369,15 +370,22 @@ fn reshaped_gaussians_kept_between_edits_match_a_fresh_composite() {
         steps.push(r.clone());
         r.groups.remove("eyes");
         steps.push(r.clone());
-        // The similarity alone, then the whole reshaping again.
+        // The similarity alone, the whole reshaping again, the anchors off
+        // and on, and another base.
         r.post.deform = Deform::Similarity;
         steps.push(r.clone());
         r.post.deform = Deform::Affine;
         r.groups.insert("eyes".into(), edit(&n[1], &[]));
         steps.push(r.clone());
+        r.post.anchor = Anchor::Parent;
+        steps.push(r.clone());
+        r.post.anchor = Anchor::Nearest;
+        steps.push(r.clone());
+        r.base = n[2].clone();
+        steps.push(r.clone());
         for (k, step) in steps.iter().enumerate() {
             let next = resolve(e, step);
-            e.update(&mut c, &next);
+            assert!(e.update(&mut c, &next).gaussians, "{smoothing:?} step {k}");
             let fresh = e.compose(&next);
             let (a, b) = (&c.gaussians, &fresh.gaussians);
             assert_eq!(c.blocks, fresh.blocks, "{smoothing:?} step {k}");
@@ -387,6 +395,18 @@ fn reshaped_gaussians_kept_between_edits_match_a_fresh_composite() {
             assert_eq!(a.log_scale, b.log_scale, "{smoothing:?} step {k}");
             assert_eq!(a.opacity_logit, b.opacity_logit, "{smoothing:?} step {k}");
             assert_eq!(a.sh, b.sh, "{smoothing:?} step {k}");
+            if step.post.deform == Deform::Affine {
+                let mut plain = next.clone();
+                plain.post.deform = Deform::Similarity;
+                let plain = e.compose(&plain);
+                let moved = (0..a.len())
+                    .filter(|&i| a.log_scale[i] != plain.gaussians.log_scale[i])
+                    .count();
+                assert!(
+                    moved > a.len() / 4,
+                    "{smoothing:?} step {k}: {moved} reshaped"
+                );
+            }
         }
     }
 }

@@ -361,14 +361,20 @@ fn an_update_that_changes_how_gaussians_follow_the_shape_equals_a_fresh_build() 
     let e = engine();
     let n = names(e);
     let best = resolve(e, &eyes_and_mouth_swapped(&n));
-    let mut affine = best.clone();
-    affine.post.deform = Deform::Affine;
+    assert_eq!(best.post.deform, Deform::Affine, "ours stretches");
+    let mut similar = best.clone();
+    similar.post.deform = Deform::Similarity;
+    let mut parent = best.clone();
+    parent.post.anchor = visage::compose::recipe::Anchor::Parent;
     let plain = resolve(e, &Recipe::unedited(&n[0]));
     for (before, after) in [
         (&plain, &best),
-        (&plain, &affine),
-        (&best, &affine),
-        (&affine, &best),
+        (&plain, &similar),
+        (&best, &similar),
+        (&similar, &best),
+        (&best, &parent),
+        (&parent, &best),
+        (&plain, &parent),
     ] {
         let mut edited = e.compose(before);
         e.update(&mut edited, after);
@@ -519,16 +525,18 @@ fn skin_from_the_base_takes_over_swapped_skin_only_where_the_base_shapes_or_fits
         opacity_sum(&after, nose_after) < 0.5 * opacity_sum(&before, nose_before),
         "the source's nose skin gives way"
     );
-    // Lips are no skin: the source's lip Gaussians keep their opacity.
+    // Lips are no skin: the source's lip Gaussians keep their opacity (a
+    // Gaussian of the source on the same triangle with the same opacity:
+    // ours stretches them with the shape, so their places moved).
     let lips = block(&after, Region::Lips, other).unwrap();
     let full = (lips.start..lips.end)
         .filter(|&i| {
             let from = source_gaussians
                 .opacity_logit
                 .iter()
-                .zip(&source_gaussians.position)
-                .any(|(&o, &p)| {
-                    o == after.gaussians.opacity_logit[i] && p == after.gaussians.position[i]
+                .zip(&source_gaussians.binding)
+                .any(|(&o, &t)| {
+                    o == after.gaussians.opacity_logit[i] && t == after.gaussians.binding[i]
                 });
             from
         })

@@ -221,14 +221,16 @@ pub fn run(args: &EngineBenchArgs) -> Result<()> {
             });
         }
         // Shape again under our post-processing, where the Gaussians that
-        // follow the shape (relit, the base's skin, reshaped) are rebuilt:
-        // after the assignments, so that their random draws stay as before.
+        // follow the shape (relit, the base's skin, reshaped) are rebuilt,
+        // drawing on its own generator so that every other row's random
+        // draws, at every number of sources, stay as they were.
+        let mut shape_rng = ChaCha8Rng::seed_from_u64(6_4 + n as u64);
         rows.push(EngineRow {
             post: Some("best"),
             ..time_shape_edits(
                 &engine,
                 &mut composite,
-                &mut rng,
+                &mut shape_rng,
                 &mut posed,
                 (n, frames),
                 args,

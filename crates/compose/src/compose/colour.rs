@@ -77,6 +77,7 @@ pub fn thesis_gain(reference: Vec3, source: Vec3) -> Vec3 {
 
 /// Applies `rgb ↦ gain ⊙ rgb` to one Gaussian's SH (coefficient-major `[coef][rgb]`).
 pub fn apply_gain(sh: &mut [f32], gain: Vec3) {
+    debug_assert_eq!(sh.len() % 3, 0, "SH come in rgb triples");
     let (dc, rest) = sh.split_at_mut(3.min(sh.len()));
     for (c, g) in dc.iter_mut().zip(gain.to_array()) {
         *c = (g * (SH_C0 * *c + 0.5) - 0.5) / SH_C0;

@@ -59,8 +59,8 @@ pub fn copy_own(
                     let exponent = copying.own_exponent[t as usize] * share;
                     let opacity = OpacityEdit::Split(exponent).apply(src.opacity_logit[i as usize]);
                     range.set_from(at, src, i as usize, opacity);
-                    if let Some(placed) = copying.reshaped.and_then(|r| r.placed(f, i)) {
-                        range.set_placement(at, *placed);
+                    if let Some(reshaped) = copying.reshaped.and_then(|r| r.placed(f, i)) {
+                        range.set_placement(at, *reshaped);
                     }
                     let sh = range.sh_of_mut(at);
                     let gain = block.correction.gain(i as usize);

@@ -560,7 +560,8 @@ impl Engine {
                 self.push_corrected(set, f, i, &correction, edit);
                 let last = set.len() - 1;
                 relight_sh(set.sh_of_mut(last), &composite.relight_gains, f, i);
-                if let Some(&placed) = composite.reshaped.placed(f, i).filter(|_| reshaped) {
+                let kept = reshaped.then_some(&composite.reshaped);
+                if let Some(&placed) = kept.and_then(|r| r.placed(f, i)) {
                     (set.position[last], set.rotation[last], set.log_scale[last]) = placed;
                 }
             }

@@ -228,7 +228,7 @@ impl PostProcess {
         smoothing: Smoothing::Blend,
         colour: ColourCorrection::Semantic,
         membership: Membership::Place,
-        deform: Deform::Similarity,
+        deform: Deform::Affine,
         anchor: Anchor::Nearest,
         shading: Shading::Relit,
         skin: SkinSource::Base,

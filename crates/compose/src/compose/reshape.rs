@@ -103,10 +103,18 @@ pub type Placed = (Vec3, Quat, Vec3);
 /// of `deform` and `anchor`, made as the composite first shows them.
 #[derive(Clone, Debug, Default)]
 pub struct ReshapedSources {
-    /// The options they were made for: `affine`, `nearest`.
-    options: (bool, bool),
+    /// The options they were made for.
+    options: ReshapeOptions,
     /// Per source; `None` until the composite first shows it.
     sources: Vec<Option<ReshapedSource>>,
+}
+
+/// What a composite's reshaping follows: the whole local map (`deform =
+/// "affine"`) and the triangle under a Gaussian (`anchor = "nearest"`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct ReshapeOptions {
+    affine: bool,
+    nearest: bool,
 }
 
 /// One source's Gaussians reshaped to a composite's shape, as far as made.
@@ -137,7 +145,10 @@ impl ReshapedSources {
         sources: &[ReshapeSource],
         wanted: &[(usize, &[u32])],
     ) {
-        let options = (reshaping.affine, reshaping.nearest);
+        let options = ReshapeOptions {
+            affine: reshaping.affine,
+            nearest: reshaping.nearest,
+        };
         if self.options != options || self.sources.len() != sources.len() {
             self.options = options;
             self.sources = (0..sources.len()).map(|_| None).collect();
@@ -224,7 +235,8 @@ impl ReshapedSource {
         if reshaping.affine {
             self.make_maps(reshaping, source, missing);
         }
-        // A few hundred Gaussians under anchors alone: not worth waking the pool for.
+        // A region's worth on an assignment edit, a composite's on a shape
+        // edit; under anchors alone most need nothing and cost little each.
         let found: Vec<Option<Placed>> = missing
             .par_iter()
             .with_min_len(512)
