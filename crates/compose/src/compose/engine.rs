@@ -24,7 +24,7 @@ use super::membership::{footprint_triangles, placements};
 use super::recipe::{
     Anchor, Deform, Membership, PostProcess, ResolvedRecipe, Shading, SkinSource, Smoothing,
 };
-use super::reshape::{ReshapeSource, ReshapedSources, Reshaping, SourceAnchors};
+use super::reshape::{ReshapeOptions, ReshapeSource, ReshapedSources, Reshaping, SourceAnchors};
 use super::seam_colours::{SeamColours, SourceTables};
 use super::seams::{limit_reach, SeamNeighbours};
 use super::selection::{Csr, SelectionTables};
@@ -528,7 +528,9 @@ impl Engine {
     fn add_border_extras(&self, recipe: &ResolvedRecipe, composite: &mut Composite) {
         let smoothing = recipe.post.smoothing;
         let membership = recipe.post.membership;
-        let reshaped = Self::follows_reshaping(&recipe.post);
+        // Per border between two sources: its regions, the source whose
+        // Gaussians cross it, and each of them with its opacity edit.
+        let mut crossings: Vec<(Region, Region, usize, Vec<(u32, OpacityEdit)>)> = Vec::new();
         for (&(r, p), band) in self.borders.pairs() {
             let f = Self::source_of(recipe, r);
             if f == Self::source_of(recipe, p) {
@@ -546,13 +548,22 @@ impl Engine {
                     counted.iter().map(move |&i| (i, edit))
                 })
                 .collect();
-            if extras.is_empty() {
-                continue;
+            if !extras.is_empty() {
+                crossings.push((r, p, f, extras));
             }
-            if reshaped {
-                let indices: Vec<u32> = extras.iter().map(|&(i, _)| i).collect();
-                self.make_reshaped(&recipe.post, composite, &[(f, &indices)]);
-            }
+        }
+        let reshaped = Self::follows_reshaping(&recipe.post);
+        if reshaped {
+            let indices: Vec<(usize, Vec<u32>)> = crossings
+                .iter()
+                .map(|(_, _, f, extras)| (*f, extras.iter().map(|&(i, _)| i).collect()))
+                .collect();
+            let wanted: Vec<(usize, &[u32])> =
+                indices.iter().map(|(f, i)| (*f, i.as_slice())).collect();
+            self.make_reshaped(&recipe.post, composite, &wanted);
+        }
+        let kept = reshaped.then_some(&composite.reshaped);
+        for (r, p, f, extras) in crossings {
             let correction = self.correction(recipe, p, f);
             let set = &mut composite.gaussians;
             let start = set.len();
@@ -560,8 +571,7 @@ impl Engine {
                 self.push_corrected(set, f, i, &correction, edit);
                 let last = set.len() - 1;
                 relight_sh(set.sh_of_mut(last), &composite.relight_gains, f, i);
-                let kept = reshaped.then_some(&composite.reshaped);
-                if let Some(&placed) = kept.and_then(|r| r.placed(f, i)) {
+                if let Some(&placed) = kept.and_then(|k| k.placed(f, i)) {
                     (set.position[last], set.rotation[last], set.log_scale[last]) = placed;
                 }
             }
@@ -649,8 +659,10 @@ impl Engine {
         let reshaping = Reshaping {
             triangles: &self.db.model.triangles,
             target: &composite.neutral,
-            affine: post.deform == Deform::Affine,
-            nearest,
+            options: ReshapeOptions {
+                affine: post.deform == Deform::Affine,
+                nearest,
+            },
         };
         composite.reshaped.make(&reshaping, &sources, wanted);
     }

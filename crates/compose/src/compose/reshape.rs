@@ -82,12 +82,8 @@ pub struct Reshaping<'a> {
     pub triangles: &'a [[u32; 3]],
     /// The composite's blended neutral mesh.
     pub target: &'a [Vec3],
-    /// Whether Gaussians follow their triangle's whole local deformation
-    /// (`deform = "affine"`) rather than its similarity.
-    pub affine: bool,
-    /// Whether Gaussians off their parent follow the triangle under them
-    /// (`anchor = "nearest"`).
-    pub nearest: bool,
+    /// What the Gaussians follow.
+    pub options: ReshapeOptions,
 }
 
 /// A slot not made yet.
@@ -109,12 +105,15 @@ pub struct ReshapedSources {
     sources: Vec<Option<ReshapedSource>>,
 }
 
-/// What a composite's reshaping follows: the whole local map (`deform =
-/// "affine"`) and the triangle under a Gaussian (`anchor = "nearest"`).
+/// What a composite's reshaping follows.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct ReshapeOptions {
-    affine: bool,
-    nearest: bool,
+pub struct ReshapeOptions {
+    /// Whether Gaussians follow their triangle's whole local deformation
+    /// (`deform = "affine"`) rather than its similarity.
+    pub affine: bool,
+    /// Whether Gaussians off their parent follow the triangle under them
+    /// (`anchor = "nearest"`).
+    pub nearest: bool,
 }
 
 /// One source's Gaussians reshaped to a composite's shape, as far as made.
@@ -145,10 +144,7 @@ impl ReshapedSources {
         sources: &[ReshapeSource],
         wanted: &[(usize, &[u32])],
     ) {
-        let options = ReshapeOptions {
-            affine: reshaping.affine,
-            nearest: reshaping.nearest,
-        };
+        let options = reshaping.options;
         if self.options != options || self.sources.len() != sources.len() {
             self.options = options;
             self.sources = (0..sources.len()).map(|_| None).collect();
@@ -232,7 +228,7 @@ impl ReshapedSource {
     /// Makes the reshaped values of `missing` (Gaussians of `source` not
     /// made yet, each once) and the maps of the triangles they follow.
     fn make(&mut self, reshaping: &Reshaping, source: &ReshapeSource, missing: &[u32]) {
-        if reshaping.affine {
+        if reshaping.options.affine {
             self.make_maps(reshaping, source, missing);
         }
         // A region's worth on an assignment edit, a composite's on a shape
