@@ -27,40 +27,42 @@ impl Engine {
         semantic: Option<Membership>,
     ) -> Option<SharedGains> {
         let (from, to) = (*self.colours.skin(source)?, *self.colours.skin(reference)?);
-        // Built before the lock: its first build runs on the thread pool,
-        // whose jobs must not wait on a lock this thread holds.
+        // Built before the pool's work below, outside any job that waits on it.
         self.colour_weights_of(source);
-        let mut cache = self.skin_gains.lock().unwrap_or_else(|e| e.into_inner());
-        let gains = cache
-            .entry((source, reference, semantic))
-            .or_insert_with(|| {
-                let count = self.db.sources[source].gaussians.len();
-                let regions = &self.db.model.triangle_regions;
-                let colours = self.colours.seen(source);
-                let brightens = dark_features::transfer_brightens(&from, &to);
-                let clothing = semantic.map(|m| self.clothing_of(source, m, &from));
-                let gains = (0..count)
-                    .into_par_iter()
-                    .map(|i| match semantic {
-                        Some(m) => {
-                            let t = self.tables.counted_triangles(m, source)[i];
-                            let region = regions[t as usize];
-                            let clothing = clothing.as_ref().and_then(|c| c[region.index()]);
-                            self.colours.semantic_gain(
-                                source,
-                                i,
-                                region,
-                                (&from, &to),
-                                brightens,
-                                clothing,
-                            )
-                        }
-                        None => skin_transfer_gain(colours[i], &from, &to),
-                    })
-                    .collect();
-                Arc::new(gains)
-            });
-        Some(gains.clone())
+        let key = (source, reference, semantic);
+        let cache = || self.skin_gains.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(gains) = cache().get(&key) {
+            return Some(gains.clone());
+        }
+        // Made without the lock held: the gains are made on the thread pool,
+        // and a pool thread copying another composite on this engine may be
+        // waiting for the lock — held here, the two would wait on each other
+        // (seen as a hang of two tests composing at once). Two threads that
+        // miss together both make the same gains; the first one kept wins.
+        let count = self.db.sources[source].gaussians.len();
+        let regions = &self.db.model.triangle_regions;
+        let colours = self.colours.seen(source);
+        let brightens = dark_features::transfer_brightens(&from, &to);
+        let clothing = semantic.map(|m| self.clothing_of(source, m, &from));
+        let gains: Vec<Vec3> = (0..count)
+            .into_par_iter()
+            .map(|i| match semantic {
+                Some(m) => {
+                    let t = self.tables.counted_triangles(m, source)[i];
+                    let region = regions[t as usize];
+                    let clothing = clothing.as_ref().and_then(|c| c[region.index()]);
+                    self.colours
+                        .semantic_gain(source, i, region, (&from, &to), brightens, clothing)
+                }
+                None => skin_transfer_gain(colours[i], &from, &to),
+            })
+            .collect();
+        Some(
+            cache()
+                .entry(key)
+                .or_insert_with(|| Arc::new(gains))
+                .clone(),
+        )
     }
 
     /// Per region (by [`Region::index`]), the mean linear colour of source
