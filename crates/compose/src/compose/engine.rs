@@ -117,6 +117,19 @@ pub struct Block {
     pub end: usize,
 }
 
+/// The Gaussians of one source that cross a border into the neighbouring
+/// region of another source (the thesis's smoothing and the cross-fade).
+struct Crossing {
+    /// The region whose source they are.
+    from: Region,
+    /// The region across the border.
+    into: Region,
+    /// Their source.
+    source: usize,
+    /// Each, with its opacity edit.
+    extras: Vec<(u32, OpacityEdit)>,
+}
+
 /// A composite avatar: blended neutral mesh and the selected, post-processed
 /// Gaussians bound to its triangles.
 #[derive(Clone, Debug)]
@@ -528,9 +541,7 @@ impl Engine {
     fn add_border_extras(&self, recipe: &ResolvedRecipe, composite: &mut Composite) {
         let smoothing = recipe.post.smoothing;
         let membership = recipe.post.membership;
-        // Per border between two sources: its regions, the source whose
-        // Gaussians cross it, and each of them with its opacity edit.
-        let mut crossings: Vec<(Region, Region, usize, Vec<(u32, OpacityEdit)>)> = Vec::new();
+        let mut crossings: Vec<Crossing> = Vec::new();
         for (&(r, p), band) in self.borders.pairs() {
             let f = Self::source_of(recipe, r);
             if f == Self::source_of(recipe, p) {
@@ -549,21 +560,32 @@ impl Engine {
                 })
                 .collect();
             if !extras.is_empty() {
-                crossings.push((r, p, f, extras));
+                crossings.push(Crossing {
+                    from: r,
+                    into: p,
+                    source: f,
+                    extras,
+                });
             }
         }
         let reshaped = Self::follows_reshaping(&recipe.post);
         if reshaped {
             let indices: Vec<(usize, Vec<u32>)> = crossings
                 .iter()
-                .map(|(_, _, f, extras)| (*f, extras.iter().map(|&(i, _)| i).collect()))
+                .map(|c| (c.source, c.extras.iter().map(|&(i, _)| i).collect()))
                 .collect();
             let wanted: Vec<(usize, &[u32])> =
                 indices.iter().map(|(f, i)| (*f, i.as_slice())).collect();
             self.make_reshaped(&recipe.post, composite, &wanted);
         }
         let kept = reshaped.then_some(&composite.reshaped);
-        for (r, p, f, extras) in crossings {
+        for Crossing {
+            from: r,
+            into: p,
+            source: f,
+            extras,
+        } in crossings
+        {
             let correction = self.correction(recipe, p, f);
             let set = &mut composite.gaussians;
             let start = set.len();
