@@ -24,7 +24,7 @@ use glam::{DMat3, DVec3, Quat, Vec3};
 use crate::avatar::binding::{
     local_to_world, normalize_quat, quat_from_matrix, triangle_frame, world_to_local, TriangleFrame,
 };
-use crate::model::geometry::symmetric_eigen;
+use crate::model::eigen::symmetric_eigen;
 
 /// Local maps within this of the identity (largest entry of L − I) are left
 /// alone: a triangle whose shape the blend kept keeps its Gaussians bit for bit.

@@ -2,7 +2,7 @@
 //! anisotropic Gaussian bumps evaluated in head space (metres, y up, +z forward,
 //! +x towards the subject's left).
 
-use glam::{DMat3, DVec3, Vec3};
+use glam::Vec3;
 
 /// Hermite smoothstep from `edge0` to `edge1` (either order), clamped to [0, 1].
 pub fn smoothstep(edge0: f32, edge1: f32, x: f32) -> f32 {
@@ -106,135 +106,9 @@ fn lattice_hash(x: i32, y: i32, z: i32, seed: u32) -> f32 {
     (h >> 8) as f32 / (1u32 << 24) as f32
 }
 
-/// Eigenvalues (descending) and orthonormal eigenvectors (as columns, in
-/// the same order) of a symmetric 3×3 matrix, by cyclic Jacobi rotations:
-/// exact to rounding for repeated eigenvalues and flat (rank-deficient)
-/// inputs alike; near-diagonal inputs take one or two sweeps. Only the
-/// upper triangle is read and kept: each rotation updates the two
-/// diagonal entries it turns and the one off-diagonal pair left (the
-/// rotated pair becomes zero), which halves the work of a full update —
-/// `deform = "affine"` runs one per Gaussian reshaped (docs/method.md §6.7),
-/// LOD merging one per merged pair. Session 50's rewrite moved results at
-/// rounding level only (the 256² composite bench read the same to 4
-/// decimals).
-pub fn symmetric_eigen(m: [[f64; 3]; 3]) -> ([f64; 3], DMat3) {
-    let mut diagonal = [m[0][0], m[1][1], m[2][2]];
-    // The off-diagonal entries (0,1), (0,2), (1,2).
-    let mut off = [m[0][1], m[0][2], m[1][2]];
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    // Each plane (p, q) with the entries in `off` of (p, q), and of (p, r)
-    // and (q, r) for the third axis r.
-    const PLANES: [(usize, usize, usize, usize, usize); 3] =
-        [(0, 1, 0, 1, 2), (0, 2, 1, 0, 2), (1, 2, 2, 0, 1)];
-    for _sweep in 0..50 {
-        let off_norm = off.iter().map(|x| x * x).sum::<f64>();
-        let scale = diagonal.iter().map(|x| x * x).sum::<f64>();
-        if off_norm <= 1e-30 * scale.max(1e-300) {
-            break;
-        }
-        for (p, q, pq, pr, qr) in PLANES {
-            let apq = off[pq];
-            if apq.abs() < 1e-300 {
-                continue;
-            }
-            let theta = (diagonal[q] - diagonal[p]) / (2.0 * apq);
-            let t = if theta == 0.0 {
-                1.0
-            } else {
-                theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt())
-            };
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let s = t * c;
-            diagonal[p] -= t * apq;
-            diagonal[q] += t * apq;
-            off[pq] = 0.0;
-            let (arp, arq) = (off[pr], off[qr]);
-            off[pr] = c * arp - s * arq;
-            off[qr] = s * arp + c * arq;
-            for row in v.iter_mut() {
-                let (vp, vq) = (row[p], row[q]);
-                row[p] = c * vp - s * vq;
-                row[q] = s * vp + c * vq;
-            }
-        }
-    }
-    let mut order = [0, 1, 2];
-    order.sort_by(|&i, &j| diagonal[j].total_cmp(&diagonal[i]));
-    let column = |k: usize| DVec3::new(v[0][k], v[1][k], v[2][k]).normalize();
-    (
-        order.map(|k| diagonal[k]),
-        DMat3::from_cols(column(order[0]), column(order[1]), column(order[2])),
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Checks that `(values, vectors)` decomposes `m`: descending values,
-    /// orthonormal vectors, V·diag·Vᵀ = M to `tolerance` of M's size.
-    fn assert_decomposes(m: [[f64; 3]; 3], tolerance: f64) {
-        let (values, vectors) = symmetric_eigen(m);
-        assert!(
-            values[0] >= values[1] && values[1] >= values[2],
-            "{values:?}"
-        );
-        let identity = vectors.transpose() * vectors - DMat3::IDENTITY;
-        let largest = |d: DMat3| d.to_cols_array().iter().fold(0.0f64, |a, x| a.max(x.abs()));
-        assert!(largest(identity) < 1e-12, "not orthonormal: {vectors:?}");
-        let rebuilt = vectors * DMat3::from_diagonal(values.into()) * vectors.transpose();
-        let given = DMat3::from_cols_array_2d(&m);
-        let size = largest(given).max(f64::MIN_POSITIVE);
-        assert!(
-            largest(rebuilt - given) <= tolerance * size,
-            "{m:?}: rebuilt {rebuilt:?}"
-        );
-    }
-
-    #[test]
-    fn symmetric_eigen_decomposes_hard_cases() {
-        let turn = DMat3::from_quat(glam::DQuat::from_euler(glam::EulerRot::XYZ, 0.3, -1.1, 2.0));
-        let rotated = |d: [f64; 3]| {
-            (turn * DMat3::from_diagonal(d.into()) * turn.transpose()).to_cols_array_2d()
-        };
-        let cases = [
-            // Diagonal, already sorted and not.
-            [[3.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]],
-            [[1.0, 0.0, 0.0], [0.0, 5.0, 0.0], [0.0, 0.0, 2.0]],
-            // Zero, repeated, flat (rank 1 and 2) and general, turned.
-            [[0.0; 3]; 3],
-            rotated([2.0, 2.0, 2.0]),
-            rotated([2.0, 2.0, 1.0]),
-            rotated([1.0, 0.0, 0.0]),
-            rotated([1.0, 1.0, 0.0]),
-            rotated([4.0, 1.5, 0.25]),
-            // Scales from a Gaussian 10⁻⁵ thin beside one 1 wide, tiny and huge.
-            rotated([1.0, 1e-10, 1e-10]),
-            rotated([1e-20, 3e-21, 1e-22]),
-            rotated([1e20, 5e19, 1e18]),
-            // Negative eigenvalues sort below zero.
-            rotated([1.0, -0.5, -2.0]),
-        ];
-        for m in cases {
-            assert_decomposes(m, 1e-13);
-        }
-        let (values, _) = symmetric_eigen(rotated([4.0, 1.5, 0.25]));
-        for (got, want) in values.iter().zip([4.0, 1.5, 0.25]) {
-            assert!((got - want).abs() < 1e-14, "{values:?}");
-        }
-        // Many random symmetric matrices.
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
-        for _ in 0..2000 {
-            let (a, b, c, d, e, f) = (next(), next(), next(), next(), next(), next());
-            assert_decomposes([[a, b, c], [b, d, e], [c, e, f]], 1e-13);
-        }
-    }
 
     #[test]
     fn smoothstep_clamps_and_reverses() {

@@ -3,6 +3,7 @@
 
 pub mod builtin;
 pub mod cavity;
+pub mod eigen;
 pub mod geometry;
 pub mod head;
 pub mod motion;

@@ -11,7 +11,7 @@ use super::project::{project, Geometry, TrainCamera};
 use super::raster::Splat;
 use crate::avatar::binding::TriangleFrame;
 use crate::error::{Error, Result};
-use crate::model::geometry::symmetric_eigen;
+use crate::model::eigen::symmetric_eigen;
 
 /// The obscuring Gaussian's scale: the head box's extents times this (the
 /// thesis's empirical constant).

@@ -14,7 +14,7 @@
 use glam::{DMat3, DVec3, Quat, Vec3};
 
 use crate::avatar::binding::quat_from_matrix;
-use crate::model::geometry::symmetric_eigen;
+use crate::model::eigen::symmetric_eigen;
 use crate::scene::splats::{SplatScene, MAX_OPACITY};
 
 /// One Gaussian as a level of the hierarchy keeps it.
