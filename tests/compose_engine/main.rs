@@ -13,7 +13,7 @@ use visage::compose::blend::Blender;
 use visage::compose::colour::{weighted_mean_colour, GAIN_RANGE};
 use visage::compose::engine::{Engine, PosedMesh};
 use visage::compose::recipe::{
-    Anchor, AnimationMode, ColourCorrection, Deform, GroupEdit, PostProcess, Recipe,
+    Anchor, AnimationMode, ColourCorrection, Deform, GroupEdit, Membership, PostProcess, Recipe,
     ResolvedRecipe, Shading, SkinSource, Smoothing,
 };
 use visage::compose::selection::Csr;

@@ -266,3 +266,53 @@ fn a_footprint_is_found_for_sound_gaussians_and_refused_for_broken_ones() {
         assert_eq!(footprints[broken], [u32::MAX; 4], "Gaussian {broken}");
     }
 }
+
+/// The seams' local colours are made once and kept between edits of the
+/// Gaussians: whatever the order of edits — other sources, a source shown
+/// again, another colour correction, membership or base (which the colours
+/// depend on) — a composite brought up to date has the colours of one
+/// composed from scratch, bit for bit.
+#[test]
+fn seam_colours_kept_between_edits_match_a_fresh_composite() {
+    let e = engine();
+    let n = names(e);
+    let mut r = Recipe::unedited(&n[0]);
+    r.post = PostProcess::BEST;
+    r.groups.insert("nose".into(), edit(&n[1], &[]));
+    r.groups.insert("mouth".into(), edit(&n[3], &[]));
+    let mut c = e.compose(&resolve(e, &r));
+    let mut steps: Vec<Recipe> = Vec::new();
+    r.groups.insert("eyes".into(), edit(&n[2], &[]));
+    steps.push(r.clone());
+    r.groups.insert("nose".into(), edit(&n[2], &[]));
+    steps.push(r.clone());
+    r.groups.insert("nose".into(), edit(&n[1], &[]));
+    steps.push(r.clone());
+    for colour in [
+        ColourCorrection::Skin,
+        ColourCorrection::Thesis,
+        ColourCorrection::Off,
+        ColourCorrection::Semantic,
+    ] {
+        r.post.colour = colour;
+        steps.push(r.clone());
+    }
+    r.post.membership = Membership::Parent;
+    steps.push(r.clone());
+    r.post.membership = Membership::Place;
+    steps.push(r.clone());
+    r.base = n[2].clone();
+    steps.push(r.clone());
+    r.groups.insert("mouth".into(), edit(&n[0], &[]));
+    steps.push(r.clone());
+    for (k, step) in steps.iter().enumerate() {
+        let next = resolve(e, step);
+        e.update(&mut c, &next);
+        let fresh = e.compose(&next);
+        assert_eq!(c.blocks, fresh.blocks, "step {k}");
+        assert!(
+            c.gaussians.sh == fresh.gaussians.sh,
+            "step {k}: colours differ"
+        );
+    }
+}

@@ -45,6 +45,7 @@ pub fn copy_own(
                     block: b,
                     gain_sum: Vec3::ZERO,
                     at_seams: Vec::new(),
+                    colours_made: Vec::new(),
                 };
                 let block = &copying.blocks[b];
                 let f = block.source;
@@ -74,6 +75,9 @@ pub fn copy_own(
                             copied.at_seams.push(at as u32);
                         }
                     }
+                }
+                if let Some(cache) = cache.as_mut() {
+                    copied.colours_made = cache.take_made();
                 }
                 copied
             },
@@ -131,6 +135,8 @@ pub struct ChunkCopied {
     pub gain_sum: Vec3,
     /// Its Gaussians near another source's triangles.
     pub at_seams: Vec<u32>,
+    /// The seams' local colours it made, for the composite to keep.
+    pub colours_made: Vec<((u32, u32, u8), Option<Vec3>)>,
 }
 
 /// Relights the SH `sh` of Gaussian `i` of source `f` by its gain in `gains`

@@ -25,7 +25,7 @@ use super::recipe::{
     Anchor, Deform, Membership, PostProcess, ResolvedRecipe, Shading, SkinSource, Smoothing,
 };
 use super::reshape::{ReshapeOptions, ReshapeSource, ReshapedSources, Reshaping, SourceAnchors};
-use super::seam_colours::{SeamColours, SourceTables};
+use super::seam_colours::{SeamColours, SourceTables, VertexColours};
 use super::seams::{limit_reach, SeamNeighbours};
 use super::selection::{Csr, SelectionTables};
 use super::shading::{vertex_exposures, BakedLight, Exposure};
@@ -148,6 +148,9 @@ pub struct Composite {
     /// shown yet (`deform = "affine"`, `anchor = "nearest"`): an edit of
     /// the Gaussians alone reuses them.
     reshaped: ReshapedSources,
+    /// The local colours its colour seams made so far (`smoothing =
+    /// "blend"`): an edit of the Gaussians alone reuses them.
+    vertex_colours: VertexColours,
     /// Mean per-channel colour gain applied per region (1 where uncorrected).
     pub colour_gains: [Vec3; Region::COUNT],
     /// Per source, the relighting gain of each of its Gaussians for this
@@ -285,6 +288,7 @@ impl Engine {
             gaussians: GaussianSet::default(),
             blocks: Vec::new(),
             reshaped: ReshapedSources::default(),
+            vertex_colours: VertexColours::default(),
             colour_gains: [Vec3::ONE; Region::COUNT],
             relight_gains: Vec::new(),
             base_misfit: Vec::new(),
@@ -462,6 +466,7 @@ impl Engine {
         let set = &mut composite.gaussians;
         set.resize(own_count, degree);
         set.reserve(own_count / 8);
+        composite.vertex_colours.keep_for(recipe);
         let seams = (smoothing == Smoothing::Blend).then(|| {
             let looks = self
                 .db
@@ -470,7 +475,7 @@ impl Engine {
                 .iter()
                 .map(|&r| Self::source_of(recipe, r) as u32)
                 .collect();
-            SeamColours::new(self, recipe, looks)
+            SeamColours::new(self, recipe, looks, &composite.vertex_colours)
         });
         // The copy reads these tables of every source shown from inside its
         // rayon jobs, and each is built on first use by an initialiser that
@@ -497,7 +502,13 @@ impl Engine {
             relight: &composite.relight_gains,
             reshaped: reshaped.then_some(&composite.reshaped),
         };
-        let copied = copy_own(self, &copying, set);
+        let mut copied = copy_own(self, &copying, set);
+        drop(seams);
+        let made = copied
+            .iter_mut()
+            .flat_map(|c| std::mem::take(&mut c.colours_made));
+        let vertex_count = self.db.model.vertex_count();
+        composite.vertex_colours.add(made, vertex_count);
         let blocks = &mut composite.blocks;
         blocks.clear();
         let gains = &mut composite.colour_gains;

@@ -6,7 +6,11 @@
 //!
 //! A [`SeamColours`] is read-only and shared by the threads that copy a
 //! composite's Gaussians; each thread keeps its own [`SeamCache`] of the
-//! local colours it has looked up, so results never depend on the split.
+//! local colours it has made, so results never depend on the split. The
+//! composite keeps every local colour made in its [`VertexColours`]: they
+//! depend on the source, the base and the colour correction, never on the
+//! assignment, so the next assignment edit looks them up instead of
+//! re-making them in every thread's cache.
 
 use std::collections::HashMap;
 
@@ -16,7 +20,7 @@ use rayon::prelude::*;
 use super::colour::blend_towards;
 use super::correction::Correction;
 use super::membership::FOOTPRINT_MAJORITY;
-use super::recipe::{Membership, ResolvedRecipe};
+use super::recipe::{ColourCorrection, Membership, ResolvedRecipe};
 use super::seams::{SeamField, SeamNeighbours, SEAM_WIDTH};
 use crate::avatar::gaussians::GaussianSet;
 use crate::model::head::HeadModel;
@@ -50,10 +54,65 @@ pub trait SourceTables: Sync {
     fn correction(&self, recipe: &ResolvedRecipe, region: Region, source: usize) -> Correction;
 }
 
+/// A source's local colour at a vertex on one side of the hairline
+/// ([`SeamColours::colour_at`]): none where it has no Gaussians there.
+type LocalColour = Option<Vec3>;
+
+/// Which local colour: (source, vertex, side of the hairline).
+type ColourKey = (u32, u32, u8);
+
+/// The local colours a composite's seams have made so far, kept between
+/// edits: valid while its base, colour correction and membership stay
+/// (what a local colour depends on besides its source and vertex).
+#[derive(Clone, Debug, Default)]
+pub struct VertexColours {
+    /// The base, colour correction and membership they were made under.
+    made_for: Option<(usize, ColourCorrection, Membership)>,
+    /// Per source, per vertex, per side: the colour, where made.
+    colours: Vec<Vec<[Option<LocalColour>; 2]>>,
+}
+
+impl VertexColours {
+    /// Forgets every colour unless they were made for `recipe`'s base,
+    /// colour correction and membership.
+    pub fn keep_for(&mut self, recipe: &ResolvedRecipe) {
+        let key = (recipe.base, recipe.post.colour, recipe.post.membership);
+        if self.made_for != Some(key) {
+            self.colours.clear();
+            self.made_for = Some(key);
+        }
+    }
+
+    fn get(&self, (s, v, side): ColourKey) -> Option<LocalColour> {
+        self.colours.get(s as usize)?.get(v as usize)?[side as usize]
+    }
+
+    /// Keeps colours made while copying (`vertex_count` per source).
+    pub fn add(
+        &mut self,
+        made: impl IntoIterator<Item = (ColourKey, LocalColour)>,
+        vertex_count: usize,
+    ) {
+        for ((s, v, side), colour) in made {
+            let s = s as usize;
+            if self.colours.len() <= s {
+                self.colours.resize(s + 1, Vec::new());
+            }
+            let per_vertex = &mut self.colours[s];
+            if per_vertex.is_empty() {
+                *per_vertex = vec![[None; 2]; vertex_count];
+            }
+            per_vertex[v as usize][side as usize] = Some(colour);
+        }
+    }
+}
+
 /// The seams of one composite: which source each triangle wears and how
 /// far each vertex is from every other source shown.
 pub struct SeamColours<'a> {
     recipe: &'a ResolvedRecipe,
+    /// The local colours made by earlier edits of the composite.
+    kept: &'a VertexColours,
     field: SeamField,
     /// Per triangle: the source it wears.
     looks: Vec<u32>,
@@ -67,25 +126,40 @@ pub struct SeamColours<'a> {
 /// truth's cross-fade (method §13.1) mixes hair with the other source's
 /// hair and skin with its skin, while a vertex on the hairline has
 /// triangles of both around it.
-fn side_of(region: Region) -> usize {
-    usize::from(region == Region::Hair)
+fn side_of(region: Region) -> u8 {
+    u8::from(region == Region::Hair)
 }
 
-/// One thread's memory of the local colours and corrections it looked up.
+/// One thread's memory of the local colours and corrections it made.
 #[derive(Default)]
 pub struct SeamCache {
-    /// Per source shown (as the field's sources), per vertex, per side of the
-    /// hairline ([`side_of`]), filled on first use: that source's local
-    /// colour there, corrected as the composite corrects it.
-    vertex_colour: Vec<Vec<[Option<Option<Vec3>>; 2]>>,
+    /// Local colours not kept by the composite, made on first use,
+    /// corrected as the composite corrects them.
+    made: HashMap<ColourKey, LocalColour>,
+    /// Those made since [`SeamCache::take_made`] last took them.
+    fresh: Vec<(ColourKey, LocalColour)>,
     /// Colour corrections by (source, region), made on first use.
     corrections: HashMap<(usize, Region), Correction>,
+}
+
+impl SeamCache {
+    /// The local colours made since the last call, for the composite to keep.
+    pub fn take_made(&mut self) -> Vec<(ColourKey, LocalColour)> {
+        std::mem::take(&mut self.fresh)
+    }
 }
 
 impl<'a> SeamColours<'a> {
     /// The seams of the composite `recipe` makes: triangle `t` wears
     /// `looks[t]`, the source of the group its region belongs to.
-    pub fn new(sources: &impl SourceTables, recipe: &'a ResolvedRecipe, looks: Vec<u32>) -> Self {
+    /// `kept` holds the local colours earlier edits made (see
+    /// [`VertexColours::keep_for`]).
+    pub fn new(
+        sources: &impl SourceTables,
+        recipe: &'a ResolvedRecipe,
+        looks: Vec<u32>,
+        kept: &'a VertexColours,
+    ) -> Self {
         let model = sources.model();
         let field = SeamField::with_neighbours(model, sources.seam_neighbours(), &looks);
         // A triangle none of whose corners is near another source is
@@ -104,6 +178,7 @@ impl<'a> SeamColours<'a> {
             .collect();
         Self {
             recipe,
+            kept,
             field,
             looks,
             near,
@@ -112,10 +187,7 @@ impl<'a> SeamColours<'a> {
 
     /// An empty cache for one thread.
     pub fn cache(&self) -> SeamCache {
-        SeamCache {
-            vertex_colour: vec![Vec::new(); self.field.sources().len()],
-            corrections: HashMap::new(),
-        }
+        SeamCache::default()
     }
 
     /// Blends the SH of source `f`'s Gaussian `i` (already corrected) towards
@@ -214,17 +286,17 @@ impl<'a> SeamColours<'a> {
         cache: &mut SeamCache,
         s: usize,
         v: u32,
-        side: usize,
-    ) -> Option<Vec3> {
-        let k = self.field.sources().binary_search(&(s as u32)).ok()?;
-        let model = sources.model();
-        let known = &mut cache.vertex_colour[k];
-        if known.is_empty() {
-            *known = vec![[None; 2]; model.vertex_count()];
-        }
-        if let Some(colour) = known[v as usize][side] {
+        side: u8,
+    ) -> LocalColour {
+        self.field.sources().binary_search(&(s as u32)).ok()?;
+        let key = (s as u32, v, side);
+        if let Some(colour) = self.kept.get(key) {
             return colour;
         }
+        if let Some(&colour) = cache.made.get(&key) {
+            return colour;
+        }
+        let model = sources.model();
         let membership = self.recipe.post.membership;
         let bary = sources.placements(membership, s);
         let weights = sources.colour_weights(s);
@@ -254,7 +326,8 @@ impl<'a> SeamColours<'a> {
             }
         }
         let colour = (total > 0.0 && sum.is_finite()).then(|| sum / total);
-        cache.vertex_colour[k][v as usize][side] = Some(colour);
+        cache.made.insert(key, colour);
+        cache.fresh.push((key, colour));
         colour
     }
 }
