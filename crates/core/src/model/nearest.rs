@@ -12,6 +12,9 @@ const MAX_CELLS_PER_AXIS: i32 = 96;
 pub struct TriangleGrid {
     /// The triangles' corners.
     corners: Vec<[Vec3; 3]>,
+    /// The triangles' bounding boxes (lower and upper corner): no point of a
+    /// triangle is nearer than its box, which is cheaper to measure.
+    boxes: Vec<[Vec3; 2]>,
     /// Lower corner of the grid.
     origin: Vec3,
     /// Edge length of a cell.
@@ -51,8 +54,10 @@ impl TriangleGrid {
         let cell = extent / per_axis;
         let dims = (((hi - lo) / cell).floor().as_ivec3() + IVec3::ONE)
             .clamp(IVec3::ONE, IVec3::splat(MAX_CELLS_PER_AXIS));
+        let boxes = bounding_boxes(&corners);
         let mut grid = Self {
             corners,
+            boxes,
             origin: lo,
             cell,
             dims,
@@ -94,6 +99,7 @@ impl TriangleGrid {
 
     fn empty(corners: Vec<[Vec3; 3]>) -> Self {
         Self {
+            boxes: bounding_boxes(&corners),
             corners,
             origin: Vec3::ZERO,
             cell: 1.0,
@@ -146,6 +152,12 @@ impl TriangleGrid {
             self.for_ring(home, ring, |cell| {
                 let (s, e) = (self.start[cell] as usize, self.start[cell + 1] as usize);
                 for &t in &self.items[s..e] {
+                    // A triangle met in an earlier cell, or one whose box is
+                    // farther than the best, cannot win; a tie can, and the
+                    // margin keeps rounding from skipping one.
+                    if best.is_some_and(|(_, bd)| self.box_is_farther(t, p, bd)) {
+                        continue;
+                    }
                     let d = self.distance(t, p);
                     // Ties go to the lower index, whichever cell finds them first.
                     if best.is_none_or(|(bt, bd)| d < bd || (d == bd && t < bt)) {
@@ -153,12 +165,46 @@ impl TriangleGrid {
                     }
                 }
             });
-            // Cells of the next rings lie at least `ring` cells away from `p`.
-            if best.is_some_and(|(_, d)| d <= ring as f32 * self.cell) {
+            // A triangle not met yet lies wholly outside the cells searched.
+            let unsearched = self.distance_past_ring(p, home, ring);
+            if best.is_some_and(|(_, d)| d < unsearched) {
                 break;
             }
         }
         best
+    }
+
+    /// How far `p` is from every cell farther than `ring` from `home` (its
+    /// cell): the distance to the nearest face of the searched block that has
+    /// cells beyond it, infinite once the block covers the grid. A point on
+    /// the surface in the middle of its cell stops after its own cell, where
+    /// `ring` cells alone would search the 26 around it too. Short by a
+    /// rounding margin, since a triangle's cells are found by rounding.
+    fn distance_past_ring(&self, p: Vec3, home: IVec3, ring: i32) -> f32 {
+        let mut nearest = f32::INFINITY;
+        for axis in 0..3 {
+            let (first, last) = (home[axis] - ring, home[axis] + ring);
+            let at = |cell: i32| self.origin[axis] + cell as f32 * self.cell;
+            if first > 0 {
+                nearest = nearest.min(p[axis] - at(first));
+            }
+            if last < self.dims[axis] - 1 {
+                nearest = nearest.min(at(last + 1) - p[axis]);
+            }
+        }
+        nearest - 1e-3 * self.cell
+    }
+
+    /// Whether triangle `t`'s bounding box, no nearer to `p` than the
+    /// triangle, lies farther than `best` (by a margin for rounding): a
+    /// cheap test before the exact distance, in squares. Where squares leave
+    /// f32's normal range (a mesh 10⁻²⁰ m across) it answers no, and the
+    /// exact distance decides.
+    fn box_is_farther(&self, t: u32, p: Vec3, best: f32) -> bool {
+        let [lo, hi] = self.boxes[t as usize];
+        let squared = ((lo - p).max(Vec3::ZERO) + (p - hi).max(Vec3::ZERO)).length_squared();
+        let limit = best * best * (1.0 + 1e-4);
+        (best == 0.0 || limit.is_normal()) && squared > limit
     }
 
     /// Distance from `p` to triangle `t`.
@@ -182,6 +228,15 @@ impl TriangleGrid {
             }
         }
     }
+}
+
+/// Each triangle's bounding box (NaN for one with a non-finite corner: it
+/// is in no cell, so never measured).
+fn bounding_boxes(corners: &[[Vec3; 3]]) -> Vec<[Vec3; 2]> {
+    corners
+        .iter()
+        .map(|c| [c[0].min(c[1]).min(c[2]), c[0].max(c[1]).max(c[2])])
+        .collect()
 }
 
 /// |v| without overflow for huge components.
@@ -349,6 +404,71 @@ mod tests {
                 "{p}: {d} vs {want}"
             );
             assert!((grid.distance(t, p) - d).abs() < 1e-6);
+        }
+    }
+
+    /// The nearest triangle by brute force, ties to the lower index.
+    fn brute_nearest(grid: &TriangleGrid, count: usize, p: Vec3) -> (u32, f32) {
+        (0..count as u32).map(|t| (t, grid.distance(t, p))).fold(
+            (u32::MAX, f32::INFINITY),
+            |best, (t, d)| {
+                if d < best.1 {
+                    (t, d)
+                } else {
+                    best
+                }
+            },
+        )
+    }
+
+    #[test]
+    fn grid_finds_the_very_triangle_brute_force_does_on_and_near_the_surface() {
+        // A wavy sheet of shared corners (so many triangles tie at a
+        // vertex), queried on it, just off it and across cell faces: the
+        // early stop may never skip the nearest, nor a lower-indexed tie —
+        // at a human scale, a tiny one and a huge one.
+        let n = 40;
+        let vertices: Vec<Vec3> = (0..n * n)
+            .map(|i| {
+                let (x, y) = ((i % n) as f32 / n as f32, (i / n) as f32 / n as f32);
+                Vec3::new(x, y, 0.05 * (9.0 * x).sin() * (7.0 * y).cos())
+            })
+            .collect();
+        let mut triangles = Vec::new();
+        for y in 0..n - 1 {
+            for x in 0..n - 1 {
+                let i = (y * n + x) as u32;
+                triangles.push([i, i + 1, i + n as u32]);
+                triangles.push([i + 1, i + n as u32 + 1, i + n as u32]);
+            }
+        }
+        for scale in [1.0, 1e-20, 1e15] {
+            let vertices: Vec<Vec3> = vertices.iter().map(|&v| v * scale).collect();
+            assert_grid_matches_brute_force(&vertices, &triangles);
+        }
+    }
+
+    /// Queries of `TriangleGrid` on `vertices`: at vertices, just off them,
+    /// farther off, all as brute force answers.
+    fn assert_grid_matches_brute_force(vertices: &[Vec3], triangles: &[[u32; 3]]) {
+        let grid = TriangleGrid::new(vertices, triangles);
+        let size = vertices
+            .iter()
+            .fold(0.0f32, |m, v| m.max(v.abs().max_element()));
+        let mut state = 777u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let mut points: Vec<Vec3> = vertices.iter().step_by(7).copied().collect();
+        for _ in 0..3000 {
+            let v = vertices[(next() * vertices.len() as f32) as usize % vertices.len()];
+            let offset = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+            points.push(v + offset * size * [0.0, 1e-4, 0.01, 0.05][points.len() % 4]);
+        }
+        for p in points {
+            let found = grid.nearest(p).unwrap();
+            assert_eq!(found, brute_nearest(&grid, triangles.len(), p), "{p}");
         }
     }
 
