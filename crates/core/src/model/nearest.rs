@@ -364,14 +364,13 @@ mod tests {
         assert_eq!(q, Vec3::ONE);
     }
 
-    #[test]
-    fn grid_agrees_with_brute_force_on_a_curved_sheet_and_far_points() {
-        // A wavy 30×30 sheet plus a separate small part far away.
-        let n = 30;
-        let mut vertices: Vec<Vec3> = (0..n * n)
+    /// An n×n grid of vertices over the unit square, waved along z by
+    /// `amplitude`·sin(fx·x)·cos(fy·y), two triangles a square.
+    fn wavy_sheet(n: usize, amplitude: f32, (fx, fy): (f32, f32)) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let vertices = (0..n * n)
             .map(|i| {
                 let (x, y) = ((i % n) as f32 / n as f32, (i / n) as f32 / n as f32);
-                Vec3::new(x, y, 0.1 * (6.0 * x).sin() * (4.0 * y).cos())
+                Vec3::new(x, y, amplitude * (fx * x).sin() * (fy * y).cos())
             })
             .collect();
         let mut triangles = Vec::new();
@@ -382,6 +381,13 @@ mod tests {
                 triangles.push([i + 1, i + n as u32 + 1, i + n as u32]);
             }
         }
+        (vertices, triangles)
+    }
+
+    #[test]
+    fn grid_agrees_with_brute_force_on_a_curved_sheet_and_far_points() {
+        // A wavy 30×30 sheet plus a separate small part far away.
+        let (mut vertices, mut triangles) = wavy_sheet(30, 0.1, (6.0, 4.0));
         let k = vertices.len() as u32;
         vertices.extend([
             Vec3::new(5.0, 5.0, 5.0),
@@ -427,21 +433,7 @@ mod tests {
         // vertex), queried on it, just off it and across cell faces: the
         // early stop may never skip the nearest, nor a lower-indexed tie —
         // at a human scale, a tiny one and a huge one.
-        let n = 40;
-        let vertices: Vec<Vec3> = (0..n * n)
-            .map(|i| {
-                let (x, y) = ((i % n) as f32 / n as f32, (i / n) as f32 / n as f32);
-                Vec3::new(x, y, 0.05 * (9.0 * x).sin() * (7.0 * y).cos())
-            })
-            .collect();
-        let mut triangles = Vec::new();
-        for y in 0..n - 1 {
-            for x in 0..n - 1 {
-                let i = (y * n + x) as u32;
-                triangles.push([i, i + 1, i + n as u32]);
-                triangles.push([i + 1, i + n as u32 + 1, i + n as u32]);
-            }
-        }
+        let (vertices, triangles) = wavy_sheet(40, 0.05, (9.0, 7.0));
         for scale in [1.0, 1e-20, 1e15] {
             let vertices: Vec<Vec3> = vertices.iter().map(|&v| v * scale).collect();
             assert_grid_matches_brute_force(&vertices, &triangles);
