@@ -14,7 +14,7 @@ use super::colour::apply_gain;
 use super::correction::Correction;
 use super::recipe::Membership;
 use super::reshape::ReshapedSources;
-use super::seam_colours::{SeamColours, SourceTables};
+use super::seam_colours::{ColourKey, LocalColour, SeamColours, SourceTables};
 use super::smoothing::split_opacity;
 use crate::avatar::gaussians::{logit, sigmoid, GaussianSet};
 use crate::model::regions::Region;
@@ -136,7 +136,7 @@ pub struct ChunkCopied {
     /// Its Gaussians near another source's triangles.
     pub at_seams: Vec<u32>,
     /// The seams' local colours it made, for the composite to keep.
-    pub colours_made: Vec<((u32, u32, u8), Option<Vec3>)>,
+    pub colours_made: Vec<(ColourKey, LocalColour)>,
 }
 
 /// Relights the SH `sh` of Gaussian `i` of source `f` by its gain in `gains`

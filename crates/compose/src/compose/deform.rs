@@ -83,8 +83,10 @@ pub fn apply_local_map(
     let q = normalize_quat(*rotation).as_dquat();
     let axes = DMat3::from_quat(q);
     let scale = log_scale.as_dvec3().exp();
-    // Σ' = M·Mᵀ with M = L·R·S; in the old axes, R ᵀ·Σ'·R is nearly diagonal
-    // for a nearly rigid map, which the Jacobi rotations settle fast.
+    // Σ' = M·Mᵀ with M = L·R·S, factored in the old axes, where Rᵀ·Σ'·R is
+    // nearly diagonal for a nearly rigid map: a flat Gaussian's graded
+    // covariance, which the solver hands to Jacobi rotations, then keeps its
+    // small variances to their own digits.
     let m = axes.transpose() * *map * axes * DMat3::from_diagonal(scale);
     let sigma = m * m.transpose();
     let (values, vectors) = symmetric_eigen(sigma.to_cols_array_2d());

@@ -56,14 +56,17 @@ pub trait SourceTables: Sync {
 
 /// A source's local colour at a vertex on one side of the hairline
 /// ([`SeamColours::colour_at`]): none where it has no Gaussians there.
-type LocalColour = Option<Vec3>;
+pub type LocalColour = Option<Vec3>;
 
 /// Which local colour: (source, vertex, side of the hairline).
-type ColourKey = (u32, u32, u8);
+pub type ColourKey = (u32, u32, u8);
 
 /// The local colours a composite's seams have made so far, kept between
 /// edits: valid while its base, colour correction and membership stay
-/// (what a local colour depends on besides its source and vertex).
+/// (what a local colour depends on besides its source and vertex) and
+/// while it is updated by the engine that made it (like the composite's
+/// other kept values: a composite is only ever brought up to date by its
+/// own engine).
 #[derive(Clone, Debug, Default)]
 pub struct VertexColours {
     /// The base, colour correction and membership they were made under.

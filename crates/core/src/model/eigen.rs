@@ -28,11 +28,15 @@ const GRADED: f64 = 1e-10;
 /// eigenvector of the one farthest from the other two as a cross product of
 /// two rows of A − λI, then one Jacobi rotation in the plane orthogonal to
 /// it), about 60 % of Jacobi's cost on reshaped covariances; `None` where the input is zero,
-/// not finite, graded past [`GRADED`] or leaves no cross product to use.
+/// subnormal, not finite, graded past [`GRADED`] or leaves no cross product to use.
 fn closed_form(m: [[f64; 3]; 3]) -> Option<([f64; 3], DMat3)> {
     let upper = [m[0][0], m[1][1], m[2][2], m[0][1], m[0][2], m[1][2]];
+    if !upper.iter().all(|x| x.is_finite()) {
+        return None;
+    }
     let size = upper.iter().fold(0.0f64, |s, x| s.max(x.abs()));
-    if !(size.is_finite() && size > 0.0) {
+    // A subnormal size has no finite reciprocal to scale by.
+    if size < f64::MIN_POSITIVE {
         return None;
     }
     // Scaled to entries of at most 1, so no product below over- or underflows.
@@ -78,11 +82,15 @@ fn closed_form(m: [[f64; 3]; 3]) -> Option<([f64; 3], DMat3)> {
     let best = crosses
         .into_iter()
         .max_by(|x, y| x.length_squared().total_cmp(&y.length_squared()))?;
-    let length = best.length();
-    if !(length.is_finite() && length > 0.0) {
+    // Scaled by its largest component before its length is taken: the
+    // cross product of two nearly zero rows (a nearly scalar matrix) can be
+    // so small that its squared length would be subnormal, short of digits.
+    let largest_component = best.abs().max_element();
+    if !(largest_component.is_finite() && largest_component >= f64::MIN_POSITIVE) {
         return None;
     }
-    let v = best * length.recip();
+    let best = best * largest_component.recip();
+    let v = best * best.length().recip();
     // An orthonormal pair spanning the plane orthogonal to v.
     let axis = if v.x.abs() <= v.y.abs() && v.x.abs() <= v.z.abs() {
         DVec3::X
@@ -267,6 +275,14 @@ mod tests {
             rotated([1e-300, 3e-301, 1e-302]),
             // Negative eigenvalues sort below zero.
             rotated([1.0, -0.5, -2.0]),
+            // Nearly scalar, off the diagonal by 1e-80: the rows of A − λI
+            // are ~1e-80, their cross products ~1e-160 (subnormal squares).
+            [[1.0, 1e-80, 0.0], [1e-80, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            [
+                [1.0, 1e-79, 3e-80],
+                [1e-79, 1.0, -2e-80],
+                [3e-80, -2e-80, 1.0],
+            ],
         ];
         for solve in [symmetric_eigen as Solver, jacobi] {
             for m in cases {
@@ -313,6 +329,19 @@ mod tests {
     }
 
     #[test]
+    fn the_closed_form_answers_nearly_repeated_and_nearly_scalar_matrices() {
+        for m in [
+            rotated([1.0, 1.0 + 1e-9, 0.5]),
+            rotated([1.0, 1.0 - 1e-12, 1.0 - 2e-12]),
+            rotated([2.0, 2.0, 1.0]),
+            [[1.0, 1e-80, 0.0], [1e-80, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        ] {
+            let found = closed_form(m).expect("the closed form's case");
+            assert_decomposition(found, m, 1e-13);
+        }
+    }
+
+    #[test]
     fn graded_zero_and_non_finite_inputs_go_to_jacobi() {
         // A Gaussian 10⁶ times flatter than wide, in axes near its own (as
         // `deform` forms it): D^½·K·D^½ with K well conditioned, whose
@@ -333,6 +362,13 @@ mod tests {
         let mut bad = rotated([1.0, 0.5, 0.25]);
         bad[1][2] = f64::NAN;
         assert!(closed_form(bad).is_none());
+        let mut infinite = rotated([1.0, 0.5, 0.25]);
+        infinite[0][0] = f64::INFINITY;
+        assert!(closed_form(infinite).is_none());
+        let subnormal = [[1e-310, 0.0, 0.0], [0.0, 5e-311, 0.0], [0.0, 0.0, 0.0]];
+        assert!(closed_form(subnormal).is_none());
+        let (values, _) = symmetric_eigen(subnormal);
+        assert_eq!(values, [1e-310, 5e-311, 0.0]);
         let (values, _) = symmetric_eigen(bad);
         assert!(
             values.iter().any(|v| v.is_nan()),

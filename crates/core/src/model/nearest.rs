@@ -145,6 +145,11 @@ impl TriangleGrid {
             return None;
         }
         let home = self.cell_of(p);
+        // What rounding may take off a distance: a thousandth of a cell, and
+        // a few units in the last place of the coordinates, which dominate
+        // for a mesh far from the origin.
+        let slack = 1e-3 * self.cell
+            + 8.0 * f32::EPSILON * (p.abs().max_element() + self.origin.abs().max_element());
         let mut best: Option<(u32, f32)> = None;
         // Clamped in float: an infinite or huge radius must not wrap.
         let rings = ((radius / self.cell).ceil() + 1.0).min(self.dims.max_element() as f32) as i32;
@@ -155,18 +160,25 @@ impl TriangleGrid {
                     // A triangle met in an earlier cell, or one whose box is
                     // farther than the best, cannot win; a tie can, and the
                     // margin keeps rounding from skipping one.
-                    if best.is_some_and(|(_, bd)| self.box_is_farther(t, p, bd)) {
+                    if best.is_some_and(|(_, bd)| self.box_is_farther(t, p, bd + slack)) {
                         continue;
                     }
                     let d = self.distance(t, p);
-                    // Ties go to the lower index, whichever cell finds them first.
-                    if best.is_none_or(|(bt, bd)| d < bd || (d == bd && t < bt)) {
+                    // Ties go to the lower index, whichever cell finds them
+                    // first; a distance rounding made NaN (corners that
+                    // collapsed into each other far from the origin) is
+                    // never nearest, not even the first met.
+                    let nearer = match best {
+                        None => !d.is_nan(),
+                        Some((bt, bd)) => d < bd || (d == bd && t < bt),
+                    };
+                    if nearer {
                         best = Some((t, d));
                     }
                 }
             });
             // A triangle not met yet lies wholly outside the cells searched.
-            let unsearched = self.distance_past_ring(p, home, ring);
+            let unsearched = self.distance_past_ring(p, home, ring) - slack;
             if best.is_some_and(|(_, d)| d < unsearched) {
                 break;
             }
@@ -178,8 +190,9 @@ impl TriangleGrid {
     /// cell): the distance to the nearest face of the searched block that has
     /// cells beyond it, infinite once the block covers the grid. A point on
     /// the surface in the middle of its cell stops after its own cell, where
-    /// `ring` cells alone would search the 26 around it too. Short by a
-    /// rounding margin, since a triangle's cells are found by rounding.
+    /// `ring` cells alone would search the 26 around it too. The caller
+    /// takes a rounding margin off, since a triangle's cells are found by
+    /// rounding.
     fn distance_past_ring(&self, p: Vec3, home: IVec3, ring: i32) -> f32 {
         let mut nearest = f32::INFINITY;
         for axis in 0..3 {
@@ -192,19 +205,20 @@ impl TriangleGrid {
                 nearest = nearest.min(at(last + 1) - p[axis]);
             }
         }
-        nearest - 1e-3 * self.cell
+        nearest
     }
 
     /// Whether triangle `t`'s bounding box, no nearer to `p` than the
-    /// triangle, lies farther than `best` (by a margin for rounding): a
-    /// cheap test before the exact distance, in squares. Where squares leave
-    /// f32's normal range (a mesh 10⁻²⁰ m across) it answers no, and the
-    /// exact distance decides.
-    fn box_is_farther(&self, t: u32, p: Vec3, best: f32) -> bool {
+    /// triangle, lies farther than `reach` (the best distance and the
+    /// caller's rounding margin, widened by 10⁻⁴ of itself): a cheap test
+    /// before the exact distance, in squares. Where squares leave f32's
+    /// normal range (a mesh 10⁻²⁰ m across) it answers no, and the exact
+    /// distance decides.
+    fn box_is_farther(&self, t: u32, p: Vec3, reach: f32) -> bool {
         let [lo, hi] = self.boxes[t as usize];
         let squared = ((lo - p).max(Vec3::ZERO) + (p - hi).max(Vec3::ZERO)).length_squared();
-        let limit = best * best * (1.0 + 1e-4);
-        (best == 0.0 || limit.is_normal()) && squared > limit
+        let limit = reach * reach * (1.0 + 1e-4);
+        limit.is_normal() && squared > limit
     }
 
     /// Distance from `p` to triangle `t`.
@@ -213,16 +227,27 @@ impl TriangleGrid {
         robust_length(closest_point_on_triangle(p, a, b, c) - p)
     }
 
-    /// Calls `f` on every cell at Chebyshev distance `ring` from `home`.
+    /// Calls `f` on every cell at Chebyshev distance `ring` from `home`:
+    /// the shell's cells only (its two faces across z whole, then per row
+    /// the rows across y whole and the two end cells of the others), not
+    /// every cell of the cube it bounds, which a far point's many empty
+    /// rings would pay for.
     fn for_ring(&self, home: IVec3, ring: i32, mut f: impl FnMut(usize)) {
         let lo = (home - IVec3::splat(ring)).max(IVec3::ZERO);
         let hi = (home + IVec3::splat(ring)).min(self.dims - IVec3::ONE);
         for z in lo.z..=hi.z {
+            let z_face = (z - home.z).abs() == ring;
             for y in lo.y..=hi.y {
-                for x in lo.x..=hi.x {
-                    let c = IVec3::new(x, y, z);
-                    if (c - home).abs().max_element() == ring {
-                        f(self.index(c));
+                if z_face || (y - home.y).abs() == ring {
+                    for x in lo.x..=hi.x {
+                        f(self.index(IVec3::new(x, y, z)));
+                    }
+                } else {
+                    // Inside the shell along z and y: only its x ends.
+                    for x in [home.x - ring, home.x + ring] {
+                        if x >= lo.x && x <= hi.x {
+                            f(self.index(IVec3::new(x, y, z)));
+                        }
                     }
                 }
             }
@@ -230,8 +255,8 @@ impl TriangleGrid {
     }
 }
 
-/// Each triangle's bounding box (NaN for one with a non-finite corner: it
-/// is in no cell, so never measured).
+/// Each triangle's bounding box (meaningless for one with a non-finite
+/// corner: it is in no cell, so never measured).
 fn bounding_boxes(corners: &[[Vec3; 3]]) -> Vec<[Vec3; 2]> {
     corners
         .iter()
@@ -433,27 +458,40 @@ mod tests {
         // vertex), queried on it, just off it and across cell faces: the
         // early stop may never skip the nearest, nor a lower-indexed tie —
         // at a human scale, a tiny one and a huge one.
-        let (vertices, triangles) = wavy_sheet(40, 0.05, (9.0, 7.0));
+        let (vertices, triangles) = wavy_sheet(30, 0.05, (9.0, 7.0));
         for scale in [1.0, 1e-20, 1e15] {
             let vertices: Vec<Vec3> = vertices.iter().map(|&v| v * scale).collect();
             assert_grid_matches_brute_force(&vertices, &triangles);
         }
+        // Far from the origin (2·10⁴ times its size), where the coordinates'
+        // rounding outweighs a thousandth of a cell, and flat (one cell deep).
+        let offset = Vec3::new(1e4, -2e4, 1.5e4);
+        let far: Vec<Vec3> = vertices.iter().map(|&v| v + offset).collect();
+        assert_grid_matches_brute_force(&far, &triangles);
+        let (flat, flat_triangles) = wavy_sheet(30, 0.0, (9.0, 7.0));
+        assert_grid_matches_brute_force(&flat, &flat_triangles);
     }
 
     /// Queries of `TriangleGrid` on `vertices`: at vertices, just off them,
     /// farther off, all as brute force answers.
     fn assert_grid_matches_brute_force(vertices: &[Vec3], triangles: &[[u32; 3]]) {
         let grid = TriangleGrid::new(vertices, triangles);
+        let centre = vertices[vertices.len() / 2];
         let size = vertices
             .iter()
-            .fold(0.0f32, |m, v| m.max(v.abs().max_element()));
+            .fold(0.0f32, |m, v| m.max((*v - centre).abs().max_element()));
         let mut state = 777u32;
         let mut next = || {
             state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (state >> 8) as f32 / (1u32 << 24) as f32
         };
         let mut points: Vec<Vec3> = vertices.iter().step_by(7).copied().collect();
-        for _ in 0..3000 {
+        // Far off the surface and outside the grid.
+        for k in 0..200 {
+            let offset = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+            points.push(centre + offset * size * [0.5, 3.0][k % 2]);
+        }
+        for _ in 0..1000 {
             let v = vertices[(next() * vertices.len() as f32) as usize % vertices.len()];
             let offset = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
             points.push(v + offset * size * [0.0, 1e-4, 0.01, 0.05][points.len() % 4]);
