@@ -165,8 +165,7 @@ impl TriangleGrid {
                     }
                     let d = self.distance(t, p);
                     // Ties go to the lower index, whichever cell finds them
-                    // first; a distance rounding made NaN (corners that
-                    // collapsed into each other far from the origin) is
+                    // first; a NaN distance (∞ − ∞ near f32's limits) is
                     // never nearest, not even the first met.
                     let nearer = match best {
                         None => !d.is_nan(),
@@ -287,7 +286,9 @@ pub fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
         return b;
     }
     let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+    // Each edge's case asks for an edge with length (d1 − d3 = |ab|², and
+    // so on): two corners in one place leave the segment to the third.
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 && d1 > d3 {
         return a + ab * (d1 / (d1 - d3));
     }
     let cp = p - c;
@@ -296,11 +297,11 @@ pub fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
         return c;
     }
     let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 && d2 > d6 {
         return a + ac * (d2 / (d2 - d6));
     }
     let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 && (d4 - d3) + (d5 - d6) > 0.0 {
         return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
     }
     let denom = va + vb + vc;
@@ -387,6 +388,21 @@ mod tests {
         assert!((q - Vec3::new(0.5, 0.0, 0.0)).length() < 1e-6, "{q}");
         let q = closest_point_on_triangle(p, Vec3::ONE, Vec3::ONE, Vec3::ONE);
         assert_eq!(q, Vec3::ONE);
+        // Two corners in one place, each pair in turn: the segment to the
+        // third (this once divided 0 by 0 into a NaN point).
+        let (o, x) = (Vec3::ZERO, Vec3::X);
+        for (a, b, c) in [(o, o, x), (o, x, o), (x, o, o)] {
+            for p in [
+                Vec3::new(0.5, 1.0, 0.0),
+                Vec3::new(-1.0, 0.3, 0.2),
+                Vec3::new(2.0, -0.5, 0.0),
+                Vec3::new(0.0, 0.0, 1.0),
+            ] {
+                let q = closest_point_on_triangle(p, a, b, c);
+                let expected = Vec3::new(p.x.clamp(0.0, 1.0), 0.0, 0.0);
+                assert!((q - expected).length() < 1e-6, "{a} {b} {c}, {p}: {q}");
+            }
+        }
     }
 
     /// An n×n grid of vertices over the unit square, waved along z by
@@ -498,6 +514,7 @@ mod tests {
         }
         for p in points {
             let found = grid.nearest(p).unwrap();
+            assert!(!found.1.is_nan(), "{p}");
             assert_eq!(found, brute_nearest(&grid, triangles.len(), p), "{p}");
         }
     }
