@@ -237,17 +237,18 @@ impl TriangleGrid {
         for z in lo.z..=hi.z {
             let z_face = (z - home.z).abs() == ring;
             for y in lo.y..=hi.y {
-                if z_face || (y - home.y).abs() == ring {
-                    for x in lo.x..=hi.x {
+                // A row on a face whole; inside the shell along z and y,
+                // only its two x ends (one call site keeps `f` inlined).
+                let (mut x, step) = if z_face || (y - home.y).abs() == ring {
+                    (lo.x, 1)
+                } else {
+                    (home.x - ring, 2 * ring)
+                };
+                while x <= hi.x {
+                    if x >= lo.x {
                         f(self.index(IVec3::new(x, y, z)));
                     }
-                } else {
-                    // Inside the shell along z and y: only its x ends.
-                    for x in [home.x - ring, home.x + ring] {
-                        if x >= lo.x && x <= hi.x {
-                            f(self.index(IVec3::new(x, y, z)));
-                        }
-                    }
+                    x += step;
                 }
             }
         }
