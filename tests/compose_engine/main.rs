@@ -11,7 +11,7 @@ use visage::avatar::synthetic::{builtin_database, SyntheticOptions};
 use visage::compose::base_skin::{similarity_misfit, Topology, BASE_FIT};
 use visage::compose::blend::Blender;
 use visage::compose::colour::{weighted_mean_colour, GAIN_RANGE};
-use visage::compose::engine::{Engine, PosedMesh};
+use visage::compose::engine::{Composite, Engine, PosedMesh};
 use visage::compose::recipe::{
     Anchor, AnimationMode, ColourCorrection, Deform, GroupEdit, Membership, PostProcess, Recipe,
     ResolvedRecipe, Shading, SkinSource, Smoothing,
@@ -59,6 +59,29 @@ fn edit(gaussians: &str, shape: &[(&str, f64)]) -> GroupEdit {
 
 fn resolve(e: &Engine, recipe: &Recipe) -> ResolvedRecipe {
     recipe.resolve(e.database()).unwrap()
+}
+
+/// Brings `c` up to date with `recipe` and checks it against a composite
+/// composed from scratch, bit for bit: its blocks and every value of every
+/// Gaussian (`label` names the step). Whether the update rebuilt the
+/// Gaussians.
+fn update_matches_fresh(
+    e: &Engine,
+    c: &mut Composite,
+    recipe: &ResolvedRecipe,
+    label: &str,
+) -> bool {
+    let rebuilt = e.update(c, recipe).gaussians;
+    let fresh = e.compose(recipe);
+    let (a, b) = (&c.gaussians, &fresh.gaussians);
+    assert_eq!(c.blocks, fresh.blocks, "{label}");
+    assert_eq!(a.binding, b.binding, "{label}");
+    assert_eq!(a.position, b.position, "{label}");
+    assert_eq!(a.rotation, b.rotation, "{label}");
+    assert_eq!(a.log_scale, b.log_scale, "{label}");
+    assert_eq!(a.opacity_logit, b.opacity_logit, "{label}");
+    assert!(a.sh == b.sh, "{label}: colours differ");
+    rebuilt
 }
 
 fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {

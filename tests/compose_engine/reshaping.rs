@@ -385,16 +385,9 @@ fn reshaped_gaussians_kept_between_edits_match_a_fresh_composite() {
         steps.push(r.clone());
         for (k, step) in steps.iter().enumerate() {
             let next = resolve(e, step);
-            assert!(e.update(&mut c, &next).gaussians, "{smoothing:?} step {k}");
-            let fresh = e.compose(&next);
-            let (a, b) = (&c.gaussians, &fresh.gaussians);
-            assert_eq!(c.blocks, fresh.blocks, "{smoothing:?} step {k}");
-            assert_eq!(a.binding, b.binding, "{smoothing:?} step {k}");
-            assert_eq!(a.position, b.position, "{smoothing:?} step {k}");
-            assert_eq!(a.rotation, b.rotation, "{smoothing:?} step {k}");
-            assert_eq!(a.log_scale, b.log_scale, "{smoothing:?} step {k}");
-            assert_eq!(a.opacity_logit, b.opacity_logit, "{smoothing:?} step {k}");
-            assert_eq!(a.sh, b.sh, "{smoothing:?} step {k}");
+            let label = format!("{smoothing:?} step {k}");
+            assert!(update_matches_fresh(e, &mut c, &next, &label), "{label}");
+            let a = &c.gaussians;
             if step.post.deform == Deform::Affine {
                 let mut plain = next.clone();
                 plain.post.deform = Deform::Similarity;

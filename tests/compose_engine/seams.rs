@@ -306,13 +306,6 @@ fn seam_colours_kept_between_edits_match_a_fresh_composite() {
     r.groups.insert("mouth".into(), edit(&n[0], &[]));
     steps.push(r.clone());
     for (k, step) in steps.iter().enumerate() {
-        let next = resolve(e, step);
-        e.update(&mut c, &next);
-        let fresh = e.compose(&next);
-        assert_eq!(c.blocks, fresh.blocks, "step {k}");
-        assert!(
-            c.gaussians.sh == fresh.gaussians.sh,
-            "step {k}: colours differ"
-        );
+        update_matches_fresh(e, &mut c, &resolve(e, step), &format!("step {k}"));
     }
 }
