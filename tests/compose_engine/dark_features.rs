@@ -534,6 +534,82 @@ fn shade_on_a_dark_sources_hairline_takes_a_lighter_bases_tone_and_its_hair_stay
     );
 }
 
+/// A dark source's ears under grey hair, moved to a fair base (method §7.7,
+/// session 52): an ear Gaussian half skin and half hair (in linear light)
+/// whose triangle shares a corner with a hair triangle brightens less than
+/// the same mix away from the hair, which the ears' lenient likeness reads
+/// as skin and moves whole; plain skin beside the hair takes the base's
+/// tone as everywhere else.
+#[test]
+fn an_ear_gaussian_part_hair_at_the_hairs_edge_is_paled_less_than_one_away_from_it() {
+    let (fair, dark) = (FAIR, DARK);
+    let (brown, grey) = (Vec3::new(0.12, 0.07, 0.04), Vec3::new(0.45, 0.44, 0.43));
+    let half_grey = to_display(0.5 * to_linear(dark) + 0.5 * to_linear(grey));
+    let mut db = small_db();
+    let model = &db.model;
+    let regions = model.triangle_regions.clone();
+    let corners_of_hair: std::collections::HashSet<u32> = model
+        .triangles
+        .iter()
+        .zip(&regions)
+        .filter(|(_, &r)| r == Region::Hair)
+        .flat_map(|(t, _)| *t)
+        .collect();
+    let beside_hair: Vec<bool> = model
+        .triangles
+        .iter()
+        .map(|t| t.iter().any(|v| corners_of_hair.contains(v)))
+        .collect();
+    // Source 1's ear Gaussians, by index: even ones the half-grey mix, odd
+    // ones plain skin; source 0 is fair with brown hair.
+    for f in 0..2 {
+        let set = &mut db.sources[f].gaussians;
+        for i in 0..set.len() {
+            let rgb = match (f, regions[set.binding[i] as usize]) {
+                (0, Region::Hair) => brown,
+                (_, Region::Hair) => grey,
+                (0, _) => fair,
+                (_, Region::LeftEar | Region::RightEar) if i % 2 == 0 => half_grey,
+                _ => dark,
+            };
+            paint_one(set, i, rgb);
+        }
+    }
+    let source = db.sources[1].gaussians.clone();
+    let c = with_group_of_source_1(db, "ears");
+    // [mix, skin] × [away, beside]: the mean linear luminance of each.
+    let mut seen: [[Vec<f32>; 2]; 2] = Default::default();
+    for region in [Region::LeftEar, Region::RightEar] {
+        for (i, rgb) in own_colours(&c, &source, &regions, region) {
+            let beside = beside_hair[source.binding[i] as usize];
+            seen[i % 2][usize::from(beside)].push(luma(rgb));
+        }
+    }
+    assert!(
+        seen.iter().flatten().all(|v| v.len() > 10),
+        "too few Gaussians: {:?}",
+        seen.each_ref().map(|k| k.each_ref().map(Vec::len))
+    );
+    let [[mix_away, mix_beside], [skin_away, skin_beside]] =
+        seen.map(|kind| kind.map(|v| v.iter().sum::<f32>() / v.len() as f32));
+    for (place, skin) in [("away from", skin_away), ("beside", skin_beside)] {
+        assert!(
+            (skin - luma(fair)).abs() < 0.03 * luma(fair),
+            "skin {place} the hair at {skin}"
+        );
+    }
+    let whole = luma(half_grey) * luma(fair) / luma(dark);
+    assert!(
+        (mix_away - whole).abs() < 0.1 * whole,
+        "the mix away from the hair at {mix_away}, the whole transfer {whole}"
+    );
+    assert!(
+        mix_beside < luma(half_grey) + 0.5 * (whole - luma(half_grey)),
+        "the mix beside the hair at {mix_beside}: unmoved {}, the whole transfer {whole}",
+        luma(half_grey)
+    );
+}
+
 /// Stubble on a dark-haired source's neck keeps its Gaussians where the
 /// base's skin takes over (method §7.11, `dark_features::holds_stubble`):
 /// with the neck in the base's shape, plain skin gives way to the base's,

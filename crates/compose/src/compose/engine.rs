@@ -27,7 +27,7 @@ use super::recipe::{
 use super::reshape::{ReshapeOptions, ReshapeSource, ReshapedSources, Reshaping, SourceAnchors};
 use super::seam_colours::{SeamColours, SourceTables, VertexColours};
 use super::seams::{limit_reach, SeamNeighbours};
-use super::selection::{Csr, SelectionTables};
+use super::selection::{sharing_a_corner, Csr, SelectionTables};
 use super::shading::{vertex_exposures, BakedLight, Exposure};
 use super::smoothing::{own_share, BorderTables};
 use super::source_colours::SourceColours;
@@ -56,6 +56,9 @@ pub struct Engine {
     skin_gains: Mutex<HashMap<GainKey, SharedGains>>,
     /// Vertex → the triangles around it.
     vertex_triangles: Csr,
+    /// Per triangle: whether it shares a corner with a hair triangle (where
+    /// the semantic correction's likeness may take the hairline's test).
+    beside_hair: Vec<bool>,
     /// `[source][membership]` → where each Gaussian sits on the triangle it
     /// counts for (barycentric), computed on first use by colour seams.
     placements: Vec<[OnceLock<Vec<[f32; 3]>>; 2]>,
@@ -227,6 +230,13 @@ impl Engine {
             .collect();
         let colours = SourceColours::new(&db, &tables, &neutrals, &parent_placements);
         let vertex_triangles = Csr::vertex_triangles(db.model.vertex_count(), &db.model.triangles);
+        let hair: Vec<bool> = db
+            .model
+            .triangle_regions
+            .iter()
+            .map(|&r| r == Region::Hair)
+            .collect();
+        let beside_hair = sharing_a_corner(&db.model.triangles, &vertex_triangles, &hair);
         let placements = parent_placements
             .into_iter()
             .map(|parent| {
@@ -247,6 +257,7 @@ impl Engine {
             colours,
             skin_gains: Mutex::new(HashMap::new()),
             vertex_triangles,
+            beside_hair,
             placements,
             seam_neighbours: OnceLock::new(),
             colour_weights: (0..source_count).map(|_| OnceLock::new()).collect(),

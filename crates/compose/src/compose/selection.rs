@@ -58,6 +58,28 @@ impl Csr {
     }
 }
 
+/// Per triangle of `triangles`: whether it shares a corner with a triangle
+/// `marked` says (itself included); `vertex_triangles` is
+/// [`Csr::vertex_triangles`] of the same mesh. A corner past the table or a
+/// triangle past `marked` counts as unmarked.
+pub fn sharing_a_corner(
+    triangles: &[[u32; 3]],
+    vertex_triangles: &Csr,
+    marked: &[bool],
+) -> Vec<bool> {
+    let touches = |v: u32| {
+        (v as usize + 1 < vertex_triangles.start.len())
+            && vertex_triangles
+                .row(v as usize)
+                .iter()
+                .any(|&u| marked.get(u as usize).copied().unwrap_or(false))
+    };
+    triangles
+        .iter()
+        .map(|corners| corners.iter().any(|&v| touches(v)))
+        .collect()
+}
+
 /// Per-source lookup tables, for each way of counting a Gaussian for a region.
 #[derive(Clone, Debug)]
 pub struct SelectionTables {
@@ -134,7 +156,29 @@ impl SelectionTables {
 
 #[cfg(test)]
 mod tests {
-    use super::Csr;
+    use super::{sharing_a_corner, Csr};
+
+    #[test]
+    fn triangles_sharing_a_corner_with_a_marked_one_include_it_and_its_fan() {
+        // A strip 0-1-2-3 of triangles, each sharing an edge with the next,
+        // and a fifth triangle off on its own; the table knows those five,
+        // and a sixth asked about has a corner past it.
+        let triangles = [
+            [0, 1, 2],
+            [1, 2, 3],
+            [2, 3, 4],
+            [3, 4, 5],
+            [6, 7, 8],
+            [0, 9, 99],
+        ];
+        let table = Csr::vertex_triangles(10, &triangles[..5]);
+        let marked = [true, false, false, false, false, false];
+        assert_eq!(
+            sharing_a_corner(&triangles, &table, &marked),
+            [true, true, true, false, false, true]
+        );
+        assert_eq!(sharing_a_corner(&triangles, &table, &[]), [false; 6]);
+    }
 
     #[test]
     fn csr_groups_items_by_row_in_order() {

@@ -181,6 +181,58 @@ pub fn semantic_skin_gain(rgb: Vec3, region: Region, from: &SkinStats, to: &Skin
     }
 }
 
+/// Where a Gaussian counts, as the semantic correction reads it: its region,
+/// and whether that triangle shares a corner with one of the hair region's
+/// (where its colour may mix skin with hair).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SkinPlace {
+    /// The region it counts for.
+    pub region: Region,
+    /// Whether its triangle shares a corner with a hair triangle.
+    pub beside_hair: bool,
+}
+
+/// Regions whose Gaussians along the hair's edge take the hairline's test
+/// as well as their own likeness ([`semantic_skin_likeness_at`]): the ears
+/// and the face, which meet the hair over the ears and at the forehead. A
+/// Gaussian of theirs at the hair's edge is part hair, their lenient
+/// likeness reads it as skin, and the whole transfer to a lighter tone then
+/// pales the hair beside it (method §7.7, session 52). Over a whole ear the
+/// same test misreads a dark source's shaded ear skin as its black hair; the
+/// neck beside the hair measured the same with it as without.
+pub fn capped_beside_hair(region: Region) -> bool {
+    matches!(region, Region::LeftEar | Region::RightEar | Region::Skin)
+}
+
+/// How surely a Gaussian at `place` with display colour `rgb` is skin: as
+/// [`semantic_skin_likeness`], but beside the hair in
+/// [`capped_beside_hair`]'s regions at most the hairline's
+/// ([`hairline_skin_likeness`]): shade keeps the skin's chromaticity, hair
+/// mixed in moves it towards the hair's. `None` for a colour with no CIELAB
+/// value (NaN).
+pub fn semantic_skin_likeness_at(rgb: Vec3, place: SkinPlace, stats: &SkinStats) -> Option<f32> {
+    let own = semantic_skin_likeness(rgb, place.region, stats)?;
+    if !(place.beside_hair && capped_beside_hair(place.region)) {
+        return Some(own);
+    }
+    let hairline = hairline_skin_likeness(rgb, srgb_to_lab(rgb), stats);
+    Some(own.min(hairline))
+}
+
+/// The semantic correction's gain for a Gaussian at `place` with display
+/// colour `rgb` ([`semantic_skin_gain`] by [`semantic_skin_likeness_at`]).
+pub fn semantic_skin_gain_at(
+    rgb: Vec3,
+    place: SkinPlace,
+    from: &SkinStats,
+    to: &SkinStats,
+) -> Vec3 {
+    match semantic_skin_likeness_at(rgb, place, from) {
+        Some(k) => transfer_gain(rgb, srgb_to_lab(rgb), k, from, to),
+        None => Vec3::ONE,
+    }
+}
+
 /// [`semantic_skin_gain`] taken a share `share` (0 to 1) of the way in
 /// linear light, c + share·(c' − c) for the colour c and its whole transfer
 /// c': the part of the colour's brightness that is skin where a dark feature
@@ -703,6 +755,81 @@ mod tests {
                 assert!(gain.is_finite(), "{hair_of:?} {rgb}: {gain}");
                 assert_eq!(gain, strict, "{hair_of:?} {rgb}");
             }
+        }
+    }
+
+    /// nuru's case (every-group, session 52): dark skin under grey hair,
+    /// moved to a light skin. An ear or face Gaussian whose triangle borders
+    /// the hair and whose colour is part grey hair brightens less than the
+    /// ears' lenient likeness would have it; skin in shade there still takes
+    /// the whole transfer, and away from the hair, or in a region not capped,
+    /// nothing changes.
+    #[test]
+    fn beside_the_hair_an_ear_gaussian_part_hair_is_moved_less_than_skin() {
+        let dark = Vec3::new(0.42, 0.28, 0.2);
+        let light = Vec3::new(0.82, 0.64, 0.5);
+        let grey = Vec3::new(0.45, 0.44, 0.43);
+        let from = stats(dark).beside_hair(chromaticity(srgb_to_linear(grey)));
+        let to = stats(light);
+        let at = |region, beside_hair| SkinPlace {
+            region,
+            beside_hair,
+        };
+        let edge = linear_to_srgb(srgb_to_linear(dark).lerp(srgb_to_linear(grey), 0.5));
+        for region in [Region::LeftEar, Region::RightEar, Region::Skin] {
+            let lenient = semantic_skin_likeness_at(edge, at(region, false), &from).unwrap();
+            let beside = semantic_skin_likeness_at(edge, at(region, true), &from).unwrap();
+            assert!(lenient > 0.9, "{region:?}: {lenient}");
+            assert!(
+                beside < 0.5 * lenient,
+                "{region:?}: {beside} against {lenient}"
+            );
+            let (far, near) = (
+                semantic_skin_gain_at(edge, at(region, false), &from, &to),
+                semantic_skin_gain_at(edge, at(region, true), &from, &to),
+            );
+            assert!(
+                near.max_element() < far.max_element(),
+                "{region:?}: {near} {far}"
+            );
+            assert_eq!(far, semantic_skin_gain(edge, region, &from, &to));
+            // Skin in shade keeps the skin's chromaticity: the whole move.
+            for shade in [1.0, 0.6] {
+                let skin = dark * shade;
+                assert_eq!(
+                    semantic_skin_likeness_at(skin, at(region, true), &from),
+                    semantic_skin_likeness(skin, region, &from),
+                    "{region:?} {shade}"
+                );
+            }
+        }
+        // The nose is not capped, beside the hair or not.
+        assert_eq!(
+            semantic_skin_gain_at(edge, at(Region::Nose, true), &from, &to),
+            semantic_skin_gain(edge, Region::Nose, &from, &to)
+        );
+        // Without the hair's colour, or for broken colours: no worse than
+        // the region's own likeness, and finite.
+        for rgb in [edge, Vec3::ZERO, Vec3::splat(1e-4), Vec3::ONE] {
+            let own = semantic_skin_likeness(rgb, Region::LeftEar, &stats(dark)).unwrap();
+            let got = semantic_skin_likeness_at(rgb, at(Region::LeftEar, true), &stats(dark));
+            assert!(
+                got.is_some_and(|k| k <= own && k.is_finite()),
+                "{rgb}: {got:?}"
+            );
+            let gain = semantic_skin_gain_at(rgb, at(Region::LeftEar, true), &from, &to);
+            assert!(gain.is_finite(), "{rgb}: {gain}");
+        }
+        for rgb in [Vec3::NAN, Vec3::INFINITY, Vec3::NEG_INFINITY] {
+            let own = semantic_skin_likeness(rgb, Region::Skin, &from);
+            let got = semantic_skin_likeness_at(rgb, at(Region::Skin, true), &from);
+            assert_eq!(got.is_none(), own.is_none(), "{rgb}");
+            assert!(
+                got.zip(own).is_none_or(|(g, o)| g <= o),
+                "{rgb}: {got:?} {own:?}"
+            );
+            let gain = semantic_skin_gain_at(rgb, at(Region::Skin, true), &from, &to);
+            assert!(gain.is_finite(), "{rgb}: {gain}");
         }
     }
 

@@ -16,8 +16,9 @@ use super::recipe::Membership;
 use super::selection::SelectionTables;
 use super::shading::{source_light, vertex_exposures, BakedLight, Exposure};
 use super::skin_transfer::{
-    gain_by_channel_share, semantic_skin_gain_shared, semantic_skin_likeness, skin_stats,
-    whole_skin_gain_shared, SkinStats, SKIN_REFERENCE_REGIONS,
+    gain_by_channel_share, semantic_skin_gain_at, semantic_skin_gain_shared,
+    semantic_skin_likeness, skin_stats, whole_skin_gain_shared, SkinPlace, SkinStats,
+    SKIN_REFERENCE_REGIONS,
 };
 use crate::avatar::database::Database;
 use crate::model::regions::Region;
@@ -179,7 +180,7 @@ impl SourceColours {
     }
 
     /// The semantic skin transfer's gain (method §7.7) for Gaussian `i` of
-    /// source `f`, counted in `region`, from `f`'s skin `from` to the base's
+    /// source `f`, counted at `place`, from `f`'s skin `from` to the base's
     /// `to`; `brightens` says whether that transfer brightens and `clothing`
     /// is the mean linear colour of `f`'s clothing in the region, if it
     /// shows any. The first rule that applies decides:
@@ -191,18 +192,20 @@ impl SourceColours {
     ///   skin's share per channel where the hair's hue tells it from skin,
     ///   else by its share of brightness — blended by the likeness with the
     ///   likeness's own transfer (`dark_features::darkening_gain`);
-    /// - otherwise by the region's likeness, taken (brightening, round the
-    ///   eyes) the skin's share of brightness of the way where it can be
-    ///   told.
+    /// - otherwise by the region's likeness (beside the hair, at most the
+    ///   hairline's in the ears: `skin_transfer::semantic_skin_likeness_at`),
+    ///   taken (brightening, round the eyes) the skin's share of brightness
+    ///   of the way where it can be told.
     pub fn semantic_gain(
         &self,
         f: usize,
         i: usize,
-        region: Region,
+        place: SkinPlace,
         (from, to): (&SkinStats, &SkinStats),
         brightens: bool,
         clothing: Option<Vec3>,
     ) -> Vec3 {
+        let region = place.region;
         let rgb = self.seen[f][i];
         if let Some(share) = clothing.and_then(|c| self.skin_share_beside(f, i, c)) {
             return whole_skin_gain_shared(rgb, from, to, share);
@@ -232,7 +235,10 @@ impl SourceColours {
                 );
             }
         }
-        let share = if brightens && dark_features::holds_dark_features(region) {
+        if !dark_features::holds_dark_features(region) {
+            return semantic_skin_gain_at(rgb, place, from, to);
+        }
+        let share = if brightens {
             self.tellable_skin_share(f, i).unwrap_or(1.0)
         } else {
             1.0

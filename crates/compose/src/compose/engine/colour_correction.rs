@@ -13,7 +13,9 @@ use crate::compose::colour::thesis_gain;
 use crate::compose::correction::{Correction, SharedGains};
 use crate::compose::dark_features;
 use crate::compose::recipe::{ColourCorrection, Membership, ResolvedRecipe};
-use crate::compose::skin_transfer::{semantic_skin_likeness, skin_transfer_gain, SkinStats};
+use crate::compose::skin_transfer::{
+    semantic_skin_likeness, skin_transfer_gain, SkinPlace, SkinStats,
+};
 use crate::model::regions::Region;
 
 impl Engine {
@@ -51,8 +53,12 @@ impl Engine {
                     let t = self.tables.counted_triangles(m, source)[i];
                     let region = regions[t as usize];
                     let clothing = clothing.as_ref().and_then(|c| c[region.index()]);
+                    let place = SkinPlace {
+                        region,
+                        beside_hair: self.beside_hair[t as usize],
+                    };
                     self.colours
-                        .semantic_gain(source, i, region, (&from, &to), brightens, clothing)
+                        .semantic_gain(source, i, place, (&from, &to), brightens, clothing)
                 }
                 None => skin_transfer_gain(colours[i], &from, &to),
             })
