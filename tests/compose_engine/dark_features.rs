@@ -534,17 +534,54 @@ fn shade_on_a_dark_sources_hairline_takes_a_lighter_bases_tone_and_its_hair_stay
     );
 }
 
-/// A dark source's ears under grey hair, moved to a fair base (method §7.7,
-/// session 52): an ear Gaussian half skin and half hair (in linear light)
-/// whose triangle shares a corner with a hair triangle brightens less than
-/// the same mix away from the hair, which the ears' lenient likeness reads
-/// as skin and moves whole; plain skin beside the hair takes the base's
-/// tone as everywhere else.
+/// A dark source's ears or face under grey hair, moved to a fair base
+/// (method §7.7, session 52): a Gaussian of theirs half skin and half hair
+/// (in linear light) whose triangle shares a corner with a hair triangle
+/// brightens less than the same mix away from the hair, which the regions'
+/// lenient likeness reads as skin and moves whole; plain skin beside the
+/// hair takes the base's tone as everywhere else.
 #[test]
-fn an_ear_gaussian_part_hair_at_the_hairs_edge_is_paled_less_than_one_away_from_it() {
-    let (fair, dark) = (FAIR, DARK);
-    let (brown, grey) = (Vec3::new(0.12, 0.07, 0.04), Vec3::new(0.45, 0.44, 0.43));
-    let half_grey = to_display(0.5 * to_linear(dark) + 0.5 * to_linear(grey));
+fn ear_and_face_gaussians_part_hair_at_the_hairs_edge_are_paled_less_than_away_from_it() {
+    // Every second ear Gaussian mixed; every eighth of the face's, where the
+    // source's skin tone is read and must stay its own.
+    for (group, swapped, every) in [
+        ("ears", &[Region::LeftEar, Region::RightEar][..], 2),
+        ("face", &[Region::Skin][..], 8),
+    ] {
+        let [[mix_away, mix_beside], [skin_away, skin_beside]] =
+            part_hair_swapped(group, swapped, every);
+        let half_grey = to_display(0.5 * to_linear(DARK) + 0.5 * to_linear(GREY));
+        for (place, skin) in [("away from", skin_away), ("beside", skin_beside)] {
+            assert!(
+                (skin - luma(FAIR)).abs() < 0.03 * luma(FAIR),
+                "{group}: skin {place} the hair at {skin}"
+            );
+        }
+        let whole = luma(half_grey) * luma(FAIR) / luma(DARK);
+        assert!(
+            (mix_away - whole).abs() < 0.1 * whole,
+            "{group}: the mix away from the hair at {mix_away}, the whole transfer {whole}"
+        );
+        assert!(
+            mix_beside < luma(half_grey) + 0.5 * (whole - luma(half_grey)),
+            "{group}: the mix beside the hair at {mix_beside}: unmoved {}, the whole transfer {whole}",
+            luma(half_grey)
+        );
+    }
+}
+
+/// A grey hair, of no skin's hue.
+const GREY: Vec3 = Vec3::new(0.45, 0.44, 0.43);
+
+/// Source 1 of the small database dark with grey hair, one in `every` of its
+/// `swapped` regions' Gaussians half skin and half hair (in linear light),
+/// the rest skin; source 0 fair with brown hair. Composes source 1's `group`
+/// on source 0 and returns the mean linear luminance of source 1's Gaussians
+/// of those regions, as [[mix, skin] × [away from, touching] the hair]: a
+/// triangle touches the hair when it shares a corner with a hair triangle.
+fn part_hair_swapped(group: &str, swapped: &[Region], every: usize) -> [[f32; 2]; 2] {
+    let brown = Vec3::new(0.12, 0.07, 0.04);
+    let half_grey = to_display(0.5 * to_linear(DARK) + 0.5 * to_linear(GREY));
     let mut db = small_db();
     let model = &db.model;
     let regions = model.triangle_regions.clone();
@@ -555,59 +592,40 @@ fn an_ear_gaussian_part_hair_at_the_hairs_edge_is_paled_less_than_one_away_from_
         .filter(|(_, &r)| r == Region::Hair)
         .flat_map(|(t, _)| *t)
         .collect();
-    let beside_hair: Vec<bool> = model
+    let touches_hair: Vec<bool> = model
         .triangles
         .iter()
         .map(|t| t.iter().any(|v| corners_of_hair.contains(v)))
         .collect();
-    // Source 1's ear Gaussians, by index: even ones the half-grey mix, odd
-    // ones plain skin; source 0 is fair with brown hair.
     for f in 0..2 {
         let set = &mut db.sources[f].gaussians;
         for i in 0..set.len() {
-            let rgb = match (f, regions[set.binding[i] as usize]) {
+            let region = regions[set.binding[i] as usize];
+            let rgb = match (f, region) {
                 (0, Region::Hair) => brown,
-                (_, Region::Hair) => grey,
-                (0, _) => fair,
-                (_, Region::LeftEar | Region::RightEar) if i % 2 == 0 => half_grey,
-                _ => dark,
+                (_, Region::Hair) => GREY,
+                (0, _) => FAIR,
+                (_, r) if swapped.contains(&r) && i % every == 0 => half_grey,
+                _ => DARK,
             };
             paint_one(set, i, rgb);
         }
     }
     let source = db.sources[1].gaussians.clone();
-    let c = with_group_of_source_1(db, "ears");
-    // [mix, skin] × [away, beside]: the mean linear luminance of each.
+    let c = with_group_of_source_1(db, group);
     let mut seen: [[Vec<f32>; 2]; 2] = Default::default();
-    for region in [Region::LeftEar, Region::RightEar] {
+    for &region in swapped {
         for (i, rgb) in own_colours(&c, &source, &regions, region) {
-            let beside = beside_hair[source.binding[i] as usize];
-            seen[i % 2][usize::from(beside)].push(luma(rgb));
+            let touching = touches_hair[source.binding[i] as usize];
+            seen[usize::from(i % every != 0)][usize::from(touching)].push(luma(rgb));
         }
     }
     assert!(
         seen.iter().flatten().all(|v| v.len() > 10),
-        "too few Gaussians: {:?}",
+        "{group}: too few Gaussians: {:?}",
         seen.each_ref().map(|k| k.each_ref().map(Vec::len))
     );
-    let [[mix_away, mix_beside], [skin_away, skin_beside]] =
-        seen.map(|kind| kind.map(|v| v.iter().sum::<f32>() / v.len() as f32));
-    for (place, skin) in [("away from", skin_away), ("beside", skin_beside)] {
-        assert!(
-            (skin - luma(fair)).abs() < 0.03 * luma(fair),
-            "skin {place} the hair at {skin}"
-        );
-    }
-    let whole = luma(half_grey) * luma(fair) / luma(dark);
-    assert!(
-        (mix_away - whole).abs() < 0.1 * whole,
-        "the mix away from the hair at {mix_away}, the whole transfer {whole}"
-    );
-    assert!(
-        mix_beside < luma(half_grey) + 0.5 * (whole - luma(half_grey)),
-        "the mix beside the hair at {mix_beside}: unmoved {}, the whole transfer {whole}",
-        luma(half_grey)
-    );
+    seen.map(|kind| kind.map(|v| v.iter().sum::<f32>() / v.len() as f32))
 }
 
 /// Stubble on a dark-haired source's neck keeps its Gaussians where the

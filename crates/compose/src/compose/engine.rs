@@ -58,7 +58,7 @@ pub struct Engine {
     vertex_triangles: Csr,
     /// Per triangle: whether it shares a corner with a hair triangle (where
     /// the semantic correction's likeness may take the hairline's test).
-    beside_hair: Vec<bool>,
+    touches_hair: Vec<bool>,
     /// `[source][membership]` → where each Gaussian sits on the triangle it
     /// counts for (barycentric), computed on first use by colour seams.
     placements: Vec<[OnceLock<Vec<[f32; 3]>>; 2]>,
@@ -236,7 +236,7 @@ impl Engine {
             .iter()
             .map(|&r| r == Region::Hair)
             .collect();
-        let beside_hair = sharing_a_corner(&db.model.triangles, &vertex_triangles, &hair);
+        let touches_hair = sharing_a_corner(&db.model.triangles, &vertex_triangles, &hair);
         let placements = parent_placements
             .into_iter()
             .map(|parent| {
@@ -257,7 +257,7 @@ impl Engine {
             colours,
             skin_gains: Mutex::new(HashMap::new()),
             vertex_triangles,
-            beside_hair,
+            touches_hair,
             placements,
             seam_neighbours: OnceLock::new(),
             colour_weights: (0..source_count).map(|_| OnceLock::new()).collect(),

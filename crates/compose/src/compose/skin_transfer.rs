@@ -174,11 +174,11 @@ pub fn strict_skin_likeness(lab: Vec3, stats: &SkinStats) -> f32 {
 /// colour `rgb`: the skin transfer from `from` to `to` where it is skin,
 /// nothing where it is not (see [`semantic_skin_likeness`]).
 pub fn semantic_skin_gain(rgb: Vec3, region: Region, from: &SkinStats, to: &SkinStats) -> Vec3 {
-    let lab = srgb_to_lab(rgb);
-    match semantic_skin_likeness(rgb, region, from) {
-        Some(k) => transfer_gain(rgb, lab, k, from, to),
-        None => Vec3::ONE,
-    }
+    let away = SkinPlace {
+        region,
+        touches_hair: false,
+    };
+    semantic_skin_gain_at(rgb, away, from, to)
 }
 
 /// Where a Gaussian counts, as the semantic correction reads it: its region,
@@ -189,15 +189,16 @@ pub struct SkinPlace {
     /// The region it counts for.
     pub region: Region,
     /// Whether its triangle shares a corner with a hair triangle.
-    pub beside_hair: bool,
+    pub touches_hair: bool,
 }
 
 /// Regions whose Gaussians along the hair's edge take the hairline's test
 /// as well as their own likeness ([`semantic_skin_likeness_at`]): the ears
 /// and the face, which meet the hair over the ears and at the forehead. A
 /// Gaussian of theirs at the hair's edge is part hair, their lenient
-/// likeness reads it as skin, and the whole transfer to a lighter tone then
-/// pales the hair beside it (method §7.7, session 52). Over a whole ear the
+/// likeness reads it as skin, and the whole transfer moves the hair with the
+/// skin — to a lighter tone it pales the hair beside it (method §7.7,
+/// session 52); to a darker one it darkens it. Over a whole ear the
 /// same test misreads a dark source's shaded ear skin as its black hair; the
 /// neck beside the hair measured the same with it as without.
 pub fn capped_beside_hair(region: Region) -> bool {
@@ -205,18 +206,23 @@ pub fn capped_beside_hair(region: Region) -> bool {
 }
 
 /// How surely a Gaussian at `place` with display colour `rgb` is skin: as
-/// [`semantic_skin_likeness`], but beside the hair in
+/// [`semantic_skin_likeness`], but touching the hair in
 /// [`capped_beside_hair`]'s regions at most the hairline's
-/// ([`hairline_skin_likeness`]): shade keeps the skin's chromaticity, hair
-/// mixed in moves it towards the hair's. `None` for a colour with no CIELAB
-/// value (NaN).
+/// ([`hairline_skin_likeness`]) where chromaticity tells the source's skin
+/// from its hair: shade keeps the skin's chromaticity, hair mixed in moves
+/// it towards the hair's. Where chromaticity cannot tell them (no hair
+/// colour, hair of the skin's hue, a colour too dark) the region's own
+/// likeness stands, as away from the hair. `None` for a colour with no
+/// CIELAB value.
 pub fn semantic_skin_likeness_at(rgb: Vec3, place: SkinPlace, stats: &SkinStats) -> Option<f32> {
     let own = semantic_skin_likeness(rgb, place.region, stats)?;
-    if !(place.beside_hair && capped_beside_hair(place.region)) {
+    if !(place.touches_hair && capped_beside_hair(place.region)) {
         return Some(own);
     }
-    let hairline = hairline_skin_likeness(rgb, srgb_to_lab(rgb), stats);
-    Some(own.min(hairline))
+    Some(match skin_side_of_hairline(rgb, stats) {
+        Some(side) => own.min(strict_skin_likeness(srgb_to_lab(rgb), stats).max(side)),
+        None => own,
+    })
 }
 
 /// The semantic correction's gain for a Gaussian at `place` with display
@@ -347,19 +353,30 @@ pub const HUE_CHROMA: f32 = 4.0;
 /// is the skin's own hue, and then the strict likeness alone decides.
 pub fn hairline_skin_likeness(rgb: Vec3, lab: Vec3, stats: &SkinStats) -> f32 {
     let strict = strict_skin_likeness(lab, stats);
-    let skin = chromaticity(srgb_to_linear(lab_to_srgb(stats.tone)));
-    let colour = chromaticity(srgb_to_linear(rgb.clamp(Vec3::ZERO, Vec3::ONE)));
-    let (Some(hair), Some(skin), Some(colour)) = (stats.hair, skin, colour) else {
-        return strict;
-    };
+    match skin_side_of_hairline(rgb, stats) {
+        Some(side) => strict.max(side),
+        None => strict,
+    }
+}
+
+/// How surely a colour lies on the skin's side of the line from the
+/// source's hair to its skin tone in chromaticity (1 on the skin's side, 0 on
+/// the hair's, soft over [`HAIRLINE_MARGIN`]); `None` where chromaticity
+/// cannot tell them: no hair colour, hair of the skin's own hue (within
+/// [`HAIR_APART`]), a colour too dark to have a chromaticity, or broken
+/// values.
+fn skin_side_of_hairline(rgb: Vec3, stats: &SkinStats) -> Option<f32> {
+    let skin = chromaticity(srgb_to_linear(lab_to_srgb(stats.tone)))?;
+    let colour = chromaticity(srgb_to_linear(rgb.clamp(Vec3::ZERO, Vec3::ONE)))?;
+    let hair = stats.hair?;
     let apart = skin.distance(hair);
     // NaN (a broken hair colour) fails this too.
     if apart.is_nan() || apart <= HAIR_APART {
-        return strict;
+        return None;
     }
     // +1 at the skin's chromaticity, −1 at the hair's, 0 half way.
     let side = (colour.distance(hair) - colour.distance(skin)) / apart;
-    strict.max(smoothstep(-HAIRLINE_MARGIN, HAIRLINE_MARGIN, side))
+    Some(smoothstep(-HAIRLINE_MARGIN, HAIRLINE_MARGIN, side))
 }
 
 /// How far apart (chromaticity distance) a source's skin and hair must be for
@@ -759,11 +776,12 @@ mod tests {
     }
 
     /// nuru's case (every-group, session 52): dark skin under grey hair,
-    /// moved to a light skin. An ear or face Gaussian whose triangle borders
+    /// moved to a light skin. An ear or face Gaussian whose triangle touches
     /// the hair and whose colour is part grey hair brightens less than the
-    /// ears' lenient likeness would have it; skin in shade there still takes
-    /// the whole transfer, and away from the hair, or in a region not capped,
-    /// nothing changes.
+    /// region's lenient likeness would have it; skin in shade there still
+    /// takes the whole transfer, and away from the hair, in a region not
+    /// capped, or where chromaticity cannot tell skin from hair, nothing
+    /// changes.
     #[test]
     fn beside_the_hair_an_ear_gaussian_part_hair_is_moved_less_than_skin() {
         let dark = Vec3::new(0.42, 0.28, 0.2);
@@ -771,9 +789,9 @@ mod tests {
         let grey = Vec3::new(0.45, 0.44, 0.43);
         let from = stats(dark).beside_hair(chromaticity(srgb_to_linear(grey)));
         let to = stats(light);
-        let at = |region, beside_hair| SkinPlace {
+        let at = |region, touches_hair| SkinPlace {
             region,
-            beside_hair,
+            touches_hair,
         };
         let edge = linear_to_srgb(srgb_to_linear(dark).lerp(srgb_to_linear(grey), 0.5));
         for region in [Region::LeftEar, Region::RightEar, Region::Skin] {
@@ -808,25 +826,30 @@ mod tests {
             semantic_skin_gain_at(edge, at(Region::Nose, true), &from, &to),
             semantic_skin_gain(edge, Region::Nose, &from, &to)
         );
-        // Without the hair's colour, or for broken colours: no worse than
-        // the region's own likeness, and finite.
-        for rgb in [edge, Vec3::ZERO, Vec3::splat(1e-4), Vec3::ONE] {
-            let own = semantic_skin_likeness(rgb, Region::LeftEar, &stats(dark)).unwrap();
-            let got = semantic_skin_likeness_at(rgb, at(Region::LeftEar, true), &stats(dark));
-            assert!(
-                got.is_some_and(|k| k <= own && k.is_finite()),
-                "{rgb}: {got:?}"
-            );
-            let gain = semantic_skin_gain_at(rgb, at(Region::LeftEar, true), &from, &to);
-            assert!(gain.is_finite(), "{rgb}: {gain}");
+        // Where chromaticity cannot tell skin from hair — no hair colour,
+        // hair of the skin's own hue, a colour too dark to have one — the
+        // region's own likeness stands beside the hair too (the strict one
+        // would keep part of shaded skin's tone).
+        let of_skin_hue = stats(dark).beside_hair(chromaticity(srgb_to_linear(dark) * 0.5));
+        for stats in [stats(dark), of_skin_hue] {
+            for rgb in [edge, dark * 0.45, Vec3::ZERO, Vec3::splat(1e-4), Vec3::ONE] {
+                assert_eq!(
+                    semantic_skin_likeness_at(rgb, at(Region::LeftEar, true), &stats),
+                    semantic_skin_likeness(rgb, Region::LeftEar, &stats),
+                    "{rgb}"
+                );
+            }
         }
+        assert_eq!(
+            semantic_skin_likeness_at(Vec3::ZERO, at(Region::Skin, true), &from),
+            semantic_skin_likeness(Vec3::ZERO, Region::Skin, &from)
+        );
+        // Broken colours: as the region's own reading, and a finite gain.
         for rgb in [Vec3::NAN, Vec3::INFINITY, Vec3::NEG_INFINITY] {
-            let own = semantic_skin_likeness(rgb, Region::Skin, &from);
-            let got = semantic_skin_likeness_at(rgb, at(Region::Skin, true), &from);
-            assert_eq!(got.is_none(), own.is_none(), "{rgb}");
-            assert!(
-                got.zip(own).is_none_or(|(g, o)| g <= o),
-                "{rgb}: {got:?} {own:?}"
+            assert_eq!(
+                semantic_skin_likeness_at(rgb, at(Region::Skin, true), &from),
+                semantic_skin_likeness(rgb, Region::Skin, &from),
+                "{rgb}"
             );
             let gain = semantic_skin_gain_at(rgb, at(Region::Skin, true), &from, &to);
             assert!(gain.is_finite(), "{rgb}: {gain}");

@@ -192,8 +192,9 @@ impl SourceColours {
     ///   skin's share per channel where the hair's hue tells it from skin,
     ///   else by its share of brightness — blended by the likeness with the
     ///   likeness's own transfer (`dark_features::darkening_gain`);
-    /// - otherwise by the region's likeness (beside the hair, at most the
-    ///   hairline's in the ears: `skin_transfer::semantic_skin_likeness_at`),
+    /// - otherwise by the region's likeness (touching the hair, at most the
+    ///   hairline's in the ears and the face:
+    ///   `skin_transfer::semantic_skin_likeness_at`),
     ///   taken (brightening, round the eyes) the skin's share of brightness
     ///   of the way where it can be told.
     pub fn semantic_gain(

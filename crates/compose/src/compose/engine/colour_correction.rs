@@ -55,7 +55,7 @@ impl Engine {
                     let clothing = clothing.as_ref().and_then(|c| c[region.index()]);
                     let place = SkinPlace {
                         region,
-                        beside_hair: self.beside_hair[t as usize],
+                        touches_hair: self.touches_hair[t as usize],
                     };
                     self.colours
                         .semantic_gain(source, i, place, (&from, &to), brightens, clothing)
