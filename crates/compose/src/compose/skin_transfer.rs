@@ -219,10 +219,7 @@ pub fn semantic_skin_likeness_at(rgb: Vec3, place: SkinPlace, stats: &SkinStats)
     if !(place.touches_hair && capped_beside_hair(place.region)) {
         return Some(own);
     }
-    Some(match skin_side_of_hairline(rgb, stats) {
-        Some(side) => own.min(strict_skin_likeness(srgb_to_lab(rgb), stats).max(side)),
-        None => own,
-    })
+    Some(hairline_reading(rgb, srgb_to_lab(rgb), stats).map_or(own, |hairline| own.min(hairline)))
 }
 
 /// The semantic correction's gain for a Gaussian at `place` with display
@@ -352,11 +349,15 @@ pub const HUE_CHROMA: f32 = 4.0;
 /// tone, but leaves its chromaticity; hair differs in chromaticity unless it
 /// is the skin's own hue, and then the strict likeness alone decides.
 pub fn hairline_skin_likeness(rgb: Vec3, lab: Vec3, stats: &SkinStats) -> f32 {
-    let strict = strict_skin_likeness(lab, stats);
-    match skin_side_of_hairline(rgb, stats) {
-        Some(side) => strict.max(side),
-        None => strict,
-    }
+    hairline_reading(rgb, lab, stats).unwrap_or_else(|| strict_skin_likeness(lab, stats))
+}
+
+/// [`hairline_skin_likeness`] where chromaticity tells the source's skin
+/// from its hair (the strict likeness or the skin's side, whichever is
+/// more); `None` where it cannot ([`skin_side_of_hairline`]).
+fn hairline_reading(rgb: Vec3, lab: Vec3, stats: &SkinStats) -> Option<f32> {
+    let side = skin_side_of_hairline(rgb, stats)?;
+    Some(strict_skin_likeness(lab, stats).max(side))
 }
 
 /// How surely a colour lies on the skin's side of the line from the
