@@ -395,6 +395,76 @@ fn a_seam_fit_is_the_fifth_step_and_the_composite_measured() {
 
 /// A composite whose face Gaussians are counted as another source's than
 /// the recipe assigns is caught as leak at the face's interior pixels.
+/// `--arrays DIR` writes one numpy archive a view, from which the reported
+/// figures can be measured again pixel by pixel.
+#[test]
+fn arrays_hold_each_view_s_pictures_and_labels_and_give_the_reported_psnr() {
+    use visage::io::npy::read_npz;
+    let edited = recipe(
+        "arrays.toml",
+        "base = \"ada\"\n[groups.nose]\ngaussians = \"cleo\"\n",
+    );
+    let truth = temp("gt-arrays");
+    capture(
+        &["--recipe", edited.to_str().unwrap(), "--tone", "base"],
+        &truth,
+    );
+    let dir = temp("arrays-out");
+    let report = eval_with(&edited, &truth, &["--arrays", dir.to_str().unwrap()]);
+    let views = report["per_view"].as_array().unwrap();
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), views.len(), "one archive a view: {files:?}");
+    let (mut squared, mut count) = (0.0f64, 0usize);
+    for file in &files {
+        let arrays = read_npz(file).unwrap();
+        let [composite, truth, head, band, region, source] =
+            ["composite", "truth", "head", "band", "region", "source"].map(|n| &arrays[n]);
+        let [h, w] = [composite.shape[0], composite.shape[1]];
+        assert_eq!(composite.shape, [h, w, 3]);
+        assert_eq!(truth.shape, [h, w, 3]);
+        for map in [head, band, region, source] {
+            assert_eq!(map.shape, [h, w]);
+        }
+        for ceiling in ["ceiling_ada", "ceiling_cleo", "ceiling_cleo_truth"] {
+            assert_eq!(arrays[ceiling].shape, [h, w, 3], "{ceiling}");
+        }
+        let names = &arrays["region_names"];
+        assert_eq!(names.shape[0], visage::model::regions::Region::COUNT);
+        for p in 0..w * h {
+            let on_head = head.data[p] == 1.0;
+            assert_eq!(
+                on_head,
+                region.data[p] >= 0.0,
+                "a region exactly on the head"
+            );
+            assert_eq!(
+                on_head,
+                source.data[p] >= 0.0,
+                "a source exactly on the head"
+            );
+            assert!(band.data[p] == 0.0 || on_head, "the band lies on the head");
+            if on_head {
+                count += 1;
+                for c in 0..3 {
+                    squared += (composite.data[3 * p + c] - truth.data[3 * p + c]).powi(2);
+                }
+            }
+        }
+    }
+    let from_arrays = 10.0 * (3.0 * count as f64 / squared).log10();
+    let reported = report["quality"]["psnr_db"].as_f64().unwrap();
+    // The arrays store float32: the same figure to rounding.
+    assert!(
+        (from_arrays - reported).abs() < 1e-3,
+        "{from_arrays} from the arrays against {reported} reported"
+    );
+    assert_eq!(report["quality"]["pixels"].as_u64(), Some(count as u64));
+}
+
 #[test]
 fn a_region_shown_by_another_source_is_leak() {
     use visage::compose::engine::Engine;
@@ -418,6 +488,7 @@ fn a_region_shown_by_another_source_is_leak() {
         border_px: 2,
         picture_views: 0,
         fit: None,
+        arrays: None,
     };
     let honest = decomposition(&engine, &recipe).unwrap();
     let (clean, _) = evaluate_variants(&engine, &recipe, &dataset, &options, &honest).unwrap();

@@ -35,6 +35,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let options = EvalOptions {
         border_px: args.border_px,
         picture_views: if args.picture.is_some() { 3 } else { 0 },
+        arrays: args.arrays.clone(),
         fit: match args.seam_fit {
             Some(0) => None,
             Some(steps) => Some(steps),

@@ -257,6 +257,11 @@ pub struct EvalArgs {
     /// side for a few views, as PNG.
     #[arg(long, value_name = "PNG", requires = "composite")]
     pub(super) picture: Option<PathBuf>,
+    /// With --composite: write each view's composite, ground truth,
+    /// labels (head, band, region, source) and every used source's own
+    /// render and truth into this folder, one numpy .npz a view.
+    #[arg(long, value_name = "DIR", requires = "composite")]
+    pub(super) arrays: Option<PathBuf>,
     /// With --composite: fit the composite's seams with this many steps
     /// (method §7.12) and measure the fitted composite as a fifth step of
     /// the decomposition; 0: no fit. Default: as the recipe's `[post] fit`

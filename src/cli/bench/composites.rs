@@ -288,6 +288,7 @@ pub fn run(args: &CompositesBenchArgs) -> Result<()> {
         let options = EvalOptions {
             border_px: args.border_px,
             picture_views: 0,
+            arrays: None,
             fit: (recipe.post.fit == Fit::Seams && args.seam_fit > 0).then_some(fit),
         };
         fitted_any |= options.fit.is_some();

@@ -13,6 +13,7 @@
 //! holds its types and the sums they are made from), and this one builds
 //! the composites and walks the views.
 
+mod arrays;
 mod pixels;
 mod report;
 mod tally;
@@ -59,6 +60,9 @@ pub struct EvalOptions {
     /// Fit the composite's seams (method §7.12) after the recipe: a fifth
     /// step of the decomposition, "+seam fit", and the composite measured.
     pub fit: Option<SeamFit>,
+    /// A folder to write each view's pictures and labels into, one numpy
+    /// `.npz` a view (`arrays.rs` lists what each holds).
+    pub arrays: Option<std::path::PathBuf>,
 }
 
 /// Checks that `dataset` is the ground truth of `recipe` (its base as it is,
@@ -327,6 +331,9 @@ pub fn evaluate_variants(
     let all: Vec<&View> = views.iter().map(|(_, v)| *v).collect();
     let times = timesteps(dataset, model, &all)?;
 
+    if let Some(dir) = &options.arrays {
+        arrays::prepare(dir)?;
+    }
     let step_names = variants.iter().map(|(name, _)| *name).collect();
     let mut tally = Tally::new(&resolved, &model.triangle_regions, used.clone(), step_names);
     let mut pictures = Vec::new();
@@ -339,11 +346,15 @@ pub fn evaluate_variants(
         let mask = read_mask(view, (w * h) as usize)?;
         let labels = labels(&t.truth, model, camera, &mask, &resolved, options.border_px);
         let mut sums = ViewSums::default();
+        let mut measured = Vec::new();
         for (k, ((_, composite), m)) in variants.iter().zip(&models).enumerate() {
             let pose = posed(engine, composite, t);
             let image = render(m, &pose.frames, camera);
             let ssim = ssim_map(&image, &goal, w as usize, h as usize);
             tally.add_step(k, &labels, &image, &goal, &ssim, &mut sums);
+            if k == last && options.arrays.is_some() {
+                measured.clone_from(&image);
+            }
             if k == last
                 && pictures.len() < options.picture_views
                 && (*split != "train" || pictures.is_empty())
@@ -369,9 +380,27 @@ pub fn evaluate_variants(
             .collect();
         tally.add_leak_and_holes(&labels, &everything, &shares, &mut sums);
         // The ceiling: each used source on its own ground truth.
+        let mut ceilings = Vec::with_capacity(own.len());
         for (k, (source, surface)) in own.iter().zip(&surfaces).enumerate() {
             let drawn = source.draw(surface, model, t, camera, &resolved, options.border_px);
             tally.add_ceiling(k, &drawn, &mut sums);
+            ceilings.push(drawn);
+        }
+        if let Some(dir) = &options.arrays {
+            let stem = format!("{split}_t{}_c{}", view.timestep, view.camera_index);
+            let view_arrays = arrays::ViewArrays {
+                size: camera.size,
+                labels: &labels,
+                composite: &measured,
+                truth: &goal,
+                ceilings: used
+                    .iter()
+                    .map(|&s| trained.sources[s].name.as_str())
+                    .zip(&ceilings)
+                    .collect(),
+                triangle_regions: &model.triangle_regions,
+            };
+            arrays::write(dir, &stem, &view_arrays)?;
         }
         let jaw_deg = (t.pose.joints[Joint::Jaw as usize].length() as f64).to_degrees();
         let figures = ViewQuality {
