@@ -393,13 +393,13 @@ fn a_seam_fit_is_the_fifth_step_and_the_composite_measured() {
     );
 }
 
-/// A composite whose face Gaussians are counted as another source's than
-/// the recipe assigns is caught as leak at the face's interior pixels.
 /// `--arrays DIR` writes one numpy archive a view, from which the reported
-/// figures can be measured again pixel by pixel.
+/// figures can be measured again pixel by pixel: the fitted composite's
+/// PSNR, and the regions and sources each pixel counts for.
 #[test]
 fn arrays_hold_each_view_s_pictures_and_labels_and_give_the_reported_psnr() {
     use visage::io::npy::read_npz;
+    use visage::model::regions::Region;
     let edited = recipe(
         "arrays.toml",
         "base = \"ada\"\n[groups.nose]\ngaussians = \"cleo\"\n",
@@ -410,31 +410,69 @@ fn arrays_hold_each_view_s_pictures_and_labels_and_give_the_reported_psnr() {
         &truth,
     );
     let dir = temp("arrays-out");
-    let report = eval_with(&edited, &truth, &["--arrays", dir.to_str().unwrap()]);
+    let fit = ["--seam-fit", "20", "--seam-fit-size", "48"];
+    let report = eval_with(
+        &edited,
+        &truth,
+        &[&["--arrays", dir.to_str().unwrap()][..], &fit].concat(),
+    );
     let views = report["per_view"].as_array().unwrap();
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().path())
         .collect();
     files.sort();
-    assert_eq!(files.len(), views.len(), "one archive a view: {files:?}");
-    let (mut squared, mut count) = (0.0f64, 0usize);
+    let mut expected: Vec<PathBuf> = views
+        .iter()
+        .map(|v| {
+            let name = format!(
+                "{}_t{}_c{}.npz",
+                v["split"].as_str().unwrap(),
+                v["timestep"],
+                v["camera"]
+            );
+            dir.join(name)
+        })
+        .collect();
+    expected.sort();
+    assert_eq!(files, expected, "one archive a view, named by it");
+    let text = |codes: &visage::io::pickle::NdArray| -> Vec<String> {
+        codes
+            .data
+            .chunks(codes.shape[1])
+            .map(|row| {
+                row.iter()
+                    .filter(|&&c| c != 0.0)
+                    .map(|&c| char::from_u32(c as u32).unwrap())
+                    .collect()
+            })
+            .collect()
+    };
+    let (mut squared, mut count, mut nose) = (0.0f64, 0usize, 0usize);
     for file in &files {
         let arrays = read_npz(file).unwrap();
         let [composite, truth, head, band, region, source] =
             ["composite", "truth", "head", "band", "region", "source"].map(|n| &arrays[n]);
-        let [h, w] = [composite.shape[0], composite.shape[1]];
-        assert_eq!(composite.shape, [h, w, 3]);
-        assert_eq!(truth.shape, [h, w, 3]);
-        for map in [head, band, region, source] {
-            assert_eq!(map.shape, [h, w]);
+        let size = [head.shape[0], head.shape[1]];
+        for picture in [
+            composite,
+            truth,
+            &arrays["ceiling_ada"],
+            &arrays["ceiling_ada_truth"],
+            &arrays["ceiling_cleo"],
+            &arrays["ceiling_cleo_truth"],
+        ] {
+            assert_eq!(picture.shape, [size[0], size[1], 3]);
         }
-        for ceiling in ["ceiling_ada", "ceiling_cleo", "ceiling_cleo_truth"] {
-            assert_eq!(arrays[ceiling].shape, [h, w, 3], "{ceiling}");
+        for map in [band, region, source, &arrays["ceiling_cleo_region"]] {
+            assert_eq!(map.shape, size);
         }
-        let names = &arrays["region_names"];
-        assert_eq!(names.shape[0], visage::model::regions::Region::COUNT);
-        for p in 0..w * h {
+        let regions = text(&arrays["region_names"]);
+        let sources = text(&arrays["source_names"]);
+        assert_eq!(regions.len(), Region::COUNT);
+        assert_eq!(regions[Region::Nose.index()], "nose");
+        assert_eq!(sources[..3], ["ada", "bram", "cleo"]);
+        for p in 0..size[0] * size[1] {
             let on_head = head.data[p] == 1.0;
             assert_eq!(
                 on_head,
@@ -447,24 +485,54 @@ fn arrays_hold_each_view_s_pictures_and_labels_and_give_the_reported_psnr() {
                 "a source exactly on the head"
             );
             assert!(band.data[p] == 0.0 || on_head, "the band lies on the head");
-            if on_head {
-                count += 1;
-                for c in 0..3 {
-                    squared += (composite.data[3 * p + c] - truth.data[3 * p + c]).powi(2);
-                }
+            if !on_head {
+                continue;
+            }
+            let shows = &regions[region.data[p] as usize];
+            let assigned = &sources[source.data[p] as usize];
+            let expected = if shows == "nose" { "cleo" } else { "ada" };
+            assert_eq!(assigned, expected, "{shows} at pixel {p} of {file:?}");
+            nose += usize::from(shows == "nose");
+            count += 1;
+            for c in 0..3 {
+                squared += (composite.data[3 * p + c] - truth.data[3 * p + c]).powi(2);
             }
         }
     }
+    assert!(nose > 0, "the nose is seen");
+    // The archives hold the fitted composite (the report's figure), in
+    // float32: the same PSNR to rounding.
     let from_arrays = 10.0 * (3.0 * count as f64 / squared).log10();
     let reported = report["quality"]["psnr_db"].as_f64().unwrap();
-    // The arrays store float32: the same figure to rounding.
+    let steps = report["decomposition"].as_array().unwrap();
+    assert_eq!(steps.last().unwrap()["step"], "+seam fit");
     assert!(
         (from_arrays - reported).abs() < 1e-3,
         "{from_arrays} from the arrays against {reported} reported"
     );
     assert_eq!(report["quality"]["pixels"].as_u64(), Some(count as u64));
+    // numpy reads them as the README says.
+    let script = "import sys, numpy as np\n\
+        a = np.load(sys.argv[1])\n\
+        n = a['region_names']\n\
+        names = n.view(f'<U{n.shape[1]}')[:, 0]\n\
+        print(names[int(sys.argv[2])], a['composite'].dtype, a['region'].dtype)\n";
+    let out = std::process::Command::new(common::python())
+        .args(["-c", script, files[0].to_str().unwrap()])
+        .arg(Region::Nose.index().to_string())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(said, "nose float32 int32\n");
 }
 
+/// A composite whose face Gaussians are counted as another source's than
+/// the recipe assigns is caught as leak at the face's interior pixels.
 #[test]
 fn a_region_shown_by_another_source_is_leak() {
     use visage::compose::engine::Engine;

@@ -58,6 +58,10 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             return Err(super::compose::without_fit("--seam-fit-renderer"));
         }
     }
+    if let Some(dir) = &options.arrays {
+        // Before the composites and the fit, which take a while.
+        crate::train::composite_eval::arrays::prepare(dir)?;
+    }
     let (report, pictures) = evaluate_composite(&trained, &recipe, &dataset, &options)?;
     if let Some(path) = &args.picture {
         let mut images = Vec::new();

@@ -13,7 +13,7 @@
 //! holds its types and the sums they are made from), and this one builds
 //! the composites and walks the views.
 
-mod arrays;
+pub mod arrays;
 mod pixels;
 mod report;
 mod tally;
@@ -399,6 +399,7 @@ pub fn evaluate_variants(
                     .zip(&ceilings)
                     .collect(),
                 triangle_regions: &model.triangle_regions,
+                source_names: trained.sources.iter().map(|s| s.name.as_str()).collect(),
             };
             arrays::write(dir, &stem, &view_arrays)?;
         }
