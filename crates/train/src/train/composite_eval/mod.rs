@@ -8,10 +8,11 @@
 //! at the same views); and the decomposition swap → +shape → +smoothing →
 //! +colour.
 //!
-//! Four files: `pixels.rs` says what each pixel of a view shows, `tally.rs`
+//! Five files: `pixels.rs` says what each pixel of a view shows, `tally.rs`
 //! sums the errors view by view into a [`CompositeReport`] (`report.rs`
-//! holds its types and the sums they are made from), and this one builds
-//! the composites and walks the views.
+//! holds its types and the sums they are made from), `arrays.rs` writes a
+//! view's pictures and labels for `--arrays`, and this one builds the
+//! composites and walks the views.
 
 pub mod arrays;
 mod pixels;
