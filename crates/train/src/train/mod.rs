@@ -22,6 +22,8 @@ pub mod project;
 pub mod raster;
 pub mod seam_fit;
 mod seam_light;
+mod seam_own_shape;
+mod seam_wholes;
 pub mod sitter;
 pub mod target;
 pub mod trainer;

@@ -15,8 +15,10 @@
 //! the blend with Adam — over a rig of its own cameras at the rest pose,
 //! never over any ground truth. Where the recipe relights its Gaussians,
 //! the wholes are relit pixel by pixel instead, and the Gaussians whose
-//! light the shape moved are fitted too, in their DC colour alone
-//! (`seam_light`). Positions and rotations stay, and scales
+//! light the shape moved are fitted too (`seam_light`); away from the
+//! seams, each person's part of a whole is then read from a drawing on
+//! that person's own face, where its Gaussians were trained
+//! (`seam_own_shape`). Positions and rotations stay, and scales
 //! move only a little: the fit changes what a Gaussian shows and how far it
 //! reaches, not where it sits, so animation and the region membership are
 //! untouched.
@@ -25,11 +27,11 @@ use std::sync::Arc;
 
 use crate::avatar::gaussians::GaussianSet;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
-use crate::compose::recipe::{AnimationMode, Shading, SkinSource};
+use crate::compose::recipe::AnimationMode;
 use crate::compose::seams::{SeamBlend, SeamField, SeamNeighbours};
 use crate::error::Result;
 use crate::model::head::{HeadModel, Joint, Pose};
-use crate::model::regions::{Group, Region};
+use crate::model::regions::Group;
 use crate::render::Backend;
 
 use super::adam::AdamGroup;
@@ -38,7 +40,9 @@ use super::holes::Obscurer;
 use super::model::{Render, Trainable, SH_STRIDE};
 use super::project::{TrainCamera, GEOMETRY};
 use super::raster::Rasterizer;
-use super::seam_light::{self, KeptWhole, PixelLight};
+use super::seam_light::{self, PixelLight};
+use super::seam_own_shape::{self as own_shape, Hit};
+use super::seam_wholes::{blended, drawable, wholes, Drawn, Whole, Wholes};
 
 /// Learning rate of the SH DC coefficients (3DGS's feature rate).
 const LR_DC: f64 = 0.0025;
@@ -90,8 +94,8 @@ impl Default for SeamFit {
 /// What a fit did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FitReport {
-    /// Gaussians fitted: those on a seam, and (in their DC colour alone)
-    /// those whose triangle's light the composite's shape moved.
+    /// Gaussians fitted: those on a seam, and those whose triangle's light
+    /// the composite's shape moved.
     pub fitted: usize,
     /// Views of the rig.
     pub views: usize,
@@ -166,28 +170,6 @@ fn cross_fade(
         _ => 0.0,
     };
     (seam.other, (f64::from(seam.weight) - hair_part).max(0.0))
-}
-
-/// `set` to draw, with any Gaussian that holds a NaN or an infinity hidden
-/// (opacity zero): it is not drawn, and the fit leaves it as it came — a
-/// NaN is no value to step from, and a NaN pixel's gradient would reach
-/// every Gaussian drawn there.
-fn drawable(set: &GaussianSet) -> Trainable {
-    let mut out = Trainable::from_set(set);
-    let stride = set.sh_stride();
-    for i in 0..set.len() {
-        let finite = set.position[i].is_finite()
-            && set.rotation[i].is_finite()
-            && set.log_scale[i].is_finite()
-            && set.opacity_logit[i].is_finite()
-            && set.sh[i * stride..(i + 1) * stride]
-                .iter()
-                .all(|x| x.is_finite());
-        if !finite {
-            out.opacity_logit[i] = f64::NEG_INFINITY;
-        }
-    }
-    out
 }
 
 /// The rig's poses: at rest, and with the jaw open by 7° (the built-in
@@ -277,135 +259,6 @@ fn near_seams(model: &HeadModel, field: &SeamField, looks: &[u32]) -> Vec<bool> 
     near
 }
 
-/// A whole head from one source, as the recipe would make it, ready to draw.
-struct Whole {
-    drawable: Trainable,
-    composite: Composite,
-    /// When the fit relights its targets per pixel (`seam_light`): the
-    /// same whole with the light its Gaussians were trained under.
-    kept: Option<KeptWhole>,
-}
-
-/// A source's whole head as each side of a seam asks for it.
-struct Wholes {
-    /// As the recipe makes it: what the composite's Gaussians of this
-    /// source draw, the target on the source's own side of a seam.
-    own: Whole,
-    /// With the source's own skin under its features, for the target's
-    /// far side where this source is the other one; `None` where that is
-    /// `own` (the recipe keeps the sources' skin, or this is the base).
-    across: Option<Across>,
-}
-
-impl Wholes {
-    /// The sources whose Gaussians these wholes hold.
-    fn sources(&self) -> impl Iterator<Item = usize> + '_ {
-        let across = self.across.iter().map(|a| &a.whole);
-        std::iter::once(&self.own)
-            .chain(across)
-            .flat_map(|w| w.kept.iter().flat_map(|k| k.sources().iter().copied()))
-    }
-}
-
-/// A source's whole head with its own skin, and how far the far side of a
-/// seam may trust it.
-struct Across {
-    /// The recipe's whole head from the source, with `skin = "source"`.
-    whole: Whole,
-    /// Per region, the share of the far side taken from `whole` ([`trust`]).
-    trust: [f64; Region::COUNT],
-}
-
-/// The share of a seam's far side taken from the other source's own skin
-/// rather than from the base's skin under its features, in a region whose
-/// colour transfer scaled the source's colours by `gain` (the region's mean
-/// per-channel gain): 1/g, g the largest channel of `gain`, and all of it
-/// where the transfer does not brighten. A gain multiplies whatever the
-/// source's training got wrong (method §13.3), so mixing its skin in at a
-/// share of 1/g keeps those errors at the size they had on the source; a
-/// gain that is not finite trusts none of it.
-fn trust(gain: glam::Vec3) -> f64 {
-    if !gain.is_finite() {
-        return 0.0;
-    }
-    let g = f64::from(gain.max_element());
-    if g <= 1.0 {
-        1.0
-    } else {
-        1.0 / g
-    }
-}
-
-/// A source's whole head drawn in one view, each way [`Wholes`] holds it.
-struct Drawn<'a> {
-    /// [`Wholes::own`] drawn: RGB per pixel.
-    own: Vec<f64>,
-    /// [`Wholes::across`] drawn, with its trust per region.
-    across: Option<(Vec<f64>, &'a [f64; Region::COUNT])>,
-}
-
-impl Drawn<'_> {
-    /// Channel `i` of the far side of a seam at a point of region `region`:
-    /// the source's own skin by its [`trust`] there, the rest as `own`.
-    fn far(&self, i: usize, region: Region) -> f64 {
-        match &self.across {
-            Some((across, trust)) => {
-                let a = trust[region.index()];
-                (1.0 - a) * self.own[i] + a * across[i]
-            }
-            None => self.own[i],
-        }
-    }
-}
-
-/// Channel `i` of the target at a point of region `region` that wears the
-/// source drawn as `own`, at seam weight `w` towards the source drawn as
-/// `other`: the own side as the recipe makes it, the far side with the
-/// other source's own skin as far as it is trusted ([`Drawn::far`]).
-fn blended(own: &Drawn, other: &Drawn, w: f64, i: usize, region: Region) -> f64 {
-    (1.0 - w) * own.own[i] + w * other.far(i, region)
-}
-
-/// Source `source`'s whole head: the recipe with every group's Gaussians
-/// from it, and, where the recipe puts the base's skin under a swapped
-/// region's features (`skin = "base"`, method §7.11), the same with the
-/// source's own skin too. The far side of a seam shows that source's look
-/// on the base's tone — its stubble as the source's Gaussians carry it,
-/// moved by the colour transfer; the base's skin in their place (what
-/// `skin = "base"` gives a head wholly swapped, wherever the likeness
-/// reads light stubble as skin) drops the stubble a bearded source's mouth
-/// trails into the base's face.
-fn wholes(engine: &Engine, composite: &Composite, source: u32) -> Wholes {
-    let mut recipe = composite.recipe.clone();
-    recipe.gaussians = [source as usize; Group::COUNT];
-    let whole = |recipe: &_| {
-        let composite = engine.compose(recipe);
-        let kept = seam_light::relights(&composite).then(|| {
-            let mut kept = recipe.clone();
-            kept.post.shading = Shading::Kept;
-            let kept = engine.compose(&kept);
-            KeptWhole::new(&kept, drawable(&kept.gaussians))
-        });
-        Whole {
-            drawable: drawable(&composite.gaussians),
-            composite,
-            kept,
-        }
-    };
-    let own = whole(&recipe);
-    // The shape is the recipe's, whichever source's Gaussians it wears:
-    // every whole is posed as the composite is.
-    debug_assert_eq!(own.composite.neutral, composite.neutral);
-    let across =
-        (recipe.post.skin == SkinSource::Base && source as usize != recipe.base).then(|| {
-            recipe.post.skin = SkinSource::Source;
-            let whole = whole(&recipe);
-            let trust = whole.composite.colour_gains.map(trust);
-            Across { whole, trust }
-        });
-    Wholes { own, across }
-}
-
 /// A seam fit in progress, one unit of work at a time, so that a caller
 /// that must stay responsive (the editor's render worker) can interleave it
 /// with other work, see how far it is, and drop it when the composite
@@ -423,18 +276,20 @@ pub struct SeamFitter {
     field: SeamField,
     /// How near each point is to another source's hair ([`hair_looks`]).
     hair_field: SeamField,
-    on_seam: Vec<bool>,
+    /// Per Gaussian: whether the fit moves it — near a seam, or (where the
+    /// recipe relights) on a triangle whose light the shape moved.
+    moves: Vec<bool>,
     fitted: usize,
     trainable: Trainable,
     wholes: Vec<Wholes>,
-    /// Per Gaussian: fitted in its DC colour alone, for the light on its
-    /// triangle (`seam_light::light_moved`) rather than for a seam.
-    light_only: Vec<bool>,
     /// Made with the wholes when the targets are relit per pixel.
     light: Option<PixelLight>,
     /// The composite posed at each of the rig's poses: the wholes too, as
     /// they share its shape ([`wholes`]).
     posed: Vec<Arc<PosedMesh>>,
+    /// Per rig pose: each person whose face the composite's shape changed,
+    /// on their own face, posed alike (`seam_own_shape`).
+    own_posed: Vec<Vec<(usize, PosedMesh)>>,
     cameras: Vec<TrainCamera>,
     views: Vec<View>,
     sh_steps: AdamGroup,
@@ -467,23 +322,20 @@ impl SeamFitter {
             .zip(&trainable.opacity_logit)
             .map(|(&t, &opacity)| opacity.is_finite() && near[t as usize])
             .collect();
-        // Away from seams, where the targets are relit per pixel: the
-        // Gaussians whose light changed, in their DC colour.
-        let light_only: Vec<bool> = if seam_light::relights(composite) {
+        // Where the targets are relit per pixel, the Gaussians whose light
+        // the shape moved too, wherever they are.
+        let moves: Vec<bool> = if seam_light::relights(composite) {
             seam_light::light_moved(engine, composite)
                 .iter()
-                .zip(&on_seam)
                 .zip(&trainable.opacity_logit)
-                .map(|((&moved, &seam), opacity)| moved && !seam && opacity.is_finite())
+                .map(|(&moved, opacity)| moved && opacity.is_finite())
+                .zip(on_seam)
+                .map(|(light, seam)| light || seam)
                 .collect()
         } else {
-            vec![false; on_seam.len()]
+            on_seam
         };
-        let fitted = on_seam
-            .iter()
-            .zip(&light_only)
-            .filter(|&(&seam, &light)| seam || light)
-            .count();
+        let fitted = moves.iter().filter(|&&m| m).count();
         let (cameras, _) = rig(options.cameras, false, [options.size; 2]);
         let n = trainable.len();
         SeamFitter {
@@ -491,13 +343,13 @@ impl SeamFitter {
             looks,
             field,
             hair_field,
-            on_seam,
+            moves,
             fitted,
             trainable,
             wholes: Vec::new(),
-            light_only,
             light: None,
             posed: Vec::new(),
+            own_posed: Vec::new(),
             cameras,
             views: Vec::new(),
             sh_steps: AdamGroup::new(LR_DC, SH_STRIDE, n),
@@ -557,14 +409,22 @@ impl SeamFitter {
             self.wholes
                 .push(wholes(engine, composite, self.field.sources()[unit]));
         } else if unit < sources + poses {
+            let mut drawn: Vec<usize> = self.wholes.iter().flat_map(Wholes::sources).collect();
+            drawn.sort_unstable();
+            drawn.dedup();
             if unit == sources && seam_light::relights(composite) {
-                let mut drawn: Vec<usize> = self.wholes.iter().flat_map(Wholes::sources).collect();
-                drawn.sort_unstable();
-                drawn.dedup();
                 self.light = Some(PixelLight::new(engine, composite, &drawn));
             }
             let pose = rig_poses()[unit - sources];
             self.posed.push(Arc::new(posed(engine, composite, &pose)));
+            let own_faces = self.wholes.iter().any(Wholes::own_faces);
+            self.own_posed.push(
+                drawn
+                    .into_iter()
+                    .filter(|&s| own_faces && own_shape::reshaped(engine, composite, s))
+                    .map(|s| (s, own_shape::posed_own_face(engine, s, &pose)))
+                    .collect(),
+            );
         } else if unit < sources + poses + views {
             let view = self.target(&engine.database().model, unit - sources - poses)?;
             let rasterizer = self.rasterizer.as_mut().expect("opened above");
@@ -575,6 +435,7 @@ impl SeamFitter {
                 // The targets are drawn: the wholes are no longer needed.
                 self.wholes = Vec::new();
                 self.posed = Vec::new();
+                self.own_posed = Vec::new();
                 self.light = None;
             }
         } else if unit < sources + poses + views + self.options.iterations {
@@ -600,6 +461,28 @@ impl SeamFitter {
         let rasterizer = self.rasterizer.as_mut().expect("opened by step");
         let mut images = Vec::with_capacity(self.wholes.len());
         let hits = rasterize(&rig.vertices, &model.triangles, camera);
+        // Away from every seam: there a whole's drawing holds the other
+        // source's overhang, which no own face's drawing has.
+        let inside: Vec<Hit> = hits
+            .iter()
+            .map(|hit| {
+                hit.filter(|(tri, bary, _)| {
+                    let t = *tri as usize;
+                    let corners = model.triangles[t];
+                    self.field.blend_at(corners, *bary, self.looks[t]).is_none()
+                })
+            })
+            .collect();
+        let own_faces: Vec<(usize, &PosedMesh, Vec<Hit>)> = self.own_posed[k / self.cameras.len()]
+            .iter()
+            .map(|(s, face)| {
+                (
+                    *s,
+                    face,
+                    rasterize(&face.vertices, &model.triangles, camera),
+                )
+            })
+            .collect();
         let light = self.light.as_ref();
         let lit = |whole: &Whole, rasterizer: &mut Rasterizer| -> Result<Vec<f64>> {
             let relit = draw(&whole.drawable, rig, camera, rasterizer)?;
@@ -609,10 +492,34 @@ impl SeamFitter {
             let Some(kept) = &whole.kept else {
                 return Ok(relit);
             };
+            let part = |s: usize, rasterizer: &mut Rasterizer| -> Result<Vec<f64>> {
+                let image = draw(&kept.part(s), rig, camera, rasterizer)?;
+                let own = own_faces.iter().find(|(person, _, _)| *person == s);
+                let (Some(own_face), Some((_, face, own_hits))) = (&whole.own_face, own) else {
+                    return Ok(image);
+                };
+                let there = own_shape::Drawing {
+                    colour: draw(&own_face.part(s), face, camera, rasterizer)?,
+                    coverage: draw(&own_face.coverage(s), face, camera, rasterizer)?,
+                };
+                let here = own_shape::Drawing {
+                    colour: image,
+                    coverage: draw(&kept.coverage(s), rig, camera, rasterizer)?,
+                };
+                Ok(own_shape::reprojected(
+                    model,
+                    camera,
+                    &inside,
+                    &face.vertices,
+                    own_hits,
+                    &there,
+                    &here,
+                ))
+            };
             let parts = kept
                 .sources()
                 .iter()
-                .map(|&s| Ok((s, draw(&kept.part(s), rig, camera, rasterizer)?)))
+                .map(|&s| Ok((s, part(s, rasterizer)?)))
                 .collect::<Result<Vec<_>>>()?;
             Ok(seam_light::relit_target(
                 model, light, &hits, &relit, &parts,
@@ -669,12 +576,9 @@ impl SeamFitter {
         )?;
         let (_, d_image) = error(render.image(), view, 3.0 * per_view.max(1.0));
         let mut grads = render.backward(&self.trainable, &d_image, rasterizer)?;
-        for (i, &seam) in self.on_seam.iter().enumerate() {
+        for (i, &moves) in self.moves.iter().enumerate() {
             let sh = &mut grads.sh[i * SH_STRIDE..(i + 1) * SH_STRIDE];
-            if self.light_only[i] {
-                sh[3..].fill(0.0);
-                grads.opacity_logit[i] = 0.0;
-            } else if seam {
+            if moves {
                 sh[3..].iter_mut().for_each(|g| *g *= REST_FACTOR);
             } else {
                 // A zero gradient keeps Adam's moments at zero: no step.
@@ -689,7 +593,7 @@ impl SeamFitter {
         Ok(())
     }
 
-    /// An Adam step on the seam Gaussians' log scales (the geometry
+    /// An Adam step on the fitted Gaussians' log scales (the geometry
     /// gradient's entries 3-5); every other Gaussian's gradient is zero.
     fn step_scales(&mut self, geometry: &[[f64; GEOMETRY]]) {
         let mut scales: Vec<f64> = self
@@ -700,8 +604,8 @@ impl SeamFitter {
             .collect();
         let grads: Vec<f64> = geometry
             .iter()
-            .zip(&self.on_seam)
-            .flat_map(|(g, &seam)| if seam { [g[3], g[4], g[5]] } else { [0.0; 3] })
+            .zip(&self.moves)
+            .flat_map(|(g, &moves)| if moves { [g[3], g[4], g[5]] } else { [0.0; 3] })
             .collect();
         self.scale_steps.step(&mut scales, &grads);
         for (g, s) in self
@@ -724,7 +628,7 @@ impl SeamFitter {
         }
         let mut out = composite.gaussians.clone();
         let stride = out.sh_stride();
-        for i in (0..out.len()).filter(|&i| self.on_seam[i] || self.light_only[i]) {
+        for i in (0..out.len()).filter(|&i| self.moves[i]) {
             out.opacity_logit[i] = self.trainable.opacity_logit[i] as f32;
             out.log_scale[i] =
                 glam::DVec3::from_array(self.trainable.geometry[i].log_scale).as_vec3();
@@ -800,106 +704,5 @@ mod tests {
         );
         // Never below zero.
         assert_eq!(cross_fade(blend(5, 0.2), blend(5, 0.3), 3, false), (5, 0.0));
-    }
-
-    #[test]
-    fn a_source_s_skin_is_trusted_across_a_seam_at_the_inverse_of_its_gain() {
-        use glam::Vec3;
-        // Unmoved or darkened: its errors grow no larger, all of it.
-        assert_eq!(trust(Vec3::ONE), 1.0);
-        assert_eq!(trust(Vec3::new(0.4, 0.6, 0.9)), 1.0);
-        // Brightened: the largest channel's gain decides.
-        assert_eq!(trust(Vec3::new(1.5, 4.0, 2.0)), 0.25);
-        assert!((trust(Vec3::splat(1.25)) - 0.8).abs() < 1e-12);
-        // A gain of nothing sensible: none of it.
-        assert_eq!(trust(Vec3::new(f32::NAN, 1.0, 1.0)), 0.0);
-        assert_eq!(trust(Vec3::new(1.0, f32::INFINITY, 1.0)), 0.0);
-    }
-
-    #[test]
-    fn the_far_side_mixes_in_the_other_source_s_own_skin_by_region() {
-        let mut trusted = [1.0; Region::COUNT];
-        trusted[Region::Nose.index()] = 0.25;
-        let plain = |v: f64| Drawn {
-            own: vec![v; 3],
-            across: None,
-        };
-        let base = plain(0.2);
-        let swapped = Drawn {
-            own: vec![0.4; 3],
-            across: Some((vec![0.8; 3], &trusted)),
-        };
-        let near = |a: f64, b: f64| (a - b).abs() < 1e-12;
-        // No far-side whole: the plain cross-fade of the two.
-        assert!(near(blended(&swapped, &base, 0.5, 1, Region::Nose), 0.3));
-        // The swapped source's own skin on the far side, by the region's trust.
-        assert!(near(swapped.far(2, Region::Nose), 0.5));
-        assert!(near(swapped.far(2, Region::Skin), 0.8));
-        assert!(near(blended(&base, &swapped, 0.5, 0, Region::Nose), 0.35));
-        // Its own side is as the recipe makes it, and w = 0 is the own side alone.
-        assert!(near(blended(&swapped, &base, 0.0, 0, Region::Skin), 0.4));
-        assert!(near(blended(&base, &swapped, 0.0, 0, Region::Skin), 0.2));
-    }
-
-    /// The sources of a whole's Gaussians, block by block.
-    fn sources(whole: &Whole) -> Vec<usize> {
-        let mut sources: Vec<usize> = whole.composite.blocks.iter().map(|b| b.source).collect();
-        sources.sort_unstable();
-        sources.dedup();
-        sources
-    }
-
-    #[test]
-    fn across_a_seam_a_source_shows_its_own_skin() {
-        use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
-        use crate::compose::recipe::{PostProcess, Recipe};
-        use crate::model::builtin::build_head;
-
-        let options = SyntheticOptions {
-            seed: 5,
-            sources: 2,
-            gaussians_per_avatar: 3_000,
-        };
-        let engine = Engine::new(builtin_database(build_head(), options).unwrap()).unwrap();
-        let names: Vec<String> = engine
-            .database()
-            .sources
-            .iter()
-            .map(|s| s.name.clone())
-            .collect();
-        let text = format!(
-            "base = \"{}\"\n[groups.mouth]\ngaussians = \"{}\"\nshape = {{ {} = 1.0 }}\n",
-            names[0], names[1], names[1]
-        );
-        let mut recipe = Recipe::from_toml(&text).unwrap();
-        recipe.post = PostProcess::BEST;
-        assert_eq!(recipe.post.skin, SkinSource::Base);
-        let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
-
-        // The swapped source's whole as the recipe makes it has the base's
-        // skin under its features; across a seam it is the source alone.
-        let swapped = wholes(&engine, &composite, 1);
-        assert_eq!(sources(&swapped.own), [0, 1]);
-        let across = swapped.across.expect("the recipe puts the base's skin in");
-        assert_eq!(sources(&across.whole), [1]);
-        assert_eq!(
-            across.whole.composite.neutral,
-            swapped.own.composite.neutral
-        );
-        let gains = across.whole.composite.colour_gains;
-        for (trusted, gain) in across.trust.iter().zip(gains) {
-            assert_eq!(*trusted, trust(gain));
-        }
-        // The base is lighter than this source somewhere: not all trusted.
-        assert!(across.trust.iter().any(|&t| t < 1.0), "{gains:?}");
-
-        // The base's whole, and any whole where the recipe keeps the
-        // sources' skin, is the same on both sides: drawn once.
-        assert!(wholes(&engine, &composite, 0).across.is_none());
-        recipe.post.skin = SkinSource::Source;
-        let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
-        let swapped = wholes(&engine, &composite, 1);
-        assert!(swapped.across.is_none());
-        assert_eq!(sources(&swapped.own), [1]);
     }
 }

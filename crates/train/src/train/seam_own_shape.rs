@@ -1,0 +1,413 @@
+//! A seam fit's targets drawn where each person's Gaussians were trained
+//! (method §7.12, "Drawn on their own face").
+//!
+//! A whole head's Gaussians sit on the composite's shape, which may not be
+//! their person's: there their detail lands a little off the surface point
+//! it belongs to (trained Gaussians lie inside the surface, so a reshaped
+//! triangle carries them along a path the surface does not take), and the
+//! fit would learn that misplacement back. So each person's part of a
+//! whole is drawn a second time on that person's own face, posed alike, and
+//! each pixel of the composite's view takes what the own-face drawing shows
+//! at the same surface point (triangle and barycentric point), where that
+//! point is visible there; elsewhere it keeps the drawing on the
+//! composite's shape.
+
+use glam::{DVec3, Vec3};
+
+use crate::avatar::binding::triangle_frames_into;
+use crate::compose::engine::{Composite, Engine, PosedMesh};
+use crate::compose::recipe::{Anchor, Deform, ResolvedRecipe, Shading};
+use crate::model::head::{HeadModel, Pose};
+
+use super::project::TrainCamera;
+
+/// How far (metres, along the view) a point may lie from the surface its
+/// own-face drawing shows at a pixel and still count as that surface: a few
+/// millimetres, far under what a nose or a lid in front of it puts there,
+/// plus [`SAME_SURFACE_PX`] pixels' width at its depth (a slanted surface
+/// changes depth across the pixels read round the point).
+const SAME_SURFACE_M: f64 = 0.004;
+/// See [`SAME_SURFACE_M`].
+const SAME_SURFACE_PX: f64 = 3.0;
+
+/// The recipe a whole is drawn with on its people's own faces: the light
+/// as trained, each Gaussian on its parent triangle as trained (on its own
+/// face a person's Gaussians need no reshaping).
+pub(super) fn own_face_recipe(recipe: &ResolvedRecipe) -> ResolvedRecipe {
+    let mut out = recipe.clone();
+    out.post.shading = Shading::Kept;
+    out.post.deform = Deform::Similarity;
+    out.post.anchor = Anchor::Parent;
+    out
+}
+
+/// Person `source`'s own neutral posed at `pose` (no expression), as the
+/// rig poses the composite.
+pub(super) fn posed_own_face(engine: &Engine, source: usize, pose: &Pose) -> PosedMesh {
+    let model = &engine.database().model;
+    let mut out = PosedMesh::default();
+    let expression = vec![0.0; model.expression_basis.len()];
+    model.pose_offset(
+        engine.source_neutral(source),
+        &expression,
+        pose,
+        None,
+        &mut out.vertices,
+    );
+    triangle_frames_into(&out.vertices, &model.triangles, &mut out.frames);
+    out
+}
+
+/// Whether the composite's shape differs from `source`'s own neutral
+/// anywhere (by more than a micrometre): where it does not, the drawing
+/// on the composite's shape is already the own-face one.
+pub(super) fn reshaped(engine: &Engine, composite: &Composite, source: usize) -> bool {
+    let own = engine.source_neutral(source);
+    own.len() != composite.neutral.len()
+        || own
+            .iter()
+            .zip(&composite.neutral)
+            .any(|(a, b)| (*a - *b).length_squared() > 1e-12)
+}
+
+/// What a pixel of the composite's view shows: triangle, barycentric point
+/// and view depth (`capture::rasterize`).
+pub(super) type Hit = Option<(u32, [f32; 3], f64)>;
+
+/// One person's part of a whole drawn in a view: its colour, and how much
+/// of each pixel its Gaussians show (`KeptWhole::coverage`), RGB per pixel.
+pub(super) struct Drawing {
+    pub(super) colour: Vec<f64>,
+    pub(super) coverage: Vec<f64>,
+}
+
+/// Below this coverage the own face's drawing shows too little of its
+/// person at a point to read a colour from.
+const MIN_COVERAGE: f64 = 0.05;
+
+/// `here`'s colour (a part drawn on the composite's shape, per pixel of
+/// `hits`) with each pixel that shows a surface point given the colour that
+/// `there` (the same part drawn on its person's own face `own`, whose
+/// surface the camera sees as `own_hits`) shows at that point per unit of
+/// its coverage, times `here`'s coverage: the share of the pixel the part
+/// has on the composite stays, and its colour comes from where its
+/// Gaussians were trained. The point's own-face pixels are read with
+/// Catmull-Rom's cubic, where the sixteen pixels round it all show the own
+/// face within [`SAME_SURFACE_M`] of the point's depth and the nearest one
+/// shows the point's triangle or one touching it (the point is in view and
+/// not at a silhouette or behind a fold there), and the part covers at
+/// least [`MIN_COVERAGE`] of it.
+pub(super) fn reprojected(
+    model: &HeadModel,
+    camera: &TrainCamera,
+    hits: &[Hit],
+    own: &[Vec3],
+    own_hits: &[Hit],
+    there: &Drawing,
+    here: &Drawing,
+) -> Vec<f64> {
+    let mut out = here.colour.clone();
+    let [w, h] = camera.size.map(|v| v as usize);
+    for (p, hit) in hits.iter().enumerate() {
+        let Some((t, bary, _)) = hit else { continue };
+        let corners = model.triangles[*t as usize];
+        let point: DVec3 = corners
+            .iter()
+            .zip(bary)
+            .map(|(&v, &b)| own[v as usize].as_dvec3() * f64::from(b))
+            .sum();
+        let Some((x, y, depth)) = projected(camera, point) else {
+            continue;
+        };
+        // Pixel centres lie at half-integers.
+        let (fx, fy) = (x - 0.5, y - 0.5);
+        let Some(taps) = taps(fx, fy, w, h) else {
+            continue;
+        };
+        let tolerance = SAME_SURFACE_M + SAME_SURFACE_PX * depth / camera.focal[0];
+        let seen = taps
+            .iter()
+            .all(|&(k, _)| own_hits[k].is_some_and(|(_, _, d)| (d - depth).abs() <= tolerance));
+        // The nearest pixel shows the point's own triangle or one touching
+        // it: a fold of an ear within a few millimetres is another surface.
+        let nearest = (fy.round().max(0.0) as usize).min(h - 1) * w
+            + (fx.round().max(0.0) as usize).min(w - 1);
+        let touching = own_hits[nearest].is_some_and(|(u, _, _)| {
+            let other = model.triangles[u as usize];
+            u == *t || other.iter().any(|v| corners.contains(v))
+        });
+        if !seen || !touching {
+            continue;
+        }
+        let read = |image: &[f64], c: usize| -> f64 {
+            taps.iter().map(|&(k, a)| a * image[3 * k + c]).sum()
+        };
+        for c in 0..3 {
+            let coverage = read(&there.coverage, c);
+            if coverage >= MIN_COVERAGE {
+                out[3 * p + c] = here.coverage[3 * p + c] * read(&there.colour, c) / coverage;
+            }
+        }
+    }
+    out
+}
+
+/// The pixels and weights that read an image at continuous pixel position
+/// (`fx`, `fy`) (pixel centres at integers): Catmull-Rom's cubic, which
+/// keeps detail a bilinear read blurs; `None` where its 4×4 pixels leave
+/// the image.
+fn taps(fx: f64, fy: f64, w: usize, h: usize) -> Option<Vec<(usize, f64)>> {
+    let (x0, y0) = (fx.floor(), fy.floor());
+    if x0 < 1.0 || y0 < 1.0 || x0 + 2.0 >= w as f64 || y0 + 2.0 >= h as f64 {
+        return None;
+    }
+    let (wx, wy) = (catmull_rom(fx - x0), catmull_rom(fy - y0));
+    let (x0, y0) = (x0 as usize - 1, y0 as usize - 1);
+    let mut out = Vec::with_capacity(16);
+    for (j, &b) in wy.iter().enumerate() {
+        for (i, &a) in wx.iter().enumerate() {
+            if a * b != 0.0 {
+                out.push(((y0 + j) * w + x0 + i, a * b));
+            }
+        }
+    }
+    Some(out)
+}
+
+/// Catmull-Rom's weights of the four samples at −1, 0, 1, 2 for a point
+/// `t` ∈ [0, 1) past the second; they sum to one.
+fn catmull_rom(t: f64) -> [f64; 4] {
+    let (t2, t3) = (t * t, t * t * t);
+    [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
+}
+
+/// A world point's continuous pixel position (x right, y down; pixel
+/// centres at half-integers) and view depth, as `capture::rasterize`
+/// projects; `None` in front of the near plane.
+fn projected(camera: &TrainCamera, point: DVec3) -> Option<(f64, f64, f64)> {
+    let v = point.to_array();
+    let r = &camera.rotation;
+    let p: [f64; 3] = std::array::from_fn(|i| {
+        r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2] + camera.translation[i]
+    });
+    let depth = -p[2];
+    (depth > camera.clip[0]).then(|| {
+        (
+            camera.principal[0] + camera.focal[0] * p[0] / depth,
+            camera.principal[1] - camera.focal[1] * p[1] / depth,
+            depth,
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::builtin::build_head;
+    use crate::train::capture::{rasterize, rig};
+
+    /// A source's Gaussians composed for its own face from a recipe that
+    /// puts them on another's are exactly those of the recipe that keeps
+    /// its shape: on its own face nothing is reshaped or relit.
+    #[test]
+    fn on_its_own_face_a_source_s_whole_is_as_trained() {
+        use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
+        use crate::compose::recipe::{PostProcess, Recipe};
+
+        let options = SyntheticOptions {
+            seed: 5,
+            sources: 2,
+            gaussians_per_avatar: 3_000,
+        };
+        let engine = Engine::new(builtin_database(build_head(), options).unwrap()).unwrap();
+        let name = |s: usize| engine.database().sources[s].name.clone();
+        let resolve = |text: &str| {
+            let mut recipe = Recipe::from_toml(text).unwrap();
+            recipe.post = PostProcess::BEST;
+            recipe.resolve(engine.database()).unwrap()
+        };
+        let elsewhere = resolve(&format!(
+            "base = \"{}\"\n[groups.face]\ngaussians = \"{}\"\nshape = {{ {} = 1.0 }}\n",
+            name(0),
+            name(0),
+            name(1)
+        ));
+        let mut own = resolve(&format!("base = \"{}\"\n", name(0)));
+        own.post.shading = Shading::Kept;
+        let composite = engine.compose(&elsewhere);
+        assert!(reshaped(&engine, &composite, 0) && !reshaped(&engine, &engine.compose(&own), 0));
+        let as_trained = engine.compose(&own).gaussians;
+        let drawn = engine.compose(&own_face_recipe(&elsewhere)).gaussians;
+        assert_eq!(drawn.len(), as_trained.len());
+        assert_eq!(drawn.binding, as_trained.binding);
+        assert_eq!(drawn.position, as_trained.position);
+        assert_eq!(drawn.log_scale, as_trained.log_scale);
+        assert_eq!(drawn.sh, as_trained.sh);
+        // The recipe's own composite moved them: there is something to undo.
+        assert_ne!(composite.gaussians.position, as_trained.position);
+    }
+
+    #[test]
+    fn catmull_rom_passes_through_its_samples_and_keeps_a_ramp() {
+        assert_eq!(catmull_rom(0.0), [0.0, 1.0, 0.0, 0.0]);
+        for k in 0..=10 {
+            let t = f64::from(k) / 10.0;
+            let w = catmull_rom(t);
+            assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            // Samples of x at −1, 0, 1, 2 read back x = t.
+            let ramp: f64 = w
+                .iter()
+                .zip([-1.0, 0.0, 1.0, 2.0])
+                .map(|(a, x)| a * x)
+                .sum();
+            assert!((ramp - t).abs() < 1e-12, "{t}: {ramp}");
+        }
+    }
+
+    /// The head's template seen by one camera of a 64² rig, with its hits.
+    fn scene() -> (HeadModel, TrainCamera, Vec<Hit>) {
+        let model = build_head();
+        let (cameras, _) = rig(3, false, [128, 128]);
+        let camera = cameras[1];
+        let hits = rasterize(&model.template, &model.triangles, &camera);
+        (model, camera, hits)
+    }
+
+    /// Each pixel's value is its centre's x: what a read at a point gives
+    /// back is where the point lies, across the image.
+    fn ramp(camera: &TrainCamera, coverage: f64) -> Drawing {
+        let [w, h] = camera.size.map(|v| v as usize);
+        let colour = (0..w * h).flat_map(|k| [(k % w) as f64 + 0.5; 3]).collect();
+        Drawing {
+            colour,
+            coverage: vec![coverage; 3 * w * h],
+        }
+    }
+
+    fn blank(camera: &TrainCamera) -> Drawing {
+        let n = 3 * (camera.size[0] * camera.size[1]) as usize;
+        Drawing {
+            colour: vec![-1.0; n],
+            coverage: vec![1.0; n],
+        }
+    }
+
+    #[test]
+    fn a_face_on_its_own_shape_reads_back_its_own_pixels() {
+        let (model, camera, hits) = scene();
+        let out = reprojected(
+            &model,
+            &camera,
+            &hits,
+            &model.template,
+            &hits,
+            &ramp(&camera, 1.0),
+            &blank(&camera),
+        );
+        let w = camera.size[0] as usize;
+        let mut read = 0;
+        for (p, hit) in hits.iter().enumerate() {
+            if hit.is_none() || out[3 * p] == -1.0 {
+                continue;
+            }
+            read += 1;
+            let x = (p % w) as f64 + 0.5;
+            assert!((out[3 * p] - x).abs() < 1e-3, "pixel {p}: {}", out[3 * p]);
+        }
+        let head = hits.iter().filter(|h| h.is_some()).count();
+        assert!(read * 2 > head, "{read} of {head} pixels read");
+    }
+
+    #[test]
+    fn a_moved_face_is_read_where_the_point_lies_on_it() {
+        let (model, camera, hits) = scene();
+        // Moved a pixel and a half along the camera's right axis.
+        let distance = DVec3::from_array(camera.eye).length();
+        let shift = (1.5 * distance / camera.focal[0]) as f32;
+        let right = DVec3::from_array(camera.rotation[0]).as_vec3();
+        let own: Vec<Vec3> = model.template.iter().map(|&v| v + shift * right).collect();
+        let own_hits = rasterize(&own, &model.triangles, &camera);
+        let out = reprojected(
+            &model,
+            &camera,
+            &hits,
+            &own,
+            &own_hits,
+            &ramp(&camera, 1.0),
+            &blank(&camera),
+        );
+        let mut read = 0;
+        for (p, hit) in hits.iter().enumerate() {
+            let Some((t, bary, _)) = hit else { continue };
+            if out[3 * p] == -1.0 {
+                continue;
+            }
+            read += 1;
+            let point: DVec3 = model.triangles[*t as usize]
+                .iter()
+                .zip(bary)
+                .map(|(&v, &b)| own[v as usize].as_dvec3() * f64::from(b))
+                .sum();
+            let (x, _, _) = projected(&camera, point).unwrap();
+            let w = camera.size[0] as usize;
+            assert!(
+                x - ((p % w) as f64 + 0.5) > 1.2,
+                "pixel {p} moved too little"
+            );
+            assert!(
+                (out[3 * p] - x).abs() < 1e-3,
+                "pixel {p}: {} against {x}",
+                out[3 * p]
+            );
+        }
+        assert!(read > 100, "{read} pixels read");
+    }
+
+    #[test]
+    fn the_composite_keeps_its_share_and_hidden_or_bare_points_their_drawing() {
+        let (model, camera, hits) = scene();
+        let here = Drawing {
+            colour: vec![-1.0; 3 * 128 * 128],
+            coverage: vec![0.25; 3 * 128 * 128],
+        };
+        // Half covered there, a quarter here: a quarter of the colour there
+        // per unit of cover.
+        let out = reprojected(
+            &model,
+            &camera,
+            &hits,
+            &model.template,
+            &hits,
+            &ramp(&camera, 0.5),
+            &here,
+        );
+        let p = (0..hits.len()).find(|&p| out[3 * p] != -1.0).unwrap();
+        let x = (p % 128) as f64 + 0.5;
+        assert!((out[3 * p] - 0.25 * x / 0.5).abs() < 1e-3);
+
+        // Something 5 cm in front of every point of the own face, or a part
+        // covering almost nothing there: the composite's drawing stays.
+        let hidden: Vec<Hit> = hits
+            .iter()
+            .map(|h| h.map(|(t, b, d)| (t, b, d - 0.05)))
+            .collect();
+        let bare = ramp(&camera, 0.01);
+        for (own_hits, there) in [(&hidden, &ramp(&camera, 1.0)), (&hits, &bare)] {
+            let out = reprojected(
+                &model,
+                &camera,
+                &hits,
+                &model.template,
+                own_hits,
+                there,
+                &here,
+            );
+            assert_eq!(out, here.colour);
+        }
+    }
+}
