@@ -202,6 +202,25 @@ pub fn surface_depth(vertices: &[Vec3], triangles: &[[u32; 3]], camera: &TrainCa
         .collect()
 }
 
+/// A world point's continuous pixel position (x right, y down; pixel
+/// centres at half-integers) and view depth, `[x, y, depth]`; `None` in
+/// front of the near plane.
+pub fn pixel_of(camera: &TrainCamera, point: glam::DVec3) -> Option<[f64; 3]> {
+    let v = point.to_array();
+    let r = &camera.rotation;
+    let p: [f64; 3] = std::array::from_fn(|i| {
+        r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2] + camera.translation[i]
+    });
+    let depth = -p[2];
+    (depth > camera.clip[0]).then(|| {
+        [
+            camera.principal[0] + camera.focal[0] * p[0] / depth,
+            camera.principal[1] - camera.focal[1] * p[1] / depth,
+            depth,
+        ]
+    })
+}
+
 /// For each pixel centre, the nearest triangle, its perspective-correct
 /// barycentric coordinates and its view depth.
 pub fn rasterize(
@@ -212,21 +231,7 @@ pub fn rasterize(
     let [w, h] = camera.size;
     let projected: Vec<Option<[f64; 3]>> = vertices
         .iter()
-        .map(|v| {
-            let v = v.as_dvec3().to_array();
-            let r = &camera.rotation;
-            let p: [f64; 3] = std::array::from_fn(|i| {
-                r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2] + camera.translation[i]
-            });
-            let depth = -p[2];
-            (depth > camera.clip[0]).then(|| {
-                [
-                    camera.principal[0] + camera.focal[0] * p[0] / depth,
-                    camera.principal[1] - camera.focal[1] * p[1] / depth,
-                    depth,
-                ]
-            })
-        })
+        .map(|v| pixel_of(camera, v.as_dvec3()))
         .collect();
     let mut depth = vec![f64::INFINITY; (w * h) as usize];
     let mut hits = vec![None; (w * h) as usize];

@@ -19,6 +19,7 @@ use crate::compose::engine::{Composite, Engine, PosedMesh};
 use crate::compose::recipe::{Anchor, Deform, ResolvedRecipe, Shading};
 use crate::model::head::{HeadModel, Pose};
 
+use super::capture::pixel_of;
 use super::project::TrainCamera;
 
 /// How far (metres, along the view) a point may lie from the surface its
@@ -116,7 +117,7 @@ pub(super) fn reprojected(
             .zip(bary)
             .map(|(&v, &b)| own[v as usize].as_dvec3() * f64::from(b))
             .sum();
-        let Some((x, y, depth)) = projected(camera, point) else {
+        let Some([x, y, depth]) = pixel_of(camera, point) else {
             continue;
         };
         // Pixel centres lie at half-integers.
@@ -184,25 +185,6 @@ fn catmull_rom(t: f64) -> [f64; 4] {
         0.5 * (-3.0 * t3 + 4.0 * t2 + t),
         0.5 * (t3 - t2),
     ]
-}
-
-/// A world point's continuous pixel position (x right, y down; pixel
-/// centres at half-integers) and view depth, as `capture::rasterize`
-/// projects; `None` in front of the near plane.
-fn projected(camera: &TrainCamera, point: DVec3) -> Option<(f64, f64, f64)> {
-    let v = point.to_array();
-    let r = &camera.rotation;
-    let p: [f64; 3] = std::array::from_fn(|i| {
-        r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2] + camera.translation[i]
-    });
-    let depth = -p[2];
-    (depth > camera.clip[0]).then(|| {
-        (
-            camera.principal[0] + camera.focal[0] * p[0] / depth,
-            camera.principal[1] - camera.focal[1] * p[1] / depth,
-            depth,
-        )
-    })
 }
 
 #[cfg(test)]
@@ -353,7 +335,7 @@ mod tests {
                 .zip(bary)
                 .map(|(&v, &b)| own[v as usize].as_dvec3() * f64::from(b))
                 .sum();
-            let (x, _, _) = projected(&camera, point).unwrap();
+            let [x, _, _] = pixel_of(&camera, point).unwrap();
             let w = camera.size[0] as usize;
             assert!(
                 x - ((p % w) as f64 + 0.5) > 1.2,
