@@ -1,6 +1,7 @@
-//! Seam fit (method §7.12): the colour and opacity of a composite's
-//! Gaussians near a change of source, fitted to what the sources themselves
-//! draw there.
+//! Seam fit (method §7.12): the colour, opacity and reach of a composite's
+//! Gaussians near a change of source (and, where the recipe relights, of
+//! those whose light the shape moved), fitted to what the sources
+//! themselves draw there.
 //!
 //! Each source draws its own border well: its Gaussians were trained beside
 //! each other. A composite puts Gaussians trained beside *other* neighbours
@@ -264,8 +265,9 @@ fn near_seams(model: &HeadModel, field: &SeamField, looks: &[u32]) -> Vec<bool> 
 /// with other work, see how far it is, and drop it when the composite
 /// changes. The units: compose each source's whole head (twice for a
 /// swapped source under `skin = "base"`, [`wholes`], and each again with
-/// the trained light where the recipe relights), pose the rig's two
-/// poses, draw each view's target (and measure the composite there), take
+/// the trained light where the recipe relights, and on its people's own
+/// faces where the shape changed them), pose the rig's two poses (and each
+/// such person's own face in them), draw each view's target (and measure the composite there), take
 /// each Adam step, and measure each view again. [`fit_seams`] runs them all.
 ///
 /// Each call takes the engine and the composite the fitter was made for;
@@ -452,9 +454,10 @@ impl SeamFitter {
     /// View `k` of the rig with its blended target: per pixel, the render of
     /// the head wholly from the source the surface point wears, cross-faded
     /// towards the nearest other source's (with that source's own skin as
-    /// far as [`trust`] allows, [`wholes`]) by the seam weight there; each
-    /// whole relit pixel by pixel where the recipe relights
-    /// (`seam_light::relit_target`).
+    /// far as `seam_wholes::trust` allows, [`wholes`]) by the seam weight
+    /// there; each whole relit pixel by pixel where the recipe relights
+    /// (`seam_light::relit_target`), its people's parts read, away from the
+    /// seams, from drawings on their own faces (`seam_own_shape`).
     fn target(&mut self, model: &HeadModel, k: usize) -> Result<View> {
         let rig = &self.posed[k / self.cameras.len()];
         let camera = &self.cameras[k % self.cameras.len()];

@@ -172,7 +172,8 @@ impl KeptWhole {
 /// inside, on the teeth and off the surface, `relit` (the whole drawn with
 /// the per-Gaussian light). The gain scales all the colour a pixel shows,
 /// its view-dependent part too: the target is what the light makes of the
-/// pixel, and the fit then moves DC colours (and, on a seam, the bands).
+/// pixel, and the fit then moves the Gaussians' colours, opacities and
+/// reach.
 pub(super) fn relit_target(
     model: &HeadModel,
     light: &PixelLight,
@@ -242,6 +243,7 @@ pub(super) fn light_moved(engine: &Engine, composite: &Composite) -> Vec<bool> {
 mod tests {
     use super::*;
     use crate::avatar::binding::triangle_frames;
+    use crate::avatar::gaussians::GaussianSet;
     use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
     use crate::compose::recipe::{PostProcess, Recipe};
     use crate::model::builtin::build_head;
@@ -377,19 +379,28 @@ mod tests {
         assert_eq!(report.fitted, moved.iter().filter(|&&m| m).count());
         let before = &relit.gaussians;
         let stride = before.sh_stride();
-        let mut refitted = 0;
+        let (mut refitted, mut reshaped, mut banded) = (0, 0, 0);
         for (i, &moved) in moved.iter().enumerate() {
-            let same = before.opacity_logit[i].to_bits() == fitted.opacity_logit[i].to_bits()
-                && before.log_scale[i] == fitted.log_scale[i]
-                && before.sh[i * stride..(i + 1) * stride]
-                    == fitted.sh[i * stride..(i + 1) * stride];
+            let sh = |set: &GaussianSet| set.sh[i * stride..(i + 1) * stride].to_vec();
+            let shape = before.opacity_logit[i].to_bits() == fitted.opacity_logit[i].to_bits()
+                && before.log_scale[i] == fitted.log_scale[i];
+            let (a, b) = (sh(before), sh(&fitted));
+            let same = shape && a == b;
             assert!(
                 moved || same,
                 "Gaussian {i}: its light stayed, yet it moved"
             );
             refitted += usize::from(!same);
+            reshaped += usize::from(!shape);
+            banded += usize::from(a[3..] != b[3..]);
         }
-        assert!(refitted > 0);
+        // Not in colour alone: opacity, reach and the view-dependent bands
+        // move too, as a seam's do.
+        assert!(
+            refitted > 0 && reshaped > 0,
+            "{refitted} refitted, {reshaped} reshaped"
+        );
+        assert!(stride == 3 || banded > 0, "no band moved");
 
         recipe.post.shading = Shading::Kept;
         let kept = engine.compose(&recipe.resolve(engine.database()).unwrap());

@@ -60,25 +60,34 @@ pub(super) fn posed_own_face(engine: &Engine, source: usize, pose: &Pose) -> Pos
 }
 
 /// Whether the composite's shape differs from `source`'s own neutral
-/// anywhere (by more than a micrometre): where it does not, the drawing
-/// on the composite's shape is already the own-face one.
+/// anywhere (by more than a micrometre) once moved as a whole — a blend
+/// of one person's shape alone is that shape moved to the base's pinned
+/// vertex: where it does not, the drawing on the composite's shape is
+/// already the own-face one.
 pub(super) fn reshaped(engine: &Engine, composite: &Composite, source: usize) -> bool {
     let own = engine.source_neutral(source);
+    let (Some(a), Some(b)) = (own.first(), composite.neutral.first()) else {
+        return own.len() != composite.neutral.len();
+    };
+    let shift = *b - *a;
     own.len() != composite.neutral.len()
-        || own
-            .iter()
-            .zip(&composite.neutral)
-            .any(|(a, b)| (*a - *b).length_squared() > 1e-12)
+        || own.iter().zip(&composite.neutral).any(|(a, b)| {
+            let d = (*a + shift - *b).length_squared();
+            // A non-finite vertex counts as changed.
+            d > 1e-12 || d.is_nan()
+        })
 }
 
 /// What a pixel of the composite's view shows: triangle, barycentric point
 /// and view depth (`capture::rasterize`).
 pub(super) type Hit = Option<(u32, [f32; 3], f64)>;
 
-/// One person's part of a whole drawn in a view: its colour, and how much
-/// of each pixel its Gaussians show (`KeptWhole::coverage`), RGB per pixel.
+/// One person's part of a whole drawn in a view.
 pub(super) struct Drawing {
+    /// Its colour, RGB per pixel (`KeptWhole::part`).
     pub(super) colour: Vec<f64>,
+    /// How much of each pixel its Gaussians show, RGB per pixel
+    /// (`KeptWhole::coverage`).
     pub(super) coverage: Vec<f64>,
 }
 
@@ -93,8 +102,10 @@ const MIN_COVERAGE: f64 = 0.05;
 /// its coverage, times `here`'s coverage: the share of the pixel the part
 /// has on the composite stays, and its colour comes from where its
 /// Gaussians were trained. The point's own-face pixels are read with
-/// Catmull-Rom's cubic, where the sixteen pixels round it all show the own
-/// face within [`SAME_SURFACE_M`] of the point's depth and the nearest one
+/// Catmull-Rom's cubic (held within the values it reads: its negative lobes
+/// overshoot at an edge), where every pixel the cubic weighs round it
+/// shows the own face within [`SAME_SURFACE_M`] of the point's depth and
+/// the nearest one
 /// shows the point's triangle or one touching it (the point is in view and
 /// not at a silhouette or behind a fold there), and the part covers at
 /// least [`MIN_COVERAGE`] of it.
@@ -141,7 +152,12 @@ pub(super) fn reprojected(
             continue;
         }
         let read = |image: &[f64], c: usize| -> f64 {
-            taps.iter().map(|&(k, a)| a * image[3 * k + c]).sum()
+            let values = taps.iter().map(|&(k, _)| image[3 * k + c]);
+            let (low, high) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+                (l.min(v), h.max(v))
+            });
+            let sum: f64 = taps.iter().map(|&(k, a)| a * image[3 * k + c]).sum();
+            sum.clamp(low, high)
         };
         for c in 0..3 {
             let coverage = read(&there.coverage, c);
@@ -155,11 +171,13 @@ pub(super) fn reprojected(
 
 /// The pixels and weights that read an image at continuous pixel position
 /// (`fx`, `fy`) (pixel centres at integers): Catmull-Rom's cubic, which
-/// keeps detail a bilinear read blurs; `None` where its 4×4 pixels leave
-/// the image.
+/// keeps detail a bilinear read blurs, each pixel with a weight other
+/// than zero; `None` where its 4×4 pixels leave the image (or a coordinate
+/// is not a number).
 fn taps(fx: f64, fy: f64, w: usize, h: usize) -> Option<Vec<(usize, f64)>> {
     let (x0, y0) = (fx.floor(), fy.floor());
-    if x0 < 1.0 || y0 < 1.0 || x0 + 2.0 >= w as f64 || y0 + 2.0 >= h as f64 {
+    let inside = x0 >= 1.0 && y0 >= 1.0 && x0 + 2.0 < w as f64 && y0 + 2.0 < h as f64;
+    if !inside {
         return None;
     }
     let (wx, wy) = (catmull_rom(fx - x0), catmull_rom(fy - y0));
@@ -228,7 +246,9 @@ mod tests {
         assert_eq!(drawn.len(), as_trained.len());
         assert_eq!(drawn.binding, as_trained.binding);
         assert_eq!(drawn.position, as_trained.position);
+        assert_eq!(drawn.rotation, as_trained.rotation);
         assert_eq!(drawn.log_scale, as_trained.log_scale);
+        assert_eq!(drawn.opacity_logit, as_trained.opacity_logit);
         assert_eq!(drawn.sh, as_trained.sh);
         // The recipe's own composite moved them: there is something to undo.
         assert_ne!(composite.gaussians.position, as_trained.position);
@@ -251,32 +271,45 @@ mod tests {
         }
     }
 
-    /// The head's template seen by one camera of a 64² rig, with its hits.
+    /// The head's template seen by one camera of a 128×96 rig (not square,
+    /// so rows and columns cannot be swapped unseen), with its hits.
     fn scene() -> (HeadModel, TrainCamera, Vec<Hit>) {
         let model = build_head();
-        let (cameras, _) = rig(3, false, [128, 128]);
+        let (cameras, _) = rig(3, false, [128, 96]);
         let camera = cameras[1];
         let hits = rasterize(&model.template, &model.triangles, &camera);
         (model, camera, hits)
     }
 
-    /// Each pixel's value is its centre's x: what a read at a point gives
-    /// back is where the point lies, across the image.
+    /// Each pixel's red is its centre's x and its green its centre's y:
+    /// what a read at a point gives back is where the point lies.
     fn ramp(camera: &TrainCamera, coverage: f64) -> Drawing {
         let [w, h] = camera.size.map(|v| v as usize);
-        let colour = (0..w * h).flat_map(|k| [(k % w) as f64 + 0.5; 3]).collect();
+        let colour = (0..w * h)
+            .flat_map(|k| [(k % w) as f64 + 0.5, (k / w) as f64 + 0.5, 0.0])
+            .collect();
         Drawing {
             colour,
             coverage: vec![coverage; 3 * w * h],
         }
     }
 
+    /// A drawing that no read gives: −1 everywhere, wholly covered.
     fn blank(camera: &TrainCamera) -> Drawing {
         let n = 3 * (camera.size[0] * camera.size[1]) as usize;
         Drawing {
             colour: vec![-1.0; n],
             coverage: vec![1.0; n],
         }
+    }
+
+    /// The pixels `out` read (not left at −1), each with the position it
+    /// read (red, green).
+    fn read(out: &[f64]) -> Vec<(usize, [f64; 2])> {
+        (0..out.len() / 3)
+            .filter(|&p| out[3 * p] != -1.0)
+            .map(|p| (p, [out[3 * p], out[3 * p + 1]]))
+            .collect()
     }
 
     #[test]
@@ -292,27 +325,36 @@ mod tests {
             &blank(&camera),
         );
         let w = camera.size[0] as usize;
-        let mut read = 0;
-        for (p, hit) in hits.iter().enumerate() {
-            if hit.is_none() || out[3 * p] == -1.0 {
-                continue;
-            }
-            read += 1;
-            let x = (p % w) as f64 + 0.5;
-            assert!((out[3 * p] - x).abs() < 1e-3, "pixel {p}: {}", out[3 * p]);
+        let read = read(&out);
+        for &(p, [x, y]) in &read {
+            assert!(hits[p].is_some());
+            let centre = [(p % w) as f64 + 0.5, (p / w) as f64 + 0.5];
+            assert!(
+                (x - centre[0]).abs() < 1e-3 && (y - centre[1]).abs() < 1e-3,
+                "pixel {p}: read {x}, {y}"
+            );
         }
         let head = hits.iter().filter(|h| h.is_some()).count();
-        assert!(read * 2 > head, "{read} of {head} pixels read");
+        assert!(
+            read.len() * 2 > head,
+            "{} of {head} pixels read",
+            read.len()
+        );
     }
 
     #[test]
     fn a_moved_face_is_read_where_the_point_lies_on_it() {
         let (model, camera, hits) = scene();
-        // Moved a pixel and a half along the camera's right axis.
+        // Moved a pixel and a half along the camera's right and up axes.
         let distance = DVec3::from_array(camera.eye).length();
         let shift = (1.5 * distance / camera.focal[0]) as f32;
         let right = DVec3::from_array(camera.rotation[0]).as_vec3();
-        let own: Vec<Vec3> = model.template.iter().map(|&v| v + shift * right).collect();
+        let up = DVec3::from_array(camera.rotation[1]).as_vec3();
+        let own: Vec<Vec3> = model
+            .template
+            .iter()
+            .map(|&v| v + shift * (right + up))
+            .collect();
         let own_hits = rasterize(&own, &model.triangles, &camera);
         let out = reprojected(
             &model,
@@ -323,39 +365,36 @@ mod tests {
             &ramp(&camera, 1.0),
             &blank(&camera),
         );
-        let mut read = 0;
-        for (p, hit) in hits.iter().enumerate() {
-            let Some((t, bary, _)) = hit else { continue };
-            if out[3 * p] == -1.0 {
-                continue;
-            }
-            read += 1;
-            let point: DVec3 = model.triangles[*t as usize]
+        let w = camera.size[0] as usize;
+        let read = read(&out);
+        for &(p, [x, y]) in &read {
+            let (t, bary, _) = hits[p].unwrap();
+            let point: DVec3 = model.triangles[t as usize]
                 .iter()
                 .zip(bary)
-                .map(|(&v, &b)| own[v as usize].as_dvec3() * f64::from(b))
+                .map(|(&v, b)| own[v as usize].as_dvec3() * f64::from(b))
                 .sum();
-            let [x, _, _] = pixel_of(&camera, point).unwrap();
-            let w = camera.size[0] as usize;
+            let [px, py, _] = pixel_of(&camera, point).unwrap();
+            let centre = [(p % w) as f64 + 0.5, (p / w) as f64 + 0.5];
             assert!(
-                x - ((p % w) as f64 + 0.5) > 1.2,
+                px - centre[0] > 1.2 && centre[1] - py > 1.2,
                 "pixel {p} moved too little"
             );
             assert!(
-                (out[3 * p] - x).abs() < 1e-3,
-                "pixel {p}: {} against {x}",
-                out[3 * p]
+                (x - px).abs() < 1e-3 && (y - py).abs() < 1e-3,
+                "pixel {p}: read {x}, {y} against {px}, {py}"
             );
         }
-        assert!(read > 100, "{read} pixels read");
+        assert!(read.len() > 100, "{} pixels read", read.len());
     }
 
     #[test]
     fn the_composite_keeps_its_share_and_hidden_or_bare_points_their_drawing() {
         let (model, camera, hits) = scene();
+        let n = 3 * (camera.size[0] * camera.size[1]) as usize;
         let here = Drawing {
-            colour: vec![-1.0; 3 * 128 * 128],
-            coverage: vec![0.25; 3 * 128 * 128],
+            colour: vec![-1.0; n],
+            coverage: vec![0.25; n],
         };
         // Half covered there, a quarter here: a quarter of the colour there
         // per unit of cover.
@@ -369,17 +408,25 @@ mod tests {
             &here,
         );
         let p = (0..hits.len()).find(|&p| out[3 * p] != -1.0).unwrap();
-        let x = (p % 128) as f64 + 0.5;
+        let x = (p % camera.size[0] as usize) as f64 + 0.5;
         assert!((out[3 * p] - 0.25 * x / 0.5).abs() < 1e-3);
 
-        // Something 5 cm in front of every point of the own face, or a part
-        // covering almost nothing there: the composite's drawing stays.
+        // Something 5 cm in front of every point of the own face, another
+        // surface at the same depth (a fold: no triangle touching the
+        // point's), or a part covering almost nothing there: the
+        // composite's drawing stays.
         let hidden: Vec<Hit> = hits
             .iter()
             .map(|h| h.map(|(t, b, d)| (t, b, d - 0.05)))
             .collect();
+        let far = model.triangles.len() as u32 / 2;
+        let folded: Vec<Hit> = hits
+            .iter()
+            .map(|h| h.map(|(t, b, d)| ((t + far) % (2 * far), b, d)))
+            .collect();
         let bare = ramp(&camera, 0.01);
-        for (own_hits, there) in [(&hidden, &ramp(&camera, 1.0)), (&hits, &bare)] {
+        let whole = ramp(&camera, 1.0);
+        for (own_hits, there) in [(&hidden, &whole), (&hits, &bare)] {
             let out = reprojected(
                 &model,
                 &camera,
@@ -391,5 +438,16 @@ mod tests {
             );
             assert_eq!(out, here.colour);
         }
+        let out = reprojected(
+            &model,
+            &camera,
+            &hits,
+            &model.template,
+            &folded,
+            &whole,
+            &here,
+        );
+        let head = hits.iter().filter(|h| h.is_some()).count();
+        assert!(read(&out).len() * 100 < head, "{} read", read(&out).len());
     }
 }

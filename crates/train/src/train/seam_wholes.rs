@@ -35,7 +35,9 @@ pub(super) fn drawable(set: &GaussianSet) -> Trainable {
 
 /// A whole head from one source, as the recipe would make it, ready to draw.
 pub(super) struct Whole {
+    /// Its Gaussians as the fit draws them (non-finite ones hidden).
     pub(super) drawable: Trainable,
+    /// The whole as the engine composed it.
     pub(super) composite: Composite,
     /// When the fit relights its targets per pixel (`seam_light`): the
     /// same whole with the light its Gaussians were trained under.
