@@ -260,6 +260,10 @@ fn near_seams(model: &HeadModel, field: &SeamField, looks: &[u32]) -> Vec<bool> 
     near
 }
 
+/// A whole drawn in one view: as the recipe makes it, and across a seam with
+/// its source's own skin where there is such a whole (`Wholes`).
+type DrawnWhole = (Vec<f64>, Option<Vec<f64>>);
+
 /// A seam fit in progress, one unit of work at a time, so that a caller
 /// that must stay responsive (the editor's render worker) can interleave it
 /// with other work, see how far it is, and drop it when the composite
@@ -267,8 +271,9 @@ fn near_seams(model: &HeadModel, field: &SeamField, looks: &[u32]) -> Vec<bool> 
 /// swapped source under `skin = "base"`, [`wholes`], and each again with
 /// the trained light where the recipe relights, and on its people's own
 /// faces where the shape changed them), pose the rig's two poses (and each
-/// such person's own face in them), draw each view's target (and measure the composite there), take
-/// each Adam step, and measure each view again. [`fit_seams`] runs them all.
+/// such person's own face in them), draw each whole in each view (and,
+/// with a view's last, blend its target and measure the composite there),
+/// take each Adam step, and measure each view again. [`fit_seams`] runs them all.
 ///
 /// Each call takes the engine and the composite the fitter was made for;
 /// the fitter keeps only what it computed from them.
@@ -286,6 +291,8 @@ pub struct SeamFitter {
     wholes: Vec<Wholes>,
     /// Made with the wholes when the targets are relit per pixel.
     light: Option<PixelLight>,
+    /// The wholes drawn so far in the view whose target is being drawn.
+    drawn: Vec<DrawnWhole>,
     /// The composite posed at each of the rig's poses: the wholes too, as
     /// they share its shape ([`wholes`]).
     posed: Vec<Arc<PosedMesh>>,
@@ -350,6 +357,7 @@ impl SeamFitter {
             trainable,
             wholes: Vec::new(),
             light: None,
+            drawn: Vec::new(),
             posed: Vec::new(),
             own_posed: Vec::new(),
             cameras,
@@ -379,10 +387,8 @@ impl SeamFitter {
         if self.idle() {
             return 0;
         }
-        self.field.sources().len()
-            + rig_poses().len()
-            + 2 * self.view_count()
-            + self.options.iterations
+        let sources = self.field.sources().len();
+        sources + rig_poses().len() + (sources + 1) * self.view_count() + self.options.iterations
     }
 
     /// Units of work done.
@@ -427,8 +433,23 @@ impl SeamFitter {
                     .map(|s| (s, own_shape::posed_own_face(engine, s, &pose)))
                     .collect(),
             );
-        } else if unit < sources + poses + views {
-            let view = self.target(&engine.database().model, unit - sources - poses)?;
+        } else if unit < sources + poses + sources * views {
+            // One whole of one view a unit: a view's target draws each
+            // whole several times over, too long for one unit of an editor
+            // that must answer a key.
+            let (k, j) = (
+                (unit - sources - poses) / sources,
+                (unit - sources - poses) % sources,
+            );
+            let model = &engine.database().model;
+            let drawn = self.draw_whole(model, k, j)?;
+            self.drawn.push(drawn);
+            if j + 1 < sources {
+                self.done += 1;
+                return Ok(());
+            }
+            let drawn = std::mem::take(&mut self.drawn);
+            let view = self.target(model, k, drawn);
             let rasterizer = self.rasterizer.as_mut().expect("opened above");
             let measured = measure(&self.trainable, &view, rasterizer)?;
             self.before = add(self.before, measured);
@@ -440,10 +461,11 @@ impl SeamFitter {
                 self.own_posed = Vec::new();
                 self.light = None;
             }
-        } else if unit < sources + poses + views + self.options.iterations {
-            self.adam_step(unit - sources - poses - views)?;
+        } else if unit < sources + poses + sources * views + self.options.iterations {
+            self.adam_step(unit - sources - poses - sources * views)?;
         } else {
-            let view = &self.views[unit - sources - poses - views - self.options.iterations];
+            let view =
+                &self.views[unit - sources - poses - sources * views - self.options.iterations];
             let rasterizer = self.rasterizer.as_mut().expect("opened above");
             self.after = add(self.after, measure(&self.trainable, view, rasterizer)?);
         }
@@ -451,18 +473,61 @@ impl SeamFitter {
         Ok(())
     }
 
-    /// View `k` of the rig with its blended target: per pixel, the render of
-    /// the head wholly from the source the surface point wears, cross-faded
+    /// View `k` of the rig with its blended target, from the fit's wholes
+    /// as drawn there (`drawn`, in the order of the fit's sources): per
+    /// pixel, the whole from the source the surface point wears, cross-faded
     /// towards the nearest other source's (with that source's own skin as
     /// far as `seam_wholes::trust` allows, [`wholes`]) by the seam weight
-    /// there; each whole relit pixel by pixel where the recipe relights
-    /// (`seam_light::relit_target`), its people's parts read, away from the
-    /// seams, from drawings on their own faces (`seam_own_shape`).
-    fn target(&mut self, model: &HeadModel, k: usize) -> Result<View> {
+    /// there.
+    fn target(&self, model: &HeadModel, k: usize, drawn: Vec<DrawnWhole>) -> View {
+        let rig = &self.posed[k / self.cameras.len()];
+        let camera = &self.cameras[k % self.cameras.len()];
+        let hits = rasterize(&rig.vertices, &model.triangles, camera);
+        let images: Vec<Drawn> = drawn
+            .into_iter()
+            .zip(&self.wholes)
+            .map(|((own, across), whole)| Drawn {
+                own,
+                across: across.zip(whole.across.as_ref().map(|a| &a.trust)),
+            })
+            .collect();
+        let of = |s: u32| &images[self.field.sources().binary_search(&s).unwrap_or(0)];
+        let mut goal = vec![0.0; 3 * hits.len()];
+        let mut head = vec![false; hits.len()];
+        for (p, hit) in hits.iter().enumerate() {
+            let Some((tri, bary, _)) = hit else { continue };
+            let t = *tri as usize;
+            let own = self.looks[t];
+            let corners = model.triangles[t];
+            let region = model.triangle_regions[t];
+            let (other, w) = cross_fade(
+                self.field.blend_at(corners, *bary, own),
+                self.hair_field.blend_at(corners, *bary, NOT_HAIR),
+                own,
+                region.group() == Group::Hair,
+            );
+            head[p] = true;
+            for (c, goal) in goal[3 * p..3 * p + 3].iter_mut().enumerate() {
+                *goal = blended(of(own), of(other), w, 3 * p + c, region);
+            }
+        }
+        View {
+            camera: *camera,
+            posed: rig.clone(),
+            goal,
+            head,
+        }
+    }
+
+    /// Whole `j` of the fit's sources drawn in view `k` as the target asks
+    /// for it: as the recipe makes it, and across a seam with the source's
+    /// own skin (`Wholes`); each relit pixel by pixel where the recipe
+    /// relights (`seam_light::relit_target`), its people's parts read, away
+    /// from the seams, from drawings on their own faces (`seam_own_shape`).
+    fn draw_whole(&mut self, model: &HeadModel, k: usize, j: usize) -> Result<DrawnWhole> {
         let rig = &self.posed[k / self.cameras.len()];
         let camera = &self.cameras[k % self.cameras.len()];
         let rasterizer = self.rasterizer.as_mut().expect("opened by step");
-        let mut images = Vec::with_capacity(self.wholes.len());
         let hits = rasterize(&rig.vertices, &model.triangles, camera);
         // Away from every seam: there a whole's drawing holds the other
         // source's overhang, which no own face's drawing has.
@@ -528,42 +593,13 @@ impl SeamFitter {
                 model, light, &hits, &relit, &parts,
             ))
         };
-        for whole in &self.wholes {
-            let across = match &whole.across {
-                Some(a) => Some((lit(&a.whole, rasterizer)?, &a.trust)),
-                None => None,
-            };
-            let own = lit(&whole.own, rasterizer)?;
-            images.push(Drawn { own, across });
-        }
-        let of = |s: u32| &images[self.field.sources().binary_search(&s).unwrap_or(0)];
-        let mut goal = vec![0.0; 3 * hits.len()];
-        let mut head = vec![false; hits.len()];
-        for (p, hit) in hits.iter().enumerate() {
-            let Some((tri, bary, _)) = hit else { continue };
-            let t = *tri as usize;
-            let own = self.looks[t];
-            let corners = model.triangles[t];
-            let region = model.triangle_regions[t];
-            let (other, w) = cross_fade(
-                self.field.blend_at(corners, *bary, own),
-                self.hair_field.blend_at(corners, *bary, NOT_HAIR),
-                own,
-                region.group() == Group::Hair,
-            );
-            head[p] = true;
-            for (c, goal) in goal[3 * p..3 * p + 3].iter_mut().enumerate() {
-                *goal = blended(of(own), of(other), w, 3 * p + c, region);
-            }
-        }
-        Ok(View {
-            camera: *camera,
-            posed: rig.clone(),
-            goal,
-            head,
-        })
+        let whole = &self.wholes[j];
+        let across = match &whole.across {
+            Some(a) => Some(lit(&a.whole, rasterizer)?),
+            None => None,
+        };
+        Ok((lit(&whole.own, rasterizer)?, across))
     }
-
     /// Adam step `k`, on view `k` round the rig.
     fn adam_step(&mut self, k: usize) -> Result<()> {
         let view = &self.views[k % self.views.len()];
