@@ -552,6 +552,7 @@ impl SeamFitter {
             })
             .collect();
         let light = self.light.as_ref();
+        let source = self.field.sources()[j] as usize;
         let lit = |whole: &Whole, rasterizer: &mut Rasterizer| -> Result<Vec<f64>> {
             let relit = draw(&whole.drawable, rig, camera, rasterizer)?;
             let Some(light) = light else {
@@ -560,11 +561,15 @@ impl SeamFitter {
             let Some(kept) = &whole.kept else {
                 return Ok(relit);
             };
-            let part = |s: usize, rasterizer: &mut Rasterizer| -> Result<Vec<f64>> {
+            let part = |s: usize, rasterizer: &mut Rasterizer| -> Result<own_shape::Part> {
                 let image = draw(&kept.part(s), rig, camera, rasterizer)?;
                 let own = own_faces.iter().find(|(person, _, _)| *person == s);
                 let (Some(own_face), Some((_, face, own_hits))) = (&whole.own_face, own) else {
-                    return Ok(image);
+                    return Ok(own_shape::Part {
+                        person: s,
+                        colour: image,
+                        coverage: None,
+                    });
                 };
                 let there = own_shape::Drawing {
                     colour: draw(&own_face.part(s), face, camera, rasterizer)?,
@@ -574,21 +579,28 @@ impl SeamFitter {
                     colour: image,
                     coverage: draw(&kept.coverage(s), rig, camera, rasterizer)?,
                 };
-                Ok(own_shape::reprojected(
-                    model,
-                    camera,
-                    &inside,
-                    &face.vertices,
-                    own_hits,
-                    &there,
-                    &here,
-                ))
+                Ok(own_shape::Part {
+                    person: s,
+                    colour: own_shape::reprojected(
+                        model,
+                        camera,
+                        &inside,
+                        &face.vertices,
+                        own_hits,
+                        &there,
+                        &here,
+                    ),
+                    coverage: Some(here.coverage),
+                })
             };
-            let parts = kept
+            let mut parts = kept
                 .sources()
                 .iter()
-                .map(|&s| Ok((s, part(s, rasterizer)?)))
+                .map(|&s| part(s, rasterizer))
                 .collect::<Result<Vec<_>>>()?;
+            own_shape::eyeballs_by_their_source(model, &inside, source, &mut parts);
+            let parts: Vec<(usize, Vec<f64>)> =
+                parts.into_iter().map(|p| (p.person, p.colour)).collect();
             Ok(seam_light::relit_target(
                 model, light, &hits, &relit, &parts,
             ))

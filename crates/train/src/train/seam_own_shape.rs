@@ -18,6 +18,7 @@ use crate::avatar::binding::triangle_frames_into;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
 use crate::compose::recipe::{Anchor, Deform, ResolvedRecipe, Shading};
 use crate::model::head::{HeadModel, Pose};
+use crate::model::regions::Region;
 
 use super::capture::pixel_of;
 use super::project::TrainCamera;
@@ -166,6 +167,58 @@ pub(super) fn reprojected(
     out
 }
 
+/// One person's part of a whole drawn in a view, as a target takes it.
+pub(super) struct Part {
+    /// The person (database index of the source).
+    pub(super) person: usize,
+    /// Its colour, RGB per pixel: read from the person's own face where
+    /// [`reprojected`] could.
+    pub(super) colour: Vec<f64>,
+    /// Where the person's own face was drawn: how much of each pixel the
+    /// part covers on the composite's shape, RGB per pixel.
+    pub(super) coverage: Option<Vec<f64>>,
+}
+
+/// `parts` of a whole from `source`, with each pixel of `hits` that shows
+/// an eyeball drawn by `source`'s part alone, at its colour per unit of its
+/// coverage there: the other parts there — the base's lid skin under
+/// `skin = "base"`, trained round the base's own eyes — hang over an
+/// eyeball of another shape, which the person shows where the lids' own
+/// surface does not cover it (dark-base-light-eyes, ada's eyes on nuru's
+/// face: its targets' eyeballs 0.05 too dark). Only where `source`'s part
+/// was drawn on its own face (its coverage known) and covers at least
+/// [`MIN_COVERAGE`] of the pixel.
+pub(super) fn eyeballs_by_their_source(
+    model: &HeadModel,
+    hits: &[Hit],
+    source: usize,
+    parts: &mut [Part],
+) {
+    let Some(own) = parts.iter().position(|p| p.person == source) else {
+        return;
+    };
+    for (p, hit) in hits.iter().enumerate() {
+        let Some((t, _, _)) = hit else { continue };
+        let region = model.triangle_regions[*t as usize];
+        if !matches!(region, Region::LeftEyeball | Region::RightEyeball) {
+            continue;
+        }
+        let Some(coverage) = &parts[own].coverage else {
+            return;
+        };
+        let share: [f64; 3] = std::array::from_fn(|c| coverage[3 * p + c]);
+        if share.iter().any(|&c| c.is_nan() || c < MIN_COVERAGE) {
+            continue;
+        }
+        for (k, part) in parts.iter_mut().enumerate() {
+            for c in 0..3 {
+                let value = &mut part.colour[3 * p + c];
+                *value = if k == own { *value / share[c] } else { 0.0 };
+            }
+        }
+    }
+}
+
 /// The pixels and weights that read an image at continuous pixel position
 /// (`fx`, `fy`) (pixel centres at integers): Catmull-Rom's cubic, which
 /// keeps detail a bilinear read blurs, each pixel with a weight other
@@ -307,6 +360,57 @@ mod tests {
             .filter(|&p| out[3 * p] != -1.0)
             .map(|p| (p, [out[3 * p], out[3 * p + 1]]))
             .collect()
+    }
+
+    #[test]
+    fn an_eyeball_shows_its_own_person_alone() {
+        let (model, camera, hits) = scene();
+        let region = |p: usize| hits[p].map(|(t, _, _)| model.triangle_regions[t as usize]);
+        let eyeball = (0..hits.len())
+            .find(|&p| matches!(region(p), Some(Region::LeftEyeball | Region::RightEyeball)))
+            .expect("an eyeball in view");
+        let skin = (0..hits.len())
+            .find(|&p| region(p) == Some(Region::Skin))
+            .expect("skin in view");
+        let n = 3 * hits.len();
+        // Person 1 (the eyes' source) covers 0.6 of each pixel at colour
+        // 0.3, the base (0) the rest at 0.2.
+        let parts = |coverage: f64| {
+            vec![
+                Part {
+                    person: 0,
+                    colour: vec![0.2; n],
+                    coverage: Some(vec![0.4; n]),
+                },
+                Part {
+                    person: 1,
+                    colour: vec![0.3; n],
+                    coverage: Some(vec![coverage; n]),
+                },
+            ]
+        };
+        let mut out = parts(0.6);
+        eyeballs_by_their_source(&model, &hits, 1, &mut out);
+        for c in 0..3 {
+            assert!((out[1].colour[3 * eyeball + c] - 0.5).abs() < 1e-12);
+            assert_eq!(out[0].colour[3 * eyeball + c], 0.0);
+            // Elsewhere both show as drawn.
+            assert_eq!(out[1].colour[3 * skin + c], 0.3);
+            assert_eq!(out[0].colour[3 * skin + c], 0.2);
+        }
+        // Where the eyes' person barely covers the pixel, or its coverage
+        // is unknown, or it is not in the whole, nothing changes.
+        let mut bare = parts(0.01);
+        eyeballs_by_their_source(&model, &hits, 1, &mut bare);
+        assert_eq!(bare[0].colour, vec![0.2; n]);
+        let mut unknown = parts(0.6);
+        unknown[1].coverage = None;
+        eyeballs_by_their_source(&model, &hits, 1, &mut unknown);
+        assert_eq!(unknown[0].colour, vec![0.2; n]);
+        let mut absent = parts(0.6);
+        eyeballs_by_their_source(&model, &hits, 7, &mut absent);
+        assert_eq!(absent[0].colour, vec![0.2; n]);
+        assert_eq!(absent[1].colour, vec![0.3; n]);
     }
 
     #[test]
