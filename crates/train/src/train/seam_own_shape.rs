@@ -211,9 +211,9 @@ pub(super) fn eyeballs_by_their_source(
             continue;
         }
         for (k, part) in parts.iter_mut().enumerate() {
-            for c in 0..3 {
-                let value = &mut part.colour[3 * p + c];
-                *value = if k == own { *value / share[c] } else { 0.0 };
+            let pixel = &mut part.colour[3 * p..3 * p + 3];
+            for (value, share) in pixel.iter_mut().zip(share) {
+                *value = if k == own { *value / share } else { 0.0 };
             }
         }
     }
