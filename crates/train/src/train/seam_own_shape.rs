@@ -92,8 +92,9 @@ pub(super) struct Drawing {
     pub(super) coverage: Vec<f64>,
 }
 
-/// Below this coverage the own face's drawing shows too little of its
-/// person at a point to read a colour from.
+/// Below this coverage a part's drawing (on its person's own face, or on
+/// the composite's shape) shows too little of its person at a point to
+/// take a colour per unit of coverage from.
 const MIN_COVERAGE: f64 = 0.05;
 
 /// `here`'s colour (a part drawn on the composite's shape, per pixel of
@@ -174,8 +175,10 @@ pub(super) struct Part {
     /// Its colour, RGB per pixel: read from the person's own face where
     /// [`reprojected`] could.
     pub(super) colour: Vec<f64>,
-    /// Where the person's own face was drawn: how much of each pixel the
-    /// part covers on the composite's shape, RGB per pixel.
+    /// How much of each pixel the part covers on the composite's shape,
+    /// RGB per pixel; `None` where the part was not drawn on its person's
+    /// own face (the composite leaves that face as it is), and its
+    /// coverage was not drawn either.
     pub(super) coverage: Option<Vec<f64>>,
 }
 
@@ -185,9 +188,10 @@ pub(super) struct Part {
 /// `skin = "base"`, trained round the base's own eyes — hang over an
 /// eyeball of another shape, which the person shows where the lids' own
 /// surface does not cover it (dark-base-light-eyes, ada's eyes on nuru's
-/// face: its targets' eyeballs 0.05 too dark). Only where `source`'s part
-/// was drawn on its own face (its coverage known) and covers at least
-/// [`MIN_COVERAGE`] of the pixel.
+/// face: its targets' eyeballs 0.05 too dark). A whole of one person
+/// shows its eyeballs at full coverage too, as the truth does. Only where
+/// `source`'s part was drawn on its own face (its coverage known) and
+/// covers at least [`MIN_COVERAGE`] of the pixel.
 pub(super) fn eyeballs_by_their_source(
     model: &HeadModel,
     hits: &[Hit],
@@ -197,15 +201,15 @@ pub(super) fn eyeballs_by_their_source(
     let Some(own) = parts.iter().position(|p| p.person == source) else {
         return;
     };
+    let Some(coverage) = parts[own].coverage.take() else {
+        return;
+    };
     for (p, hit) in hits.iter().enumerate() {
         let Some((t, _, _)) = hit else { continue };
         let region = model.triangle_regions[*t as usize];
         if !matches!(region, Region::LeftEyeball | Region::RightEyeball) {
             continue;
         }
-        let Some(coverage) = &parts[own].coverage else {
-            return;
-        };
         let share: [f64; 3] = std::array::from_fn(|c| coverage[3 * p + c]);
         if share.iter().any(|&c| c.is_nan() || c < MIN_COVERAGE) {
             continue;
@@ -217,6 +221,7 @@ pub(super) fn eyeballs_by_their_source(
             }
         }
     }
+    parts[own].coverage = Some(coverage);
 }
 
 /// The pixels and weights that read an image at continuous pixel position
@@ -400,13 +405,17 @@ mod tests {
         }
         // Where the eyes' person barely covers the pixel, or its coverage
         // is unknown, or it is not in the whole, nothing changes.
-        let mut bare = parts(0.01);
-        eyeballs_by_their_source(&model, &hits, 1, &mut bare);
-        assert_eq!(bare[0].colour, vec![0.2; n]);
+        for coverage in [0.01, f64::NAN] {
+            let mut bare = parts(coverage);
+            eyeballs_by_their_source(&model, &hits, 1, &mut bare);
+            assert_eq!(bare[0].colour, vec![0.2; n]);
+            assert_eq!(bare[1].colour, vec![0.3; n]);
+        }
         let mut unknown = parts(0.6);
         unknown[1].coverage = None;
         eyeballs_by_their_source(&model, &hits, 1, &mut unknown);
         assert_eq!(unknown[0].colour, vec![0.2; n]);
+        assert_eq!(unknown[1].colour, vec![0.3; n]);
         let mut absent = parts(0.6);
         eyeballs_by_their_source(&model, &hits, 7, &mut absent);
         assert_eq!(absent[0].colour, vec![0.2; n]);
