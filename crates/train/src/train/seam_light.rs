@@ -443,11 +443,10 @@ mod tests {
         // The teeth show their parts as drawn (as trained, placed by their
         // own faces), not the whole with the per-Gaussian light, and not
         // relit where the skin's light would relight them.
-        for c in 0..3 {
+        for value in &out[0..3] {
             assert!(
-                (out[c] - 0.3).abs() < 1e-12,
-                "the teeth are not relit: {}",
-                out[c]
+                (value - 0.3).abs() < 1e-12,
+                "the teeth are not relit: {value}"
             );
         }
         assert_eq!(&out[6..9], &[0.9; 3], "off the surface nothing is relit");

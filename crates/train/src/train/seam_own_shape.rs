@@ -369,7 +369,7 @@ mod tests {
 
     #[test]
     fn an_eyeball_shows_its_own_person_alone() {
-        let (model, camera, hits) = scene();
+        let (model, _, hits) = scene();
         let region = |p: usize| hits[p].map(|(t, _, _)| model.triangle_regions[t as usize]);
         let eyeball = (0..hits.len())
             .find(|&p| matches!(region(p), Some(Region::LeftEyeball | Region::RightEyeball)))
