@@ -601,8 +601,6 @@ impl SeamFitter {
             // At every eyeball pixel: near a seam too the base's lids hang
             // over it (dark-base-light-eyes +0.011 dB over `inside` alone).
             own_shape::eyeballs_by_their_source(model, &hits, source, &mut parts);
-            let parts: Vec<(usize, Vec<f64>)> =
-                parts.into_iter().map(|p| (p.person, p.colour)).collect();
             Ok(seam_light::relit_target(
                 model, light, &hits, &relit, &parts,
             ))

@@ -23,6 +23,7 @@ use crate::model::head::HeadModel;
 use crate::model::regions::Region;
 
 use super::model::{Trainable, SH_STRIDE};
+use super::seam_own_shape::Part;
 
 /// Whether a composite's seam fit relights its targets pixel by pixel: when
 /// the recipe relights its Gaussians (a recipe that keeps the sources'
@@ -186,7 +187,7 @@ pub(super) fn relit_target(
     light: &PixelLight,
     hits: &[Option<(u32, [f32; 3], f64)>],
     relit: &[f64],
-    parts: &[(usize, Vec<f64>)],
+    parts: &[Part],
 ) -> Vec<f64> {
     let mut out = relit.to_vec();
     for (p, hit) in hits.iter().enumerate() {
@@ -195,14 +196,14 @@ pub(super) fn relit_target(
         let corners = model.triangles[*t as usize];
         let pixel = &mut out[3 * p..3 * p + 3];
         pixel.fill(0.0);
-        for (s, image) in parts {
+        for part in parts {
             let gain = if as_trained {
                 Vec3::ONE
             } else {
-                light.gain(*s, corners, *bary)
+                light.gain(part.person, corners, *bary)
             };
             for c in 0..3 {
-                pixel[c] += image[3 * p + c] * f64::from(gain[c]);
+                pixel[c] += part.colour[3 * p + c] * f64::from(gain[c]);
             }
         }
     }
@@ -438,7 +439,12 @@ mod tests {
         let skin = region_triangle(Region::Skin);
         let hits = [Some((teeth, at, 1.0)), Some((skin, at, 1.0)), None];
         let relit = vec![0.9; 9];
-        let parts = [(0, vec![0.2; 9]), (1, vec![0.1; 9])];
+        let part = |person: usize, value: f64| Part {
+            person,
+            colour: vec![value; 9],
+            coverage: None,
+        };
+        let parts = [part(0, 0.2), part(1, 0.1)];
         let out = relit_target(model, &light, &hits, &relit, &parts);
         // The teeth show their parts as drawn (as trained, placed by their
         // own faces), not the whole with the per-Gaussian light, and not
