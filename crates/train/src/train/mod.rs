@@ -20,6 +20,7 @@ pub mod model;
 pub mod posing;
 pub mod project;
 pub mod raster;
+mod seam_base_detail;
 pub mod seam_fit;
 mod seam_light;
 mod seam_own_shape;

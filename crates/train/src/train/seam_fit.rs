@@ -28,7 +28,7 @@ use std::sync::Arc;
 
 use crate::avatar::gaussians::GaussianSet;
 use crate::compose::engine::{Composite, Engine, PosedMesh};
-use crate::compose::recipe::AnimationMode;
+use crate::compose::recipe::{AnimationMode, SkinSource};
 use crate::compose::seams::{SeamBlend, SeamField, SeamNeighbours};
 use crate::error::Result;
 use crate::model::head::{HeadModel, Joint, Pose};
@@ -41,6 +41,7 @@ use super::holes::Obscurer;
 use super::model::{Render, Trainable, SH_STRIDE};
 use super::project::{TrainCamera, GEOMETRY};
 use super::raster::Rasterizer;
+use super::seam_base_detail::{takes_base_detail, with_base_detail};
 use super::seam_light::{self, PixelLight};
 use super::seam_own_shape::{self as own_shape, Hit};
 use super::seam_wholes::{blended, drawable, wholes, Drawn, Whole, Wholes};
@@ -280,6 +281,10 @@ type DrawnWhole = (Vec<f64>, Option<Vec<f64>>);
 pub struct SeamFitter {
     options: SeamFit,
     looks: Vec<u32>,
+    /// Under `skin = "base"`, the base (its database index) when the
+    /// composite shows it: the whole whose skin detail the targets take
+    /// where a swapped source shows skin alike (`seam_base_detail`).
+    base_detail_from: Option<u32>,
     field: SeamField,
     /// How near each point is to another source's hair ([`hair_looks`]).
     hair_field: SeamField,
@@ -347,9 +352,14 @@ impl SeamFitter {
         let fitted = moves.iter().filter(|&&m| m).count();
         let (cameras, _) = rig(options.cameras, false, [options.size; 2]);
         let n = trainable.len();
+        let base = composite.recipe.base as u32;
+        let base_detail_from = (composite.recipe.post.skin == SkinSource::Base
+            && field.sources().contains(&base))
+        .then_some(base);
         SeamFitter {
             options: *options,
             looks,
+            base_detail_from,
             field,
             hair_field,
             moves,
@@ -478,7 +488,9 @@ impl SeamFitter {
     /// pixel, the whole from the source the surface point wears, cross-faded
     /// towards the nearest other source's (with that source's own skin as
     /// far as `seam_wholes::trust` allows, [`wholes`]) by the seam weight
-    /// there.
+    /// there; away from the seams, a swapped source's skin moved towards
+    /// the base's whole where the two show the same skin
+    /// (`seam_base_detail`).
     fn target(&self, model: &HeadModel, k: usize, drawn: Vec<DrawnWhole>) -> View {
         let rig = &self.posed[k / self.cameras.len()];
         let camera = &self.cameras[k % self.cameras.len()];
@@ -494,6 +506,8 @@ impl SeamFitter {
         let of = |s: u32| &images[self.field.sources().binary_search(&s).unwrap_or(0)];
         let mut goal = vec![0.0; 3 * hits.len()];
         let mut head = vec![false; hits.len()];
+        // Away from every seam, on a swapped source's skin.
+        let mut base_detail = vec![false; hits.len()];
         for (p, hit) in hits.iter().enumerate() {
             let Some((tri, bary, _)) = hit else { continue };
             let t = *tri as usize;
@@ -510,6 +524,17 @@ impl SeamFitter {
             for (c, goal) in goal[3 * p..3 * p + 3].iter_mut().enumerate() {
                 *goal = blended(of(own), of(other), w, 3 * p + c, region);
             }
+            base_detail[p] = self.base_detail_from.is_some_and(|b| b != own)
+                && w == 0.0
+                && takes_base_detail(region);
+        }
+        if let Some(base) = self.base_detail_from {
+            with_base_detail(
+                &mut goal,
+                &of(base).own,
+                &base_detail,
+                camera.size[0] as usize,
+            );
         }
         View {
             camera: *camera,
@@ -755,5 +780,42 @@ mod tests {
         );
         // Never below zero.
         assert_eq!(cross_fade(blend(5, 0.2), blend(5, 0.3), 3, false), (5, 0.0));
+    }
+
+    #[test]
+    fn targets_take_the_bases_detail_only_under_its_skin_where_it_is_shown() {
+        use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
+        use crate::compose::recipe::{PostProcess, Recipe};
+        use crate::model::builtin::build_head;
+        let options = SyntheticOptions {
+            seed: 5,
+            sources: 2,
+            gaussians_per_avatar: 1_000,
+        };
+        let engine = Engine::new(builtin_database(build_head(), options).unwrap()).unwrap();
+        let names: Vec<String> = engine
+            .database()
+            .sources
+            .iter()
+            .map(|s| s.name.clone())
+            .collect();
+        let fitter = |groups: &str, skin: SkinSource| {
+            let text = format!("base = \"{}\"\n{groups}", names[0]);
+            let mut recipe = Recipe::from_toml(&text).unwrap();
+            recipe.post = PostProcess::BEST;
+            recipe.post.skin = skin;
+            let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
+            SeamFitter::new(&engine, &composite, &SeamFit::default())
+        };
+        let mouth = format!("[groups.mouth]\ngaussians = \"{}\"\n", names[1]);
+        assert_eq!(fitter(&mouth, SkinSource::Base).base_detail_from, Some(0));
+        // The thesis's meaning: the source's own skin is what is asked for.
+        assert_eq!(fitter(&mouth, SkinSource::Source).base_detail_from, None);
+        // Every group swapped: the base is shown nowhere, so no whole of it.
+        let all: String = Group::ALL
+            .iter()
+            .map(|g| format!("[groups.{}]\ngaussians = \"{}\"\n", g.name(), names[1]))
+            .collect();
+        assert_eq!(fitter(&all, SkinSource::Base).base_detail_from, None);
     }
 }
