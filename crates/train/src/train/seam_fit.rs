@@ -506,7 +506,7 @@ impl SeamFitter {
         let of = |s: u32| &images[self.field.sources().binary_search(&s).unwrap_or(0)];
         let mut goal = vec![0.0; 3 * hits.len()];
         let mut head = vec![false; hits.len()];
-        // Away from every seam, on a swapped source's skin.
+        // Where the target may take the base's skin detail.
         let mut base_detail = vec![false; hits.len()];
         for (p, hit) in hits.iter().enumerate() {
             let Some((tri, bary, _)) = hit else { continue };
@@ -520,13 +520,11 @@ impl SeamFitter {
                 own,
                 region.group() == Group::Hair,
             );
+            base_detail[p] = takes_base_detail(self.base_detail_from, own, w > 0.0, region);
             head[p] = true;
             for (c, goal) in goal[3 * p..3 * p + 3].iter_mut().enumerate() {
                 *goal = blended(of(own), of(other), w, 3 * p + c, region);
             }
-            base_detail[p] = self.base_detail_from.is_some_and(|b| b != own)
-                && w == 0.0
-                && takes_base_detail(region);
         }
         if let Some(base) = self.base_detail_from {
             with_base_detail(
@@ -753,6 +751,7 @@ pub fn fit_seams(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::regions::Region;
 
     fn blend(other: u32, weight: f32) -> Option<SeamBlend> {
         Some(SeamBlend { other, weight })
@@ -782,8 +781,10 @@ mod tests {
         assert_eq!(cross_fade(blend(5, 0.2), blend(5, 0.3), 3, false), (5, 0.0));
     }
 
-    #[test]
-    fn targets_take_the_bases_detail_only_under_its_skin_where_it_is_shown() {
+    /// A two-source database of `gaussians` each, its names, and the
+    /// composite of source 1's `group` on source 0 under `post ours` with
+    /// `skin`.
+    fn swap(group: &str, skin: SkinSource) -> (Engine, Composite) {
         use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
         use crate::compose::recipe::{PostProcess, Recipe};
         use crate::model::builtin::build_head;
@@ -793,29 +794,113 @@ mod tests {
             gaussians_per_avatar: 1_000,
         };
         let engine = Engine::new(builtin_database(build_head(), options).unwrap()).unwrap();
-        let names: Vec<String> = engine
-            .database()
-            .sources
-            .iter()
-            .map(|s| s.name.clone())
-            .collect();
-        let fitter = |groups: &str, skin: SkinSource| {
-            let text = format!("base = \"{}\"\n{groups}", names[0]);
-            let mut recipe = Recipe::from_toml(&text).unwrap();
-            recipe.post = PostProcess::BEST;
-            recipe.post.skin = skin;
-            let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
-            SeamFitter::new(&engine, &composite, &SeamFit::default())
+        let name = |s: usize| engine.database().sources[s].name.clone();
+        let text = if group.is_empty() {
+            format!("base = \"{}\"\n", name(0))
+        } else {
+            format!(
+                "base = \"{}\"\n[groups.{group}]\ngaussians = \"{}\"\n",
+                name(0),
+                name(1)
+            )
         };
-        let mouth = format!("[groups.mouth]\ngaussians = \"{}\"\n", names[1]);
-        assert_eq!(fitter(&mouth, SkinSource::Base).base_detail_from, Some(0));
+        let mut recipe = Recipe::from_toml(&text).unwrap();
+        recipe.post = PostProcess::BEST;
+        recipe.post.skin = skin;
+        let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
+        (engine, composite)
+    }
+
+    #[test]
+    fn targets_take_the_bases_detail_only_under_its_skin_where_it_is_shown() {
+        let options = SeamFit::default();
+        let fitter = |group: &str, skin| {
+            let (engine, composite) = swap(group, skin);
+            SeamFitter::new(&engine, &composite, &options).base_detail_from
+        };
+        assert_eq!(fitter("mouth", SkinSource::Base), Some(0));
         // The thesis's meaning: the source's own skin is what is asked for.
-        assert_eq!(fitter(&mouth, SkinSource::Source).base_detail_from, None);
+        assert_eq!(fitter("mouth", SkinSource::Source), None);
         // Every group swapped: the base is shown nowhere, so no whole of it.
+        let (engine, _) = swap("", SkinSource::Base);
+        let name = engine.database().sources[1].name.clone();
         let all: String = Group::ALL
             .iter()
-            .map(|g| format!("[groups.{}]\ngaussians = \"{}\"\n", g.name(), names[1]))
+            .map(|g| format!("[groups.{}]\ngaussians = \"{name}\"\n", g.name()))
             .collect();
-        assert_eq!(fitter(&all, SkinSource::Base).base_detail_from, None);
+        let text = format!("base = \"{}\"\n{all}", engine.database().sources[0].name);
+        let mut recipe = crate::compose::recipe::Recipe::from_toml(&text).unwrap();
+        recipe.post = crate::compose::recipe::PostProcess::BEST;
+        let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
+        assert_eq!(
+            SeamFitter::new(&engine, &composite, &options).base_detail_from,
+            None
+        );
+    }
+
+    #[test]
+    fn a_swapped_sources_skin_like_the_bases_takes_the_bases_pixels_in_a_target() {
+        // Source 1's eyes on source 0. Each whole drawn as one flat colour:
+        // the base's B, source 1's 1 % lighter (the same skin up to detail)
+        // or 20 % darker (a feature over every window).
+        let base = [0.6, 0.5, 0.4];
+        let target = |skin, scale: f64| {
+            let (engine, composite) = swap("eyes", skin);
+            let options = SeamFit {
+                size: 48,
+                cameras: 1,
+                ..SeamFit::default()
+            };
+            let mut fitter = SeamFitter::new(&engine, &composite, &options);
+            // Compose the wholes and pose the rig.
+            for _ in 0..fitter.field.sources().len() + rig_poses().len() {
+                fitter.step(&engine, &composite).unwrap();
+            }
+            let pixels = (options.size * options.size) as usize;
+            let flat = |rgb: [f64; 3]| -> DrawnWhole { (rgb.repeat(pixels), None) };
+            let drawn = vec![flat(base), flat(base.map(|c| c * scale))];
+            let model = &engine.database().model;
+            let view = fitter.target(model, 0, drawn);
+            let hits = rasterize(
+                &fitter.posed[0].vertices,
+                &model.triangles,
+                &fitter.cameras[0],
+            );
+            // Per pixel on source 1's points: its region and the goal.
+            let swapped: Vec<(Region, [f64; 3])> = hits
+                .iter()
+                .enumerate()
+                .filter_map(|(p, hit)| {
+                    let (t, _, _) = (*hit)?;
+                    (fitter.looks[t as usize] == 1).then(|| {
+                        let g = &view.goal[3 * p..3 * p + 3];
+                        (model.triangle_regions[t as usize], [g[0], g[1], g[2]])
+                    })
+                })
+                .collect();
+            assert!(!swapped.is_empty());
+            swapped
+        };
+        let takes_base = |pixels: &[(Region, [f64; 3])]| {
+            pixels
+                .iter()
+                .filter(|(r, g)| {
+                    matches!(r, Region::LeftEyeRegion | Region::RightEyeRegion) && *g == base
+                })
+                .count()
+        };
+        let alike = target(SkinSource::Base, 1.01);
+        assert!(
+            takes_base(&alike) > 0,
+            "no eye-region pixel took the base's"
+        );
+        let eyeball = base.map(|c| c * 1.01);
+        assert!(alike
+            .iter()
+            .filter(|(r, _)| matches!(r, Region::LeftEyeball | Region::RightEyeball))
+            .all(|(_, g)| *g == eyeball));
+        // A feature, or the thesis's skin: the base's pixel nowhere.
+        assert_eq!(takes_base(&target(SkinSource::Base, 0.8)), 0);
+        assert_eq!(takes_base(&target(SkinSource::Source, 1.01)), 0);
     }
 }
