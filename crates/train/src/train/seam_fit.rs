@@ -781,10 +781,9 @@ mod tests {
         assert_eq!(cross_fade(blend(5, 0.2), blend(5, 0.3), 3, false), (5, 0.0));
     }
 
-    /// A two-source database of `gaussians` each, its names, and the
-    /// composite of source 1's `group` on source 0 under `post ours` with
-    /// `skin`.
-    fn swap(group: &str, skin: SkinSource) -> (Engine, Composite) {
+    /// A two-source synthetic database and the composite of source 1's
+    /// `groups` on source 0 under `post ours` with `skin`.
+    fn swap(groups: &[&str], skin: SkinSource) -> (Engine, Composite) {
         use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
         use crate::compose::recipe::{PostProcess, Recipe};
         use crate::model::builtin::build_head;
@@ -795,15 +794,10 @@ mod tests {
         };
         let engine = Engine::new(builtin_database(build_head(), options).unwrap()).unwrap();
         let name = |s: usize| engine.database().sources[s].name.clone();
-        let text = if group.is_empty() {
-            format!("base = \"{}\"\n", name(0))
-        } else {
-            format!(
-                "base = \"{}\"\n[groups.{group}]\ngaussians = \"{}\"\n",
-                name(0),
-                name(1)
-            )
-        };
+        let mut text = format!("base = \"{}\"\n", name(0));
+        for group in groups {
+            text += &format!("[groups.{group}]\ngaussians = \"{}\"\n", name(1));
+        }
         let mut recipe = Recipe::from_toml(&text).unwrap();
         recipe.post = PostProcess::BEST;
         recipe.post.skin = skin;
@@ -813,29 +807,16 @@ mod tests {
 
     #[test]
     fn targets_take_the_bases_detail_only_under_its_skin_where_it_is_shown() {
-        let options = SeamFit::default();
-        let fitter = |group: &str, skin| {
-            let (engine, composite) = swap(group, skin);
-            SeamFitter::new(&engine, &composite, &options).base_detail_from
+        let fitter = |groups: &[&str], skin| {
+            let (engine, composite) = swap(groups, skin);
+            SeamFitter::new(&engine, &composite, &SeamFit::default()).base_detail_from
         };
-        assert_eq!(fitter("mouth", SkinSource::Base), Some(0));
+        assert_eq!(fitter(&["mouth"], SkinSource::Base), Some(0));
         // The thesis's meaning: the source's own skin is what is asked for.
-        assert_eq!(fitter("mouth", SkinSource::Source), None);
+        assert_eq!(fitter(&["mouth"], SkinSource::Source), None);
         // Every group swapped: the base is shown nowhere, so no whole of it.
-        let (engine, _) = swap("", SkinSource::Base);
-        let name = engine.database().sources[1].name.clone();
-        let all: String = Group::ALL
-            .iter()
-            .map(|g| format!("[groups.{}]\ngaussians = \"{name}\"\n", g.name()))
-            .collect();
-        let text = format!("base = \"{}\"\n{all}", engine.database().sources[0].name);
-        let mut recipe = crate::compose::recipe::Recipe::from_toml(&text).unwrap();
-        recipe.post = crate::compose::recipe::PostProcess::BEST;
-        let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
-        assert_eq!(
-            SeamFitter::new(&engine, &composite, &options).base_detail_from,
-            None
-        );
+        let all: Vec<&str> = Group::ALL.iter().map(|g| g.name()).collect();
+        assert_eq!(fitter(&all, SkinSource::Base), None);
     }
 
     #[test]
@@ -845,7 +826,7 @@ mod tests {
         // or 20 % darker (a feature over every window).
         let base = [0.6, 0.5, 0.4];
         let target = |skin, scale: f64| {
-            let (engine, composite) = swap("eyes", skin);
+            let (engine, composite) = swap(&["eyes"], skin);
             let options = SeamFit {
                 size: 48,
                 cameras: 1,
