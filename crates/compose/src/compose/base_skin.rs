@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use super::dark_features::{holds_dark_features, holds_stubble};
 use super::recipe::ResolvedRecipe;
-use super::selection::Csr;
+use super::selection::{sharing_a_corner, Csr};
 use super::skin_transfer::{semantic_skin_likeness, SkinStats};
 use crate::avatar::binding::triangle_frame;
 use crate::model::geometry::smoothstep;
@@ -242,25 +242,11 @@ fn beside_feature(
     features: &Features,
     only_base: impl Fn(usize) -> bool,
 ) -> Vec<bool> {
-    topology
-        .triangles
-        .iter()
-        .take(triangles)
-        .enumerate()
-        .map(|(t, corners)| {
-            let feature = if only_base(t) {
-                &features.base
-            } else {
-                &features.either
-            };
-            corners.iter().any(|&v| {
-                topology
-                    .vertex_triangles
-                    .row(v as usize)
-                    .iter()
-                    .any(|&u| feature.get(u as usize).copied().unwrap_or(false))
-            })
-        })
+    let corners = &topology.triangles[..triangles.min(topology.triangles.len())];
+    let beside = |marked: &[bool]| sharing_a_corner(corners, topology.vertex_triangles, marked);
+    let (base, either) = (beside(&features.base), beside(&features.either));
+    (0..corners.len())
+        .map(|t| if only_base(t) { base[t] } else { either[t] })
         .collect()
 }
 
