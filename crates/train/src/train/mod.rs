@@ -24,6 +24,8 @@ mod seam_base_detail;
 pub mod seam_fit;
 mod seam_light;
 mod seam_own_shape;
+#[cfg(test)]
+mod seam_test_people;
 mod seam_wholes;
 pub mod sitter;
 pub mod target;

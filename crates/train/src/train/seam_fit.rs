@@ -784,22 +784,16 @@ mod tests {
     /// A two-source synthetic database and the composite of source 1's
     /// `groups` on source 0 under `post ours` with `skin`.
     fn swap(groups: &[&str], skin: SkinSource) -> (Engine, Composite) {
-        use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
-        use crate::compose::recipe::{PostProcess, Recipe};
-        use crate::model::builtin::build_head;
-        let options = SyntheticOptions {
-            seed: 5,
-            sources: 2,
-            gaussians_per_avatar: 1_000,
-        };
-        let engine = Engine::new(builtin_database(build_head(), options).unwrap()).unwrap();
-        let name = |s: usize| engine.database().sources[s].name.clone();
-        let mut text = format!("base = \"{}\"\n", name(0));
+        use crate::train::seam_test_people::{name_of, ours, two_people};
+        let engine = two_people(1_000);
+        let mut text = format!("base = \"{}\"\n", name_of(&engine, 0));
         for group in groups {
-            text += &format!("[groups.{group}]\ngaussians = \"{}\"\n", name(1));
+            text += &format!(
+                "[groups.{group}]\ngaussians = \"{}\"\n",
+                name_of(&engine, 1)
+            );
         }
-        let mut recipe = Recipe::from_toml(&text).unwrap();
-        recipe.post = PostProcess::BEST;
+        let mut recipe = ours(&text);
         recipe.post.skin = skin;
         let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
         (engine, composite)

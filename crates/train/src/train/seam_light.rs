@@ -254,28 +254,17 @@ mod tests {
     use super::*;
     use crate::avatar::binding::triangle_frames;
     use crate::avatar::gaussians::GaussianSet;
-    use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
-    use crate::compose::recipe::{PostProcess, Recipe};
-    use crate::model::builtin::build_head;
     use crate::render::Backend;
     use crate::train::capture::rig;
     use crate::train::holes::Obscurer;
     use crate::train::model::Render;
     use crate::train::raster::Rasterizer;
-
-    fn engine() -> Engine {
-        let options = SyntheticOptions {
-            seed: 5,
-            sources: 2,
-            gaussians_per_avatar: 3_000,
-        };
-        Engine::new(builtin_database(build_head(), options).unwrap()).unwrap()
-    }
+    use crate::train::seam_test_people::{name_of, ours, two_people};
 
     /// The composite of source 1's mouth on source 0, with the mouth's shape
     /// when `reshaped`, post-processed as `post ours`.
     fn mouth_swap(engine: &Engine, reshaped: bool) -> Composite {
-        let name = |s: usize| engine.database().sources[s].name.clone();
+        let name = |s: usize| name_of(engine, s);
         let shape = if reshaped {
             format!("shape = {{ {} = 1.0 }}\n", name(1))
         } else {
@@ -286,14 +275,12 @@ mod tests {
             name(0),
             name(1)
         );
-        let mut recipe = Recipe::from_toml(&text).unwrap();
-        recipe.post = PostProcess::BEST;
-        engine.compose(&recipe.resolve(engine.database()).unwrap())
+        engine.compose(&ours(&text).resolve(engine.database()).unwrap())
     }
 
     #[test]
     fn a_head_drawn_person_by_person_adds_up_to_itself() {
-        let engine = engine();
+        let engine = two_people(3_000);
         let composite = mouth_swap(&engine, true);
         let whole = Trainable::from_set(&composite.gaussians);
         let kept = KeptWhole::new(&composite, whole.clone());
@@ -337,7 +324,7 @@ mod tests {
 
     #[test]
     fn the_light_moves_only_where_the_shape_does() {
-        let engine = engine();
+        let engine = two_people(3_000);
         // Source 1's Gaussians on the base's shape: its own light moved, the
         // base's did not.
         let swapped = mouth_swap(&engine, false);
@@ -366,16 +353,15 @@ mod tests {
         use crate::compose::recipe::Shading;
         use crate::train::seam_fit::{fit_seams, SeamFit};
 
-        let engine = engine();
-        let name = |s: usize| engine.database().sources[s].name.clone();
+        let engine = two_people(3_000);
+        let name = |s: usize| name_of(&engine, s);
         let text = format!(
             "base = \"{}\"\n[groups.face]\ngaussians = \"{}\"\nshape = {{ {} = 1.0 }}\n",
             name(0),
             name(0),
             name(1)
         );
-        let mut recipe = Recipe::from_toml(&text).unwrap();
-        recipe.post = PostProcess::BEST;
+        let mut recipe = ours(&text);
         let options = SeamFit {
             iterations: 6,
             size: 32,
@@ -421,7 +407,7 @@ mod tests {
 
     #[test]
     fn a_target_is_relit_pixel_by_pixel_but_in_the_mouth() {
-        let engine = engine();
+        let engine = two_people(3_000);
         let model = &engine.database().model;
         let composite = mouth_swap(&engine, false);
         let light = PixelLight::new(&engine, &composite, &[0, 1]);

@@ -271,21 +271,11 @@ mod tests {
     /// its shape: on its own face nothing is reshaped or relit.
     #[test]
     fn on_its_own_face_a_source_s_whole_is_as_trained() {
-        use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
-        use crate::compose::recipe::{PostProcess, Recipe};
+        use crate::train::seam_test_people::{name_of, ours, two_people};
 
-        let options = SyntheticOptions {
-            seed: 5,
-            sources: 2,
-            gaussians_per_avatar: 3_000,
-        };
-        let engine = Engine::new(builtin_database(build_head(), options).unwrap()).unwrap();
-        let name = |s: usize| engine.database().sources[s].name.clone();
-        let resolve = |text: &str| {
-            let mut recipe = Recipe::from_toml(text).unwrap();
-            recipe.post = PostProcess::BEST;
-            recipe.resolve(engine.database()).unwrap()
-        };
+        let engine = two_people(3_000);
+        let name = |s: usize| name_of(&engine, s);
+        let resolve = |text: &str| ours(text).resolve(engine.database()).unwrap();
         let elsewhere = resolve(&format!(
             "base = \"{}\"\n[groups.face]\ngaussians = \"{}\"\nshape = {{ {} = 1.0 }}\n",
             name(0),

@@ -238,28 +238,13 @@ mod tests {
 
     #[test]
     fn across_a_seam_a_source_shows_its_own_skin() {
-        use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
-        use crate::compose::recipe::{PostProcess, Recipe};
-        use crate::model::builtin::build_head;
+        use crate::train::seam_test_people::{name_of, ours, two_people};
 
-        let options = SyntheticOptions {
-            seed: 5,
-            sources: 2,
-            gaussians_per_avatar: 3_000,
-        };
-        let engine = Engine::new(builtin_database(build_head(), options).unwrap()).unwrap();
-        let names: Vec<String> = engine
-            .database()
-            .sources
-            .iter()
-            .map(|s| s.name.clone())
-            .collect();
-        let text = format!(
-            "base = \"{}\"\n[groups.mouth]\ngaussians = \"{}\"\nshape = {{ {} = 1.0 }}\n",
-            names[0], names[1], names[1]
-        );
-        let mut recipe = Recipe::from_toml(&text).unwrap();
-        recipe.post = PostProcess::BEST;
+        let engine = two_people(3_000);
+        let (base, other) = (name_of(&engine, 0), name_of(&engine, 1));
+        let mut recipe = ours(&format!(
+            "base = \"{base}\"\n[groups.mouth]\ngaussians = \"{other}\"\nshape = {{ {other} = 1.0 }}\n"
+        ));
         assert_eq!(recipe.post.skin, SkinSource::Base);
         let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
 
