@@ -16,7 +16,7 @@
 //! unlike over a patch — stubble, a blush — it keeps the source's.
 
 use crate::model::geometry::smoothstep;
-use crate::model::regions::{Group, Region};
+use crate::model::regions::Region;
 
 /// Half the side of the square window whose mean difference tells a patch
 /// of one side's feature from the other's skin detail: 5×5 pixels.
@@ -40,24 +40,25 @@ const FLOOR: f64 = 0.05;
 
 /// Whether a target pixel may take the base's skin detail: under `skin =
 /// "base"` with the base shown (`base`, its database index, from
-/// `SeamFitter`), on a point wearing another source (`own`) that the target
-/// does not cross-fade (`fades`: a seam weight over 0; it is 0 away from
-/// every seam and on the skin side of another person's hair, §7.12 — taken
-/// away from the seams alone, the bench read 34.371 dB against 34.377), in a
-/// region that may wear the base's skin. Not the regions that hold no skin (the hair
-/// group, the remainder under it included; eyeballs, teeth, the mouth's
-/// inside), nor the lips and the boundary, whose skin shares are the
-/// source's features by design; not the neck, where the base's own stubble
-/// and collar read as skin beside the source's and a swap of them lost
-/// (random-03's neck, jomo's on femi, 36.5 → 32.5 dB inside; every-group's
-/// beside cleo's black collar −0.4 to −1.2 dB).
-pub(super) fn takes_base_detail(base: Option<u32>, own: u32, fades: bool, region: Region) -> bool {
+/// `SeamFitter`), on a point wearing another source (`own`), whether a seam
+/// cross-fades it with another source's whole or not (the window tells
+/// there too whether the mix shows the base's skin; since session 57), in
+/// a region that may wear the base's skin: the face's skin, the nose, the
+/// ears, the eyes' regions and sockets, and the remainder (the temples,
+/// sideburns and nape beside the hair, skin wherever a swapped hair group's
+/// hair leaves them bare; since session 57). Not the regions that hold no
+/// skin (the hair itself, whose base's hair can read as alike to the
+/// source's; eyeballs, teeth, the mouth's inside), nor the lips and the
+/// boundary, whose skin shares are the source's features by design; not
+/// the neck, where the base's own stubble and collar read as skin beside
+/// the source's (jomo's black stubble on femi's neck gave way to femi's
+/// grey). Method §7.12 has what each choice measured.
+pub(super) fn takes_base_detail(base: Option<u32>, own: u32, region: Region) -> bool {
     base.is_some_and(|b| b != own)
-        && !fades
-        && region.group() != Group::Hair
         && !matches!(
             region,
-            Region::Neck
+            Region::Hair
+                | Region::Neck
                 | Region::Boundary
                 | Region::Lips
                 | Region::LipsInside
@@ -229,7 +230,7 @@ mod tests {
     }
 
     #[test]
-    fn only_a_swapped_sources_skin_away_from_the_seams_takes_it() {
+    fn only_a_swapped_sources_skin_takes_it() {
         let base = Some(0);
         for region in [
             Region::LeftEyeRegion,
@@ -237,16 +238,15 @@ mod tests {
             Region::Nose,
             Region::LeftEar,
             Region::Skin,
+            Region::Remainder,
         ] {
-            assert!(takes_base_detail(base, 1, false, region), "{region:?}");
-            // Cross-faded, on the base's own points, without a base whole.
-            assert!(!takes_base_detail(base, 1, true, region), "{region:?}");
-            assert!(!takes_base_detail(base, 0, false, region), "{region:?}");
-            assert!(!takes_base_detail(None, 1, false, region), "{region:?}");
+            assert!(takes_base_detail(base, 1, region), "{region:?}");
+            // On the base's own points, without a base whole.
+            assert!(!takes_base_detail(base, 0, region), "{region:?}");
+            assert!(!takes_base_detail(None, 1, region), "{region:?}");
         }
         for region in [
             Region::Hair,
-            Region::Remainder,
             Region::Neck,
             Region::Lips,
             Region::LipsInside,
@@ -254,7 +254,7 @@ mod tests {
             Region::LeftEyeball,
             Region::Boundary,
         ] {
-            assert!(!takes_base_detail(base, 1, false, region), "{region:?}");
+            assert!(!takes_base_detail(base, 1, region), "{region:?}");
         }
     }
 }

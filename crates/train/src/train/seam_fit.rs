@@ -488,9 +488,8 @@ impl SeamFitter {
     /// pixel, the whole from the source the surface point wears, cross-faded
     /// towards the nearest other source's (with that source's own skin as
     /// far as `seam_wholes::trust` allows, [`wholes`]) by the seam weight
-    /// there; away from the seams, a swapped source's skin moved towards
-    /// the base's whole where the two show the same skin
-    /// (`seam_base_detail`).
+    /// there; then, on a swapped source's skin, moved towards the base's
+    /// whole where the two show the same skin (`seam_base_detail`).
     fn target(&self, model: &HeadModel, k: usize, drawn: Vec<DrawnWhole>) -> View {
         let rig = &self.posed[k / self.cameras.len()];
         let camera = &self.cameras[k % self.cameras.len()];
@@ -520,7 +519,7 @@ impl SeamFitter {
                 own,
                 region.group() == Group::Hair,
             );
-            base_detail[p] = takes_base_detail(self.base_detail_from, own, w > 0.0, region);
+            base_detail[p] = takes_base_detail(self.base_detail_from, own, region);
             head[p] = true;
             for (c, goal) in goal[3 * p..3 * p + 3].iter_mut().enumerate() {
                 *goal = blended(of(own), of(other), w, 3 * p + c, region);
@@ -815,12 +814,12 @@ mod tests {
 
     #[test]
     fn a_swapped_sources_skin_like_the_bases_takes_the_bases_pixels_in_a_target() {
-        // Source 1's eyes on source 0. Each whole drawn as one flat colour:
+        // Source 1's eyes (or hair) on source 0. Each whole drawn as one flat colour:
         // the base's B, source 1's 1 % lighter (the same skin up to detail)
         // or 20 % darker (a feature over every window).
         let base = [0.6, 0.5, 0.4];
-        let target = |skin, scale: f64| {
-            let (engine, composite) = swap(&["eyes"], skin);
+        let target = |groups: &[&str], skin, scale: f64| {
+            let (engine, composite) = swap(groups, skin);
             let options = SeamFit {
                 size: 48,
                 cameras: 1,
@@ -841,41 +840,65 @@ mod tests {
                 &model.triangles,
                 &fitter.cameras[0],
             );
-            // Per pixel on source 1's points: its region and the goal.
-            let swapped: Vec<(Region, [f64; 3])> = hits
+            // Per pixel on source 1's points: its region, the goal and
+            // whether a seam cross-fades it.
+            let swapped: Vec<(Region, [f64; 3], bool)> = hits
                 .iter()
                 .enumerate()
                 .filter_map(|(p, hit)| {
-                    let (t, _, _) = (*hit)?;
-                    (fitter.looks[t as usize] == 1).then(|| {
+                    let (t, bary, _) = (*hit)?;
+                    let t = t as usize;
+                    (fitter.looks[t] == 1).then(|| {
                         let g = &view.goal[3 * p..3 * p + 3];
-                        (model.triangle_regions[t as usize], [g[0], g[1], g[2]])
+                        let region = model.triangle_regions[t];
+                        let (_, w) = cross_fade(
+                            fitter.field.blend_at(model.triangles[t], bary, 1),
+                            fitter
+                                .hair_field
+                                .blend_at(model.triangles[t], bary, NOT_HAIR),
+                            1,
+                            region.group() == Group::Hair,
+                        );
+                        (region, [g[0], g[1], g[2]], w > 0.0)
                     })
                 })
                 .collect();
             assert!(!swapped.is_empty());
             swapped
         };
-        let takes_base = |pixels: &[(Region, [f64; 3])]| {
+        let eye_region = |r: &Region| matches!(r, Region::LeftEyeRegion | Region::RightEyeRegion);
+        let takes_base = |pixels: &[(Region, [f64; 3], bool)]| {
             pixels
                 .iter()
-                .filter(|(r, g)| {
-                    matches!(r, Region::LeftEyeRegion | Region::RightEyeRegion) && *g == base
-                })
+                .filter(|(r, g, _)| eye_region(r) && *g == base)
                 .count()
         };
-        let alike = target(SkinSource::Base, 1.01);
+        let alike = target(&["eyes"], SkinSource::Base, 1.01);
         assert!(
             takes_base(&alike) > 0,
             "no eye-region pixel took the base's"
         );
+        // Cross-faded towards the base's whole or not, alike skin is the
+        // base's.
+        assert!(alike.iter().any(|(r, _, faded)| eye_region(r) && *faded));
+        assert!(alike
+            .iter()
+            .filter(|(r, _, _)| eye_region(r))
+            .all(|(_, g, _)| *g == base));
         let eyeball = base.map(|c| c * 1.01);
         assert!(alike
             .iter()
-            .filter(|(r, _)| matches!(r, Region::LeftEyeball | Region::RightEyeball))
-            .all(|(_, g)| *g == eyeball));
+            .filter(|(r, _, _)| matches!(r, Region::LeftEyeball | Region::RightEyeball))
+            .all(|(_, g, _)| *g == eyeball));
         // A feature, or the thesis's skin: the base's pixel nowhere.
-        assert_eq!(takes_base(&target(SkinSource::Base, 0.8)), 0);
-        assert_eq!(takes_base(&target(SkinSource::Source, 1.01)), 0);
+        assert_eq!(takes_base(&target(&["eyes"], SkinSource::Base, 0.8)), 0);
+        assert_eq!(takes_base(&target(&["eyes"], SkinSource::Source, 1.01)), 0);
+        // A swapped hair group: the bare remainder beside the hair takes the
+        // base's skin, the hair stays the source's.
+        let hair = target(&["hair"], SkinSource::Base, 1.01);
+        let in_region = |r: Region| hair.iter().filter(move |(q, _, _)| *q == r);
+        assert!(in_region(Region::Remainder).count() > 0);
+        assert!(in_region(Region::Remainder).all(|(_, g, _)| *g == base));
+        assert!(in_region(Region::Hair).all(|(_, g, _)| *g != base));
     }
 }
