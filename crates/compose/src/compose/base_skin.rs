@@ -235,7 +235,8 @@ fn only_base_features_keep_off(region: Region, eyes_brighten: bool) -> bool {
 /// stays off those: the base's skin Gaussians beside its own features were
 /// trained beside them (every-group's neck lost 3.2 dB to a light line along
 /// cleo's collar without this); round the eyes, under a brightening
-/// transfer, the shape-weighted part does too.
+/// transfer, the shape-weighted part does too. A corner past the topology's
+/// table counts as beside no feature ([`sharing_a_corner`]).
 fn beside_feature(
     topology: Topology,
     triangles: usize,

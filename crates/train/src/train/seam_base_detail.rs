@@ -9,8 +9,10 @@
 //! side stands on or beside the triangle, and where the base's Gaussians do
 //! not fit the new shape — round the eyes nearly everywhere, on a swapped
 //! ear. A target is drawn pixel by pixel, and there the two can be told
-//! apart more finely: where the swapped source's whole and the base's whole,
-//! both drawn on the composite's shape, show the same skin up to its detail,
+//! apart more finely: where the target (the swapped source's whole,
+//! cross-faded across a seam with the nearest other person's) and the
+//! base's whole, both drawn on the composite's shape, show the same skin up
+//! to its detail,
 //! the target takes the base's pixel; where they differ by more than skin
 //! detail does — a brow, a lash, a lid's crease, either side's — or are
 //! unlike over a patch — stubble, a blush — it keeps the source's.

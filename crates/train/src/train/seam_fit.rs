@@ -751,6 +751,7 @@ pub fn fit_seams(
 mod tests {
     use super::*;
     use crate::model::regions::Region;
+    use crate::train::seam_test_people::swap;
 
     fn blend(other: u32, weight: f32) -> Option<SeamBlend> {
         Some(SeamBlend { other, weight })
@@ -778,24 +779,6 @@ mod tests {
         );
         // Never below zero.
         assert_eq!(cross_fade(blend(5, 0.2), blend(5, 0.3), 3, false), (5, 0.0));
-    }
-
-    /// A two-source synthetic database and the composite of source 1's
-    /// `groups` on source 0 under `post ours` with `skin`.
-    fn swap(groups: &[&str], skin: SkinSource) -> (Engine, Composite) {
-        use crate::train::seam_test_people::{name_of, ours, two_people};
-        let engine = two_people(1_000);
-        let mut text = format!("base = \"{}\"\n", name_of(&engine, 0));
-        for group in groups {
-            text += &format!(
-                "[groups.{group}]\ngaussians = \"{}\"\n",
-                name_of(&engine, 1)
-            );
-        }
-        let mut recipe = ours(&text);
-        recipe.post.skin = skin;
-        let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
-        (engine, composite)
     }
 
     #[test]
@@ -899,6 +882,7 @@ mod tests {
         let in_region = |r: Region| hair.iter().filter(move |(q, _, _)| *q == r);
         assert!(in_region(Region::Remainder).count() > 0);
         assert!(in_region(Region::Remainder).all(|(_, g, _)| *g == base));
+        assert!(in_region(Region::Hair).count() > 0);
         assert!(in_region(Region::Hair).all(|(_, g, _)| *g != base));
     }
 }

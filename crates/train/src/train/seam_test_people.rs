@@ -2,8 +2,8 @@
 //! recipes for them post-processed as `post ours`.
 
 use crate::avatar::synthetic::{builtin_database, SyntheticOptions};
-use crate::compose::engine::Engine;
-use crate::compose::recipe::{PostProcess, Recipe};
+use crate::compose::engine::{Composite, Engine};
+use crate::compose::recipe::{PostProcess, Recipe, SkinSource};
 use crate::model::builtin::build_head;
 
 /// An engine over two built-in people (seed 5) of `gaussians` Gaussians
@@ -27,4 +27,21 @@ pub(super) fn ours(text: &str) -> Recipe {
     let mut recipe = Recipe::from_toml(text).unwrap();
     recipe.post = PostProcess::BEST;
     recipe
+}
+
+/// Two built-in people of a thousand Gaussians each and the composite of
+/// person 1's `groups` on person 0 under `post ours` with `skin`.
+pub(super) fn swap(groups: &[&str], skin: SkinSource) -> (Engine, Composite) {
+    let engine = two_people(1_000);
+    let mut text = format!("base = \"{}\"\n", name_of(&engine, 0));
+    for group in groups {
+        text += &format!(
+            "[groups.{group}]\ngaussians = \"{}\"\n",
+            name_of(&engine, 1)
+        );
+    }
+    let mut recipe = ours(&text);
+    recipe.post.skin = skin;
+    let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
+    (engine, composite)
 }

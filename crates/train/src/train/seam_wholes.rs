@@ -243,7 +243,8 @@ mod tests {
         let engine = two_people(3_000);
         let (base, other) = (name_of(&engine, 0), name_of(&engine, 1));
         let mut recipe = ours(&format!(
-            "base = \"{base}\"\n[groups.mouth]\ngaussians = \"{other}\"\nshape = {{ {other} = 1.0 }}\n"
+            "base = \"{base}\"\n\
+             [groups.mouth]\ngaussians = \"{other}\"\nshape = {{ {other} = 1.0 }}\n"
         ));
         assert_eq!(recipe.post.skin, SkinSource::Base);
         let composite = engine.compose(&recipe.resolve(engine.database()).unwrap());
