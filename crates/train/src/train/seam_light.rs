@@ -353,15 +353,10 @@ mod tests {
         use crate::compose::recipe::Shading;
         use crate::train::seam_fit::{fit_seams, SeamFit};
 
+        use crate::train::seam_test_people::base_on_the_others_face;
+
         let engine = two_people(3_000);
-        let name = |s: usize| name_of(&engine, s);
-        let text = format!(
-            "base = \"{}\"\n[groups.face]\ngaussians = \"{}\"\nshape = {{ {} = 1.0 }}\n",
-            name(0),
-            name(0),
-            name(1)
-        );
-        let mut recipe = ours(&text);
+        let mut recipe = base_on_the_others_face(&engine);
         let options = SeamFit {
             iterations: 6,
             size: 32,

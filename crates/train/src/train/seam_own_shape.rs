@@ -271,18 +271,13 @@ mod tests {
     /// its shape: on its own face nothing is reshaped or relit.
     #[test]
     fn on_its_own_face_a_source_s_whole_is_as_trained() {
-        use crate::train::seam_test_people::{name_of, ours, two_people};
+        use crate::train::seam_test_people::{base_on_the_others_face, name_of, ours, two_people};
 
         let engine = two_people(3_000);
-        let name = |s: usize| name_of(&engine, s);
-        let resolve = |text: &str| ours(text).resolve(engine.database()).unwrap();
-        let elsewhere = resolve(&format!(
-            "base = \"{}\"\n[groups.face]\ngaussians = \"{}\"\nshape = {{ {} = 1.0 }}\n",
-            name(0),
-            name(0),
-            name(1)
-        ));
-        let mut own = resolve(&format!("base = \"{}\"\n", name(0)));
+        let resolve =
+            |recipe: crate::compose::recipe::Recipe| recipe.resolve(engine.database()).unwrap();
+        let elsewhere = resolve(base_on_the_others_face(&engine));
+        let mut own = resolve(ours(&format!("base = \"{}\"\n", name_of(&engine, 0))));
         own.post.shading = Shading::Kept;
         let composite = engine.compose(&elsewhere);
         assert!(reshaped(&engine, &composite, 0) && !reshaped(&engine, &engine.compose(&own), 0));

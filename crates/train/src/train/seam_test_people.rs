@@ -29,6 +29,15 @@ pub(super) fn ours(text: &str) -> Recipe {
     recipe
 }
 
+/// The recipe (under `post ours`) of person 0 whole on person 1's face
+/// shape: a head of one source on a new shape.
+pub(super) fn base_on_the_others_face(engine: &Engine) -> Recipe {
+    let (base, other) = (name_of(engine, 0), name_of(engine, 1));
+    ours(&format!(
+        "base = \"{base}\"\n[groups.face]\ngaussians = \"{base}\"\nshape = {{ {other} = 1.0 }}\n"
+    ))
+}
+
 /// Two built-in people of a thousand Gaussians each and the composite of
 /// person 1's `groups` on person 0 under `post ours` with `skin`.
 pub(super) fn swap(groups: &[&str], skin: SkinSource) -> (Engine, Composite) {
